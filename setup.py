@@ -1,0 +1,31 @@
+"""ament_python package definition for mvpose_ros.
+
+`colcon build` on a ROS 2 install and `pip install .` in a plain venv both use this file.
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'mvpose_ros'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(include=[PACKAGE, f'{PACKAGE}.*', 'msg_adapters', 'msg_adapters.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='mvpose_ros developers',
+    maintainer_email='mvpose-ros@example.org',
+    description='Multi-view multi-person 3D pose estimation with sliding-window belief propagation.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'mvpose-eval = mvpose_ros.cli.evaluate:main',
+        ],
+    },
+)
