@@ -1,0 +1,229 @@
+"""Calibrated pinhole cameras with OpenCV lens distortion, rig loading, and ray geometry.
+
+Convention: a world point X (metres) maps to camera coordinates x_cam = R @ X + t, then to
+normalised coordinates (x/z, y/z), through the radial-tangential distortion (OpenCV order k1, k2,
+p1, p2, k3), and to pixels through K.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg
+
+from mvpose_ros.core.datasets import IMAGE_SIZES
+
+# Newton steps for undistortion; quadratic convergence makes this exact to float precision for
+# any lens whose distortion map is monotone over the image.
+_UNDISTORT_ITERATIONS = 10
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Camera:
+    """One calibrated camera.
+
+    K: (3, 3) intrinsics; R: (3, 3) world-to-camera rotation; t: (3,) metres;
+    dist: (5,) k1, k2, p1, p2, k3 (zeros = no distortion); width, height: image size in pixels.
+    """
+
+    name: str
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    dist: np.ndarray
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for field, shape in (('K', (3, 3)), ('R', (3, 3)), ('t', (3,)), ('dist', (5,))):
+            value = np.array(getattr(self, field), dtype=float).reshape(shape)
+            value.flags.writeable = False  # frozen means the arrays too
+            object.__setattr__(self, field, value)
+        object.__setattr__(self, 'width', int(self.width))
+        object.__setattr__(self, 'height', int(self.height))
+
+    @classmethod
+    def from_projection(cls, name: str, P: np.ndarray, width: int, height: int) -> Camera:
+        """Camera without distortion from a (3, 4) projection matrix (any scale or sign)."""
+        P = np.asarray(P, dtype=float).reshape(3, 4)
+        # P is defined up to a scale whose sign decides which side of the camera is "in front":
+        # with positive focal lengths and det(R) = +1 that scale must make det(P[:, :3]) > 0.
+        if np.linalg.det(P[:, :3]) < 0:
+            P = -P
+        K, R = scipy.linalg.rq(P[:, :3])
+        flip = np.diag(np.sign(np.diag(K)))
+        K, R = K @ flip, flip @ R
+        t = np.linalg.solve(K, P[:, 3])
+        return cls(name, K / K[2, 2], R, t, np.zeros(5), width, height)
+
+    @property
+    def P(self) -> np.ndarray:
+        """(3, 4) projection matrix K [R | t] (ignores distortion)."""
+        return self.K @ np.column_stack([self.R, self.t])
+
+    @property
+    def centre(self) -> np.ndarray:
+        """(3,) world position of the optical centre."""
+        return -self.R.T @ self.t
+
+    @property
+    def has_distortion(self) -> bool:
+        """Any non-zero distortion coefficient (most rigs have none)."""
+        return bool(np.any(self.dist != 0))
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """(..., 3) world points -> (..., 2) pixels; NaN for points at or behind the camera."""
+        x_cam = np.asarray(X, dtype=float) @ self.R.T + self.t
+        z = x_cam[..., 2:]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            xy = np.where(z > 0, x_cam[..., :2] / z, np.nan)
+        if self.has_distortion:
+            xy = self._distort(xy)
+        return xy @ self.K[:2, :2].T + self.K[:2, 2]
+
+    def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(..., 2) pixels -> world rays: origins (..., 3) (the centre), unit dirs (..., 3)."""
+        uv = np.asarray(uv, dtype=float)
+        xy = (uv - self.K[:2, 2]) @ np.linalg.inv(self.K[:2, :2]).T
+        if self.has_distortion:
+            xy = self._undistort(xy)
+        d_cam = np.concatenate([xy, np.ones_like(xy[..., :1])], axis=-1)
+        d = d_cam @ self.R  # R.T @ d_cam for each ray
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        return np.broadcast_to(self.centre, d.shape).copy(), d
+
+    def _distort(self, xy: np.ndarray) -> np.ndarray:
+        """(..., 2) undistorted -> distorted normalised coordinates."""
+        k1, k2, p1, p2, k3 = self.dist
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        return np.stack([x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                         y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y], axis=-1)
+
+    def _undistort(self, xy_d: np.ndarray) -> np.ndarray:
+        """(..., 2) distorted -> undistorted normalised coordinates by Newton's method."""
+        k1, k2, p1, p2, k3 = self.dist
+        xy = xy_d.copy()
+        for _ in range(_UNDISTORT_ITERATIONS):
+            x, y = xy[..., 0], xy[..., 1]
+            r2 = x * x + y * y
+            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            d_radial = 2 * (k1 + r2 * (2 * k2 + 3 * k3 * r2))  # d radial / d r2, times 2
+            # Jacobian of _distort at (x, y).
+            j_xx = radial + x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+            j_xy = x * y * d_radial + 2 * p1 * x + 2 * p2 * y  # symmetric: also d y_d / d x
+            j_yy = radial + y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+            r = self._distort(xy) - xy_d
+            det = j_xx * j_yy - j_xy * j_xy
+            xy = xy - np.stack([j_yy * r[..., 0] - j_xy * r[..., 1],
+                                j_xx * r[..., 1] - j_xy * r[..., 0]], axis=-1) / det[..., None]
+        return xy
+
+
+def _image_size(path: Path, width: int | None, height: int | None,
+                cx: float, cy: float) -> tuple[int, int]:
+    """Explicit size, else the dataset named in the path, else twice the principal point."""
+    if width is not None and height is not None:
+        return width, height
+    parts = [path.name.lower(), *(p.lower() for p in reversed(path.parent.parts))]
+    for part in parts:
+        for dataset, size in IMAGE_SIZES.items():
+            if dataset in part:
+                return width or size[0], height or size[1]
+    return width or round(2 * cx), height or round(2 * cy)
+
+
+def _load_json(path: Path, width: int | None, height: int | None) -> list[Camera]:
+    cams = []
+    with open(path) as f:
+        entries = json.load(f)
+    for name in sorted(entries, key=lambda n: (len(n), n)):
+        e = entries[name]
+        # The files round R to 6 decimals; snap it back onto SO(3) so that R.T inverts it.
+        u, _, vt = np.linalg.svd(np.asarray(e['R'], dtype=float))
+        R = u @ vt
+        centre = np.asarray(e['T'], dtype=float).reshape(3) / 1000.0  # mm -> m
+        k = np.ravel(e.get('k', [])).astype(float)
+        p = np.ravel(e.get('p', [])).astype(float)
+        k = np.pad(k, (0, 3 - k.size))
+        p = np.pad(p, (0, 2 - p.size))
+        K = np.array([[e['fx'], 0.0, e['cx']], [0.0, e['fy'], e['cy']], [0.0, 0.0, 1.0]])
+        w, h = _image_size(path, width, height, e['cx'], e['cy'])
+        cams.append(Camera(name, K, R, -R @ centre, np.array([k[0], k[1], p[0], p[1], k[2]]), w, h))
+    return cams
+
+
+def _load_projections(files: list[Path], width: int | None, height: int | None) -> list[Camera]:
+    cams = []
+    for f in files:
+        P = np.array(f.read_text().replace(',', ' ').split(), dtype=float).reshape(3, 4)
+        cam = Camera.from_projection(f.name[1:-4], P, 0, 0)
+        w, h = _image_size(f, width, height, cam.K[0, 2], cam.K[1, 2])
+        cams.append(dataclasses.replace(cam, width=w, height=h))
+    return cams
+
+
+def load_rig(path: str | Path, width: int | None = None, height: int | None = None) -> list[Camera]:
+    """Cameras of a rig, ordered by index.
+
+    path: a calibration json (Shelf layout: {cam: {R, T (mm, centre in world), fx, fy, cx, cy,
+    k, p}}) or a folder holding one (calibration_*.json, preferred: it carries distortion) or
+    P{i}.txt projection matrices (world metres -> pixels).
+    """
+    path = Path(path)
+    if path.is_file():
+        if path.suffix == '.json':
+            return _load_json(path, width, height)
+        if re.fullmatch(r'P\d+\.txt', path.name):
+            return _load_projections([path], width, height)
+        raise ValueError(f'{path}: not a calibration json or P<i>.txt file')
+    if not path.is_dir():
+        raise FileNotFoundError(f'calibration not found: {path}')
+    jsons = sorted(path.glob('calibration_*.json'))
+    if jsons:
+        return _load_json(jsons[0], width, height)
+    projections = sorted((f for f in path.glob('P*.txt') if re.fullmatch(r'P\d+\.txt', f.name)),
+                         key=lambda f: int(f.name[1:-4]))
+    if projections:
+        return _load_projections(projections, width, height)
+    raise FileNotFoundError(f'{path}: no calibration_*.json or P<i>.txt files')
+
+
+def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """(..., K, 3) lines (K >= 2) -> (..., 3) point minimising the sum of squared distances.
+
+    Directions need not be unit. Degenerate sets (all lines parallel, or non-finite input) give NaN.
+    """
+    o = np.asarray(origins, dtype=float)
+    d = np.asarray(dirs, dtype=float)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    # Each line contributes the projector onto its normal plane: A = sum(I - d d^T), b = sum(.. o).
+    proj = np.eye(3) - d[..., :, None] * d[..., None, :]
+    A = proj.sum(axis=-3)
+    b = (proj @ o[..., None]).sum(axis=-3)
+    n_lines = d.shape[-2]
+    ok = np.isfinite(A).all(axis=(-2, -1)) & np.isfinite(b).all(axis=(-2, -1))
+    ok &= np.abs(np.linalg.det(np.where(ok[..., None, None], A, 0.0))) > 1e-12 * n_lines ** 3
+    X = np.linalg.solve(np.where(ok[..., None, None], A, np.eye(3)),
+                        np.where(ok[..., None, None], b, 0.0))[..., 0]
+    return np.where(ok[..., None], X, np.nan)
+
+
+def ray_ray_distance(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    """(..., 3) two lines each -> (...) distance between their closest points (lines, not rays)."""
+    o1, d1, o2, d2 = (np.asarray(a, dtype=float) for a in (o1, d1, o2, d2))
+    d1 = d1 / np.linalg.norm(d1, axis=-1, keepdims=True)
+    d2 = d2 / np.linalg.norm(d2, axis=-1, keepdims=True)
+    gap = o2 - o1
+    n = np.cross(d1, d2)
+    n_norm = np.linalg.norm(n, axis=-1)
+    parallel = n_norm < 1e-9
+    with np.errstate(divide='ignore', invalid='ignore'):
+        skew = np.abs(np.sum(gap * n, axis=-1)) / n_norm
+    # Parallel lines: distance from o2 to line 1.
+    side = np.linalg.norm(np.cross(gap, d1), axis=-1)
+    return np.where(parallel, side, skew)

@@ -1,0 +1,112 @@
+"""The Shelf and Campus datasets: where the data lives, their fixed facts, and ground-truth loading.
+
+Ground truth comes from the datasets' `actorsGT.mat` (MATLAB cell arrays): `actor3D{p}{f}` is a
+(14, 3) array in metres, `actor2D{p}{f}{c}` a (14, 2) array in pixels, and an absent actor is an
+empty (1, 0) array. Here absence becomes NaN so that frames stack into dense arrays.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import scipy.io
+
+DATA_ROOT_ENV = 'MVPOSE_DATA_ROOT'
+
+SHELF_TEST_FRAMES = range(300, 601)
+CAMPUS_TEST_FRAMES = [*range(350, 471), *range(650, 751)]
+SHELF_ACTORS = (0, 1, 2)
+CAMPUS_ACTORS = (0, 1, 2)
+
+# (width, height) in pixels; the calibration json files do not record it.
+IMAGE_SIZES = {'shelf': (1032, 776), 'campus': (360, 288)}
+
+N_JOINTS = 14
+
+
+def data_root(override: str | None = None) -> Path:
+    """Folder holding the shared data (`data/`, `models/`).
+
+    An explicit `override` (CLI flag) or the MVPOSE_DATA_ROOT variable is used as given and is an
+    error when missing: silently falling back to another data set would hide a typo. Without
+    either, try `../shared` beside the repository checkout, then `../shared` beside the cwd.
+    """
+    if override is not None:
+        tried = [Path(override).expanduser()]
+    elif os.environ.get(DATA_ROOT_ENV):
+        tried = [Path(os.environ[DATA_ROOT_ENV]).expanduser()]
+    else:
+        checkout = Path(__file__).resolve().parents[2]
+        tried = [checkout.parent / 'shared', Path.cwd().parent / 'shared']
+    for path in tried:
+        if path.is_dir():
+            return path
+    source = ('override' if override is not None
+              else DATA_ROOT_ENV if os.environ.get(DATA_ROOT_ENV) else 'default locations')
+    raise FileNotFoundError(
+        f'mvpose data root not found ({source}); tried: {", ".join(str(p) for p in tried)}. '
+        f'Pass a data root or set {DATA_ROOT_ENV}.')
+
+
+def dataset_dir(name: str, root: str | None = None) -> Path:
+    """`<data root>/data/<name>`, e.g. dataset_dir('shelf')."""
+    return data_root(root) / 'data' / name
+
+
+@dataclass
+class GroundTruth:
+    """3D ground truth of a clip.
+
+    frames: (F,) actorsGT frame indices (0-based).
+    poses: (F, A, 14, 3) metres, NaN where the actor is absent.
+    """
+
+    frames: np.ndarray
+    poses: np.ndarray
+
+    @property
+    def present(self) -> np.ndarray:
+        """(F, A) bool: the actor is annotated in that frame."""
+        return np.isfinite(self.poses).all(axis=(-2, -1))
+
+
+def _cells(mat_path: str | Path, key: str, frames: Sequence[int] | None) -> tuple[np.ndarray, list]:
+    """Frame indices (F,) and per-actor lists of the selected cells of `key`."""
+    actors = scipy.io.loadmat(str(mat_path), variable_names=[key])[key][0]
+    n_frames = actors[0].shape[0]
+    idx = np.arange(n_frames) if frames is None else np.asarray(list(frames), dtype=int)
+    if idx.size and (idx.min() < 0 or idx.max() >= n_frames):
+        raise IndexError(f'{mat_path}: frames must lie in 0..{n_frames - 1}')
+    return idx, [actor[idx, 0] for actor in actors]
+
+
+def load_actors_gt(mat_path: str | Path, frames: Sequence[int] | None = None) -> GroundTruth:
+    """3D ground truth of every actor in `mat_path` at `frames` (all frames when None)."""
+    idx, actors = _cells(mat_path, 'actor3D', frames)
+    poses = np.full((idx.size, len(actors), N_JOINTS, 3), np.nan)
+    for a, cells in enumerate(actors):
+        here = np.array([c.size > 0 for c in cells], dtype=bool)
+        if here.any():
+            poses[here, a] = np.stack(cells[here])
+    return GroundTruth(frames=idx, poses=poses)
+
+
+def load_actors_gt_2d(mat_path: str | Path, frames: Sequence[int] | None = None) -> np.ndarray:
+    """(F, A, C, 14, 2) annotated pixels of every actor in every camera, NaN where absent.
+
+    An absent actor's cell holds one empty array per camera. Campus stores some cameras'
+    annotations as integers; they are returned as float.
+    """
+    idx, actors = _cells(mat_path, 'actor2D', frames)
+    n_cams = max((cell.size for cells in actors for cell in cells), default=0)
+    uv = np.full((idx.size, len(actors), n_cams, N_JOINTS, 2), np.nan)
+    for a, cells in enumerate(actors):
+        for c in range(n_cams):
+            views = [cell.ravel()[c] if cell.size > c else np.empty(0) for cell in cells]
+            here = np.array([v.size > 0 for v in views], dtype=bool)
+            if here.any():
+                uv[here, a, c] = np.stack([v for v, h in zip(views, here) if h])
+    return uv

@@ -1,0 +1,228 @@
+"""Camera model, rig loading and ray geometry, checked on the real Shelf and Campus calibration."""
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+import scipy.optimize
+
+from mvpose_ros.core.camera import Camera, closest_point_to_rays, load_rig, ray_ray_distance
+from mvpose_ros.core.datasets import (SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
+                                      load_actors_gt_2d)
+
+SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]
+
+
+def _calibration(dataset: str):
+    return dataset_dir(dataset) / 'calibration'
+
+
+def _gt(dataset: str):
+    """3D (F, A, 14, 3) and 2D (F, A, C, 14, 2) ground truth."""
+    if dataset == 'shelf':
+        mat, frames = dataset_dir('shelf') / 'actorsGT.mat', SHELF_FRAMES
+    else:
+        mat, frames = dataset_dir('campus') / 'mmpose_subset' / 'actorsGT.mat', None
+    return load_actors_gt(mat, frames).poses, load_actors_gt_2d(mat, frames)
+
+
+def _rigs(dataset: str) -> dict[str, list[Camera]]:
+    calib = _calibration(dataset)
+    p_form = [load_rig(f)[0] for f in sorted(calib.glob('P*.txt'))]
+    return {'json': load_rig(calib / f'calibration_{dataset}.json'), 'P': p_form}
+
+
+@pytest.fixture(scope='module', params=['shelf', 'campus'])
+def dataset(request):
+    return request.param
+
+
+def test_load_rig_shapes_and_sizes():
+    shelf, campus = load_rig(_calibration('shelf')), load_rig(_calibration('campus'))
+    assert [c.name for c in shelf] == ['0', '1', '2', '3', '4']
+    assert {(c.width, c.height) for c in shelf} == {(1032, 776)}
+    assert [c.name for c in campus] == ['0', '1', '2']
+    assert {(c.width, c.height) for c in campus} == {(360, 288)}
+    assert load_rig(_calibration('shelf'), width=640, height=480)[0].width == 640
+    for cam in shelf + campus:
+        assert cam.P.shape == (3, 4)
+        np.testing.assert_allclose(cam.R @ cam.R.T, np.eye(3), atol=1e-5)
+        # The rigs look at people near the world origin from 2..13 m away.
+        assert 2.0 < np.linalg.norm(cam.centre[:2]) < 15.0
+
+
+def test_json_matches_projection_files(dataset):
+    rigs = _rigs(dataset)
+    for cj, cp in zip(rigs['json'], rigs['P']):
+        assert cj.name == cp.name
+        assert (cj.width, cj.height) == (cp.width, cp.height)
+        np.testing.assert_allclose(cj.R, cp.R, atol=1e-5)
+        np.testing.assert_allclose(cj.centre, cp.centre, atol=1e-3)  # 1 mm
+        np.testing.assert_allclose(cj.K, cp.K, atol=0.1)
+        # The json rebuilds P*.txt (5 significant digits) up to scale.
+        P = np.loadtxt(_calibration(dataset) / f'P{cj.name}.txt',
+                       delimiter=',' if dataset == 'shelf' else None)
+        np.testing.assert_allclose(cj.P / cj.P[2, 3] * P[2, 3], P,
+                                   rtol=2e-4, atol=1e-3 * np.abs(P).max())
+
+
+def test_projection_reproduces_actor2d(dataset):
+    X, uv = _gt(dataset)
+    for form, rig in _rigs(dataset).items():
+        err = np.stack([np.abs(cam.project(X) - uv[:, :, c]) for c, cam in enumerate(rig)], axis=2)
+        present = np.isfinite(uv).all(axis=(2, 3, 4))
+        assert present.sum() >= 3
+        err = err[present]  # (N, C, 14, 2)
+        if dataset == 'shelf':
+            assert err.max() < 0.1, form
+        else:
+            # Campus: camera 2 is an exact reprojection of the 3D ground truth; cameras 0 and 1
+            # hold integer hand annotations the 3D was fitted to (errors up to ~2.7 px).
+            assert err[:, 2].max() < 0.1, form
+            assert err[:, :2].max() < 3.0, form
+            assert np.all(uv[present][:, :2] == np.round(uv[present][:, :2]))
+
+
+def test_from_projection_recovers_camera():
+    rng = np.random.default_rng(0)
+    R = cv2.Rodrigues(rng.normal(size=3))[0]
+    K = np.array([[800.0, 0.5, 320.0], [0.0, 780.0, 240.0], [0.0, 0.0, 1.0]])
+    t = np.array([0.1, -0.2, 4.0])
+    P = K @ np.column_stack([R, t])
+    for scale in (1.0, -3.7):  # P is defined up to any scale, sign included
+        cam = Camera.from_projection('c', scale * P, 640, 480)
+        np.testing.assert_allclose(cam.K, K, atol=1e-9)
+        np.testing.assert_allclose(cam.R, R, atol=1e-12)
+        np.testing.assert_allclose(cam.t, t, atol=1e-12)
+        assert np.linalg.det(cam.R) == pytest.approx(1.0)
+
+
+def _points_in_front(cam: Camera, rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 3) world points 0.5..10 m in front of cam, inside a wide cone."""
+    x_cam = np.column_stack([rng.uniform(-1, 1, (n, 2)), np.ones(n)]) * rng.uniform(0.5, 10, (n, 1))
+    return (x_cam - cam.t) @ cam.R
+
+
+def test_ray_round_trip_real_cameras(dataset):
+    rng = np.random.default_rng(1)
+    for cam in load_rig(_calibration(dataset)):
+        X = _points_in_front(cam, rng, 500)
+        o, d = cam.rays(cam.project(X))
+        np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0)
+        np.testing.assert_allclose(o, np.broadcast_to(cam.centre, o.shape))
+        dist = np.linalg.norm(np.cross(X - o, d), axis=-1)
+        assert dist.max() < 1e-6
+
+
+def test_behind_camera_is_nan():
+    cam = load_rig(_calibration('shelf'))[0]
+    rng = np.random.default_rng(2)
+    X = _points_in_front(cam, rng, 10)
+    behind = 2 * cam.centre - X  # mirrored through the optical centre
+    uv = cam.project(np.stack([X, behind, np.broadcast_to(cam.centre, X.shape)]))
+    assert uv.shape == (3, 10, 2)
+    assert np.isfinite(uv[0]).all()
+    assert np.isnan(uv[1:]).all()
+
+
+DIST = np.array([-0.28, 0.09, 0.0012, -0.0017, -0.015])
+
+
+def _distorted_camera() -> Camera:
+    cam = load_rig(_calibration('shelf'))[1]
+    return dataclasses.replace(cam, dist=DIST)
+
+
+def test_distortion_matches_opencv():
+    cam = _distorted_camera()
+    X = _points_in_front(cam, np.random.default_rng(3), 300)
+    ours = cam.project(X)
+    ref, _ = cv2.projectPoints(X, cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)
+    np.testing.assert_allclose(ours, ref[:, 0], atol=1e-6)
+    # Distortion actually moves points, so the comparison above is not vacuous.
+    plain = dataclasses.replace(cam, dist=np.zeros(5)).project(X)
+    assert np.abs(plain - ours).max() > 10.0
+
+
+def test_distortion_round_trip():
+    cam = _distorted_camera()
+    rng = np.random.default_rng(4)
+    # Pixels over the whole image (this lens stays monotone there) -> rays -> project back.
+    uv = rng.uniform([0, 0], [cam.width, cam.height], (1000, 2))
+    o, d = cam.rays(uv)
+    np.testing.assert_allclose(cam.project(o + 3.0 * d), uv, atol=1e-6)
+    # And world points -> pixels -> rays pass through the points.
+    X = o + rng.uniform(0.5, 10.0, (1000, 1)) * d
+    o2, d2 = cam.rays(cam.project(X))
+    assert np.linalg.norm(np.cross(X - o2, d2), axis=-1).max() < 1e-6
+    # Agrees with OpenCV's undistortion run to convergence.
+    ref = cv2.undistortPoints(uv[:, None], cam.K, cam.dist, None, None, None,
+                              (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))
+    d_cam = d @ cam.R.T
+    np.testing.assert_allclose(d_cam[:, :2] / d_cam[:, 2:], ref[:, 0], atol=1e-6)
+
+
+def test_rays_vectorised_shapes():
+    cam = load_rig(_calibration('shelf'))[0]
+    o, d = cam.rays(np.zeros((4, 7, 2)))
+    assert o.shape == d.shape == (4, 7, 3)
+
+
+def test_closest_point_exact_without_noise():
+    rng = np.random.default_rng(5)
+    X = rng.normal(size=(50, 3))
+    o = rng.normal(scale=5.0, size=(50, 4, 3))
+    d = (X[:, None] - o) * rng.uniform(0.1, 3.0, (50, 4, 1))  # non-unit, either length
+    np.testing.assert_allclose(closest_point_to_rays(o, d), X, atol=1e-10)
+    np.testing.assert_allclose(closest_point_to_rays(o[:, :2], d[:, :2]), X, atol=1e-10)
+
+
+def test_closest_point_is_least_squares_under_noise():
+    rng = np.random.default_rng(6)
+    o = rng.normal(scale=4.0, size=(20, 3, 3))
+    d = rng.normal(size=(20, 3, 3))  # unrelated lines: a large residual
+    ours = closest_point_to_rays(o, d)
+    for i in range(len(o)):
+        u = d[i] / np.linalg.norm(d[i], axis=-1, keepdims=True)
+
+        def residual(x, i=i, u=u):
+            return np.cross(x - o[i], u).ravel()  # |(x - o) x u| = distance to the line
+
+        ref = scipy.optimize.least_squares(residual, np.zeros(3), xtol=1e-14, ftol=1e-14).x
+        np.testing.assert_allclose(ours[i], ref, atol=1e-6)
+        cost = np.sum(residual(ours[i]) ** 2)
+        assert cost > 0.1  # genuinely noisy: the lines do not meet
+        assert cost <= np.sum(residual(ref) ** 2) + 1e-12
+
+
+def test_closest_point_degenerate_is_nan():
+    o = np.array([[[0.0, 0, 0], [1, 0, 0]], [[0, 0, 0], [1, 0, 0]]])
+    d = np.array([[[0.0, 0, 1], [0, 0, 2]], [[0, 0, 1], [np.nan, 0, 1]]])
+    assert np.isnan(closest_point_to_rays(o, d)).all()
+    good = closest_point_to_rays(np.array([[0.0, 0, 0], [1, 0, 0]]),
+                                 np.array([[0.0, 0, 1], [-1, 0, 1]]))
+    np.testing.assert_allclose(good, [0, 0, 1], atol=1e-12)
+
+
+def test_ray_ray_distance_vs_brute_force():
+    rng = np.random.default_rng(7)
+    o1, d1, o2, d2 = rng.normal(size=(4, 30, 3))
+    ours = ray_ray_distance(o1, d1, o2, d2)
+    for i in range(30):
+        ref = scipy.optimize.minimize(
+            lambda st, i=i: np.sum((o1[i] + st[0] * d1[i] - o2[i] - st[1] * d2[i]) ** 2),
+            np.zeros(2), method='BFGS', options={'gtol': 1e-12}).fun
+        assert ours[i] == pytest.approx(np.sqrt(ref), abs=1e-6)
+    # Intersecting lines are at distance 0.
+    assert ray_ray_distance(o1, d1, o1 + 2.0 * d1, d2) == pytest.approx(np.zeros(30), abs=1e-12)
+
+
+def test_ray_ray_distance_parallel():
+    o1 = np.array([[0.0, 0, 0], [1, 2, 3]])
+    d = np.array([[0.0, 0, 1], [1, 1, 0]])
+    # Perpendicular parts of the offsets: (3, 4, 0) and all of (0.5, -0.5, 2).
+    offset = np.array([[3.0, 4, 7], [0.5, -0.5, 2]])
+    dist = ray_ray_distance(o1, d, o1 + offset, -2.5 * d)
+    np.testing.assert_allclose(dist, [5.0, np.sqrt(0.5 + 4)], atol=1e-12)
