@@ -1,0 +1,133 @@
+"""The 14-joint Shelf/Campus body and its mapping from 2D detector formats (BODY25, COCO-17,
+MPII-16).
+
+The limb joints (ankles ... wrists) map one-to-one; the two head joints are derived by a head
+model: 'paper' (neck and nose, shifted up 10 cm in 3D afterwards, as Schwarcz & Pollard score
+it), 'anatomical' (a head centre from the ears and the neck, as VoxelPose/mvpose derive it) or
+'direct' (detectors that give the head top, like MPII-16). Head models work in 3D, on the 16
+inference joints, so every view contributes the same physical points.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+JOINT_NAMES: tuple[str, ...] = (
+    'r_ankle', 'r_knee', 'r_hip', 'l_hip', 'l_knee', 'l_ankle',
+    'r_wrist', 'r_elbow', 'r_shoulder', 'l_shoulder', 'l_elbow', 'l_wrist',
+    'bottom_head', 'top_head',
+)
+NUM_JOINTS = len(JOINT_NAMES)
+BOTTOM_HEAD = 12
+TOP_HEAD = 13
+
+BONES: tuple[tuple[int, int], ...] = (
+    (0, 1), (1, 2), (2, 3), (3, 4), (4, 5),
+    (6, 7), (7, 8), (8, 9), (9, 10), (10, 11),
+    (8, 12), (9, 12), (12, 13), (2, 8), (3, 9),
+)
+# (right, left): ankles, knees, hips, wrists, elbows, shoulders
+SYMMETRIC_PAIRS: tuple[tuple[int, int], ...] = ((0, 5), (1, 4), (2, 3), (6, 11), (7, 10), (8, 9))
+
+
+def _mirror() -> np.ndarray:
+    out = np.arange(NUM_JOINTS)
+    right, left = np.array(SYMMETRIC_PAIRS).T
+    out[right], out[left] = left, right
+    return out
+
+
+MIRROR = _mirror()  # (14,) each joint's left/right counterpart; the head joints map to themselves
+
+BODY25_NAMES: tuple[str, ...] = (
+    'nose', 'neck', 'r_shoulder', 'r_elbow', 'r_wrist', 'l_shoulder', 'l_elbow', 'l_wrist',
+    'mid_hip', 'r_hip', 'r_knee', 'r_ankle', 'l_hip', 'l_knee', 'l_ankle',
+    'r_eye', 'l_eye', 'r_ear', 'l_ear',
+    'l_big_toe', 'l_small_toe', 'l_heel', 'r_big_toe', 'r_small_toe', 'r_heel',
+)
+COCO17_NAMES: tuple[str, ...] = (
+    'nose', 'l_eye', 'r_eye', 'l_ear', 'r_ear', 'l_shoulder', 'r_shoulder', 'l_elbow',
+    'r_elbow', 'l_wrist', 'r_wrist', 'l_hip', 'r_hip', 'l_knee', 'r_knee', 'l_ankle', 'r_ankle',
+)
+# EfficientPose channel order (see shared/README.md), not the original MPII annotation order
+MPII16_NAMES: tuple[str, ...] = (
+    'head_top', 'upper_neck', 'r_shoulder', 'r_elbow', 'r_wrist', 'thorax', 'l_shoulder',
+    'l_elbow', 'l_wrist', 'pelvis', 'r_hip', 'r_knee', 'r_ankle', 'l_hip', 'l_knee', 'l_ankle',
+)
+FORMAT_NAMES: dict[str, tuple[str, ...]] = {
+    'body25': BODY25_NAMES, 'coco17': COCO17_NAMES, 'mpii16': MPII16_NAMES,
+}
+
+
+# The joints the 3D stage infers: the 12 limb joints, then what detectors actually see of the
+# head. The dataset's bottom_head / top_head are derived from these in 3D by a head model.
+INFERENCE_NAMES: tuple[str, ...] = JOINT_NAMES[:12] + ('neck', 'head', 'r_ear', 'l_ear')
+NUM_INFERENCE_JOINTS = len(INFERENCE_NAMES)
+NECK, HEAD, R_EAR, L_EAR = 12, 13, 14, 15
+
+# Source keypoint of each inference joint per format; None where the format has no such point
+# (COCO's neck is the shoulder midpoint; MPII has no ears, and its 'head' is the head top).
+_SOURCES: dict[str, tuple[str | None, ...]] = {
+    'body25': JOINT_NAMES[:12] + ('neck', 'nose', 'r_ear', 'l_ear'),
+    'coco17': JOINT_NAMES[:12] + (None, 'nose', 'r_ear', 'l_ear'),
+    'mpii16': JOINT_NAMES[:12] + ('upper_neck', 'head_top', None, None),
+}
+SOURCE_INDEX: dict[str, np.ndarray] = {
+    fmt: np.array([FORMAT_NAMES[fmt].index(n) if n else -1 for n in names]) for fmt, names in _SOURCES.items()
+}
+BODY25_INFERENCE_JOINTS = SOURCE_INDEX['body25']  # (16,) BODY25 index of each inference joint
+
+
+def _inference_mirror() -> np.ndarray:
+    out = np.arange(NUM_INFERENCE_JOINTS)
+    pairs = np.array(SYMMETRIC_PAIRS + ((R_EAR, L_EAR),))
+    out[pairs[:, 0]], out[pairs[:, 1]] = pairs[:, 1], pairs[:, 0]
+    return out
+
+
+INFERENCE_MIRROR = _inference_mirror()  # (16,) left/right counterpart of each inference joint
+
+# 'paper': bottom/top head = neck/nose + 10 cm up (Schwarcz & Pollard's scoring).
+# 'anatomical': from the 3D ears and neck, as VoxelPose and mvpose derive it for COCO: head
+#   centre = ear midpoint, bottom = midway between neck and head centre, top = as far above the
+#   centre as the bottom is below it.
+# 'direct': the detector already gives bottom/top head (MPII upper_neck / head_top).
+HEAD_MODELS = ('paper', 'anatomical', 'direct')
+HEAD_SHIFT_M = 0.10
+UP = np.array([0.0, 0.0, 1.0])  # the Shelf and Campus worlds have z up
+
+
+def to_inference(keypoints: np.ndarray, fmt: str) -> np.ndarray:
+    """Map 2D keypoints (..., K, 3) [u, v, score] of format fmt ('body25', 'coco17', 'mpii16') to
+    the 16 inference joints (..., 16, 3). A joint is missing when its score is <= 0 (or NaN) and
+    is then returned as (NaN, NaN, 0)."""
+    if fmt not in FORMAT_NAMES:
+        raise ValueError(f'unknown keypoint format {fmt!r}; expected one of {sorted(FORMAT_NAMES)}')
+    keypoints = np.asarray(keypoints, dtype=np.float64)
+    if keypoints.shape[-2:] != (len(FORMAT_NAMES[fmt]), 3):
+        raise ValueError(f'{fmt} keypoints must be (..., {len(FORMAT_NAMES[fmt])}, 3), '
+                         f'got {keypoints.shape}')
+    index = SOURCE_INDEX[fmt]
+    out = keypoints[..., np.maximum(index, 0), :].copy()
+    out[..., index < 0, :] = (np.nan, np.nan, 0.0)
+    if fmt == 'coco17':
+        names = FORMAT_NAMES[fmt]
+        r, l = keypoints[..., names.index('r_shoulder'), :], keypoints[..., names.index('l_shoulder'), :]
+        out[..., NECK, :2] = 0.5 * (r[..., :2] + l[..., :2])
+        out[..., NECK, 2] = np.minimum(r[..., 2], l[..., 2])
+    out[~(out[..., 2] > 0)] = (np.nan, np.nan, 0.0)  # one convention for 'missing' downstream
+    return out
+
+
+def finalize_head(joints: np.ndarray, head_model: str) -> np.ndarray:
+    """The dataset's 14 joints (..., 14, 3) from the 16 inferred 3D joints (..., 16, 3), metres."""
+    if head_model not in HEAD_MODELS:
+        raise ValueError(f'unknown head model {head_model!r}; expected one of {HEAD_MODELS}')
+    joints = np.asarray(joints, dtype=np.float64)
+    out = joints[..., :NUM_JOINTS, :].copy()
+    if head_model == 'paper':
+        out[..., [BOTTOM_HEAD, TOP_HEAD], :] += HEAD_SHIFT_M * UP
+    elif head_model == 'anatomical':
+        centre = 0.5 * (joints[..., R_EAR, :] + joints[..., L_EAR, :])
+        out[..., BOTTOM_HEAD, :] = 0.5 * (joints[..., NECK, :] + centre)
+        out[..., TOP_HEAD, :] = 2.0 * centre - out[..., BOTTOM_HEAD, :]
+    return out

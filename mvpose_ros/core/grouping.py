@@ -1,0 +1,100 @@
+"""OpenPose's greedy bottom-up grouping: joint candidates are linked into people limb by limb
+with their part-affinity scores."""
+from __future__ import annotations
+
+import numpy as np
+
+from mvpose_ros.core.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
+
+
+# Shoulder-ear limbs (2, 17) and (5, 18) close loops over the kinematic tree the other 24 limbs
+# span. The file lists them before the eye-ear limbs, so taken in file order they would claim
+# ears before the head chain reaches them and a wrong shoulder-ear link would then block the
+# right ear. They go last instead (as in OpenPose's own order): by then they can only add an
+# ear the head chain missed or join a head fragment to its body, and they never start a person.
+BODY25_REDUNDANT_LIMBS = frozenset(BODY25_PAF_PAIRS.index(p) for p in ((2, 17), (5, 18)))
+_LIMB_ORDER = ([k for k in range(len(BODY25_PAF_PAIRS)) if k not in BODY25_REDUNDANT_LIMBS]
+               + sorted(BODY25_REDUNDANT_LIMBS))
+
+
+def _limb_connections(score: np.ndarray, min_score: float) -> list[tuple[int, int, float]]:
+    """Greedy one-to-one matching of a limb's candidate pairs by score (n_a, n_b), best first."""
+    order = np.argsort(-score, axis=None, kind='stable')
+    order = order[score.ravel()[order] > min_score]
+    used_a = np.zeros(score.shape[0], bool)
+    used_b = np.zeros(score.shape[1], bool)
+    out = []
+    for ia, ib in zip(*np.unravel_index(order, score.shape)):
+        if not (used_a[ia] or used_b[ib]):
+            used_a[ia] = used_b[ib] = True
+            out.append((int(ia), int(ib), float(score[ia, ib])))
+    return out
+
+
+def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 0.05,
+                 min_joints: int = 4, min_mean_score: float = 0.3) -> np.ndarray:
+    """Group one frame's BODY25 candidates into people; returns (P, 25) int candidate index per
+    joint (-1 where the person has none), best-scoring person first.
+
+    Limbs are taken in the file's order (torso first, so people grow from the neck), the two
+    redundant shoulder-ear limbs last. Per limb, candidate pairs are accepted greedily by
+    sharpened score, each candidate at most once; an accepted pair starts a person (neither end
+    owned), extends one (its person lacks that joint) or merges two people (no joint in common);
+    anything else is a conflict and the pair is ignored.
+
+    paf_power: sharpening exponent applied to the raw PAF scores (the file's producer used 0.2).
+    min_paf: a pair is a connection only if its sharpened score is > min_paf. The files hold
+        raw 0 for pairs OpenPose rejected and >= 0.05 otherwise, so the default keeps every
+        pair OpenPose accepted and rejects only the zeros (0.05 ** 0.2 = 0.55 would do the same).
+    min_joints, min_mean_score: people with fewer joints, or whose (sum of candidate scores + sum
+        of sharpened PAF scores of their connections) / joint count is lower, are dropped
+        (OpenPose's subset filter).
+    """
+    owner = [np.full(len(c), -1) for c in frame.candidates]  # person index per candidate
+    people: list[np.ndarray | None] = []
+    scores: list[float] = []
+
+    for k in _LIMB_ORDER:
+        a, b = BODY25_PAF_PAIRS[k]
+        raw = frame.pafs[k]
+        if raw.size == 0:
+            continue
+        redundant = k in BODY25_REDUNDANT_LIMBS
+        sa, sb = frame.candidates[a][:, 2], frame.candidates[b][:, 2]
+        for ca, cb, paf in _limb_connections(np.power(raw, paf_power), min_paf):
+            pa, pb = owner[a][ca], owner[b][cb]
+            if pa < 0 and pb < 0:
+                if redundant:
+                    continue
+                person = np.full(BODY25_NUM_JOINTS, -1)
+                person[a], person[b] = ca, cb
+                owner[a][ca] = owner[b][cb] = len(people)
+                people.append(person)
+                scores.append(sa[ca] + sb[cb] + paf)
+            elif pa < 0 or pb < 0:
+                # attach the free end unless its person already has that joint
+                p, j, c, s = (pb, a, ca, sa[ca]) if pa < 0 else (pa, b, cb, sb[cb])
+                if people[p][j] < 0:
+                    people[p][j] = c
+                    owner[j][c] = p
+                    scores[p] += s + paf
+            elif pa != pb:
+                first, second = people[pa], people[pb]
+                if np.any((first >= 0) & (second >= 0)):
+                    continue  # the two fragments disagree on some joint
+                taken = second >= 0
+                first[taken] = second[taken]
+                for j in np.flatnonzero(taken):
+                    owner[j][second[j]] = pa
+                scores[pa] += scores[pb] + paf
+                people[pb] = None
+
+    kept = []
+    for person, score in zip(people, scores):
+        if person is None:
+            continue
+        n = int(np.count_nonzero(person >= 0))
+        if n >= min_joints and score / n >= min_mean_score:
+            kept.append((score, person))
+    kept.sort(key=lambda x: -x[0])
+    return np.array([p for _, p in kept], dtype=np.int64).reshape(-1, BODY25_NUM_JOINTS)
