@@ -1,0 +1,139 @@
+"""Sum-product loopy belief propagation over one person's joints in a window of frames.
+
+Variables are y[t, j] (frame t, joint j), each with M discrete 3D hypotheses. Factors: the
+unary data term, one ternary temporal factor per joint and inner frame, and groups of
+pairwise factors within a frame (collision pairs, limbs). The schedule is the paper's: every
+iteration updates all messages of one factor type before the next; temporal messages sweep
+forward through the window, then backward. Messages live in the log domain, normalised, so long
+windows neither underflow nor drift.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+@dataclass(frozen=True)
+class PairwiseGroup:
+    """One type of within-frame pairwise factor.
+
+    edges: (E, 2) joint indices; tables: (T, E, M, M) potentials indexed [state of edges[e, 0],
+    state of edges[e, 1]].
+    """
+
+    name: str
+    edges: np.ndarray
+    tables: np.ndarray
+
+
+@dataclass
+class Messages:
+    """Factor-to-variable log messages, kept between calls to warm-start a sliding window.
+
+    temporal: (3, T, J, M): from the factor centred at frame t to y[t-1], y[t], y[t+1].
+    pairwise: per group (T, E, 2, M): to edges[e, 0] and to edges[e, 1].
+    """
+
+    temporal: np.ndarray
+    pairwise: list[np.ndarray] = field(default_factory=list)
+
+    @classmethod
+    def uniform(cls, shape: tuple[int, int, int], edge_counts: Sequence[int]) -> Messages:
+        t, j, m = shape
+        return cls(np.zeros((3, t, j, m)), [np.zeros((t, e, 2, m)) for e in edge_counts])
+
+    def slid(self, drop: int, add: int) -> Messages:
+        """Messages of a window moved forward: the first `drop` frames leave, `add` new frames
+        start uniform."""
+
+        def move(a: np.ndarray, axis: int) -> np.ndarray:
+            kept = np.delete(a, np.s_[:drop], axis=axis)
+            pad = [(0, 0)] * a.ndim
+            pad[axis] = (0, add)
+            return np.pad(kept, pad)
+
+        return Messages(move(self.temporal, 1), [move(p, 0) for p in self.pairwise])
+
+
+def _log_normalise(x: np.ndarray) -> np.ndarray:
+    return x - np.logaddexp.reduce(x, axis=-1, keepdims=True)
+
+
+def _softmax(x: np.ndarray) -> np.ndarray:
+    e = np.exp(x - x.max(axis=-1, keepdims=True))
+    return e / e.sum(axis=-1, keepdims=True)
+
+
+def _log_message(m: np.ndarray) -> np.ndarray:
+    return _log_normalise(np.log(np.maximum(m, np.finfo(np.float64).tiny)))
+
+
+def loopy_bp(
+    data: np.ndarray,
+    temporal: Sequence[np.ndarray | None],
+    groups: Sequence[PairwiseGroup] = (),
+    iterations: int = 5,
+    messages: Messages | None = None,
+) -> tuple[np.ndarray, Messages]:
+    """Marginals of every joint hypothesis in a window.
+
+    data: (T, J, M) non-negative unary potentials. temporal: T entries; entry t is None or the
+    (J, M, M, M) table of the factor on (y[t-1], y[t], y[t+1]) indexed [j, a, c, b] (see
+    factors.temporal_table); entries 0 and T-1 must be None. messages: a warm start of matching
+    shape. Returns the marginals (T, J, M) and the final messages.
+    """
+    t_len, n_joints, m = data.shape
+    if len(temporal) != t_len or (t_len and (temporal[0] is not None or temporal[-1] is not None)):
+        raise ValueError('temporal needs one entry per frame, None at both ends')
+    msgs = messages or Messages.uniform(data.shape, [len(g.edges) for g in groups])
+    tm = msgs.temporal
+    total = np.log(np.maximum(data, np.finfo(np.float64).tiny))
+    total[:-1] += tm[0, 1:]
+    total += tm[1]
+    total[1:] += tm[2, :-1]
+    for group, pm in zip(groups, msgs.pairwise):
+        for e, (i, k) in enumerate(group.edges):
+            total[:, i] += pm[:, e, 0]
+            total[:, k] += pm[:, e, 1]
+
+    inner = [t for t in range(1, t_len - 1) if temporal[t] is not None]
+    for _ in range(iterations):
+        for sweep in (inner, inner[::-1]):
+            for t in sweep:
+                _update_temporal(t, temporal[t], total, tm)
+        for group, pm in zip(groups, msgs.pairwise):
+            _update_pairwise(group, total, pm)
+    return _softmax(total), msgs
+
+
+def _update_temporal(t: int, table: np.ndarray, total: np.ndarray, tm: np.ndarray) -> None:
+    """Recompute the three outgoing messages of the temporal factor centred at frame t."""
+    j, ma, mc, mb = table.shape
+    n_prev = _softmax(total[t - 1] - tm[0, t])
+    n_cur = _softmax(total[t] - tm[1, t])
+    n_next = _softmax(total[t + 1] - tm[2, t])
+    flat = table.reshape(j, ma * mc, mb)
+    pair = (n_prev[:, :, None] * n_next[:, None, :]).reshape(j, 1, ma * mc)
+    to_cur = (pair @ flat)[:, 0]
+    over_cur = (flat @ n_cur[:, :, None]).reshape(j, ma, mc)
+    to_prev = (over_cur @ n_next[:, :, None])[..., 0]
+    to_next = (n_prev[:, None, :] @ over_cur)[:, 0]
+    for slot, frame, new in ((0, t - 1, to_prev), (1, t, to_cur), (2, t + 1, to_next)):
+        new = _log_message(new)
+        total[frame] += new - tm[slot, t]
+        tm[slot, t] = new
+
+
+def _update_pairwise(group: PairwiseGroup, total: np.ndarray, pm: np.ndarray) -> None:
+    """Flooding update of every factor of one pairwise type, all frames at once."""
+    i, k = group.edges[:, 0], group.edges[:, 1]
+    n_i = _softmax(total[:, i] - pm[:, :, 0])
+    n_k = _softmax(total[:, k] - pm[:, :, 1])
+    to_i = _log_message((group.tables @ n_k[..., None])[..., 0])
+    to_k = _log_message((n_i[..., None, :] @ group.tables)[..., 0, :])
+    for e, (a, b) in enumerate(group.edges):
+        total[:, a] += to_i[:, e] - pm[:, e, 0]
+        total[:, b] += to_k[:, e] - pm[:, e, 1]
+    pm[:, :, 0] = to_i
+    pm[:, :, 1] = to_k

@@ -1,0 +1,127 @@
+"""CRF factor tables: temporal (constant velocity), left/right collision, limb length."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mvpose_ros.core.factors import (TEMPORAL_FORMS, FactorConfig, collision_table, limb_table,
+                                     pair_distances, temporal_table)
+
+
+def _reference_temporal(prev, cur, nxt, config) -> np.ndarray:
+    """Direct (J, M, M, M) [j, a, c, b] table, normalised per joint."""
+    mid = 0.5 * (prev[:, :, None, None] + nxt[:, None, :, None])  # (J, a, c, 1, 3)
+    d = np.linalg.norm(cur[:, None, None, :] - mid, axis=-1)  # (J, a, c, b)
+    if config.temporal_form == 'laplace':
+        table = np.exp(-d / config.temporal_scale)
+    else:
+        table = np.exp(-d ** 2 / (2 * config.temporal_scale ** 2))
+    return table / table.sum(axis=(1, 2, 3), keepdims=True)
+
+
+@pytest.mark.parametrize('form', TEMPORAL_FORMS)
+def test_temporal_peaks_at_constant_velocity(form):
+    config = FactorConfig(temporal_form=form)
+    rng = np.random.default_rng(0)
+    prev, nxt = rng.normal(scale=0.3, size=(2, 3, 5, 3))
+    cur = rng.normal(scale=0.3, size=(3, 6, 3))
+    cur[:, 4] = 0.5 * (prev[:, 1] + nxt[:, 3])  # b = 4 is the midpoint of a = 1, c = 3
+    table = temporal_table(prev, cur, nxt, config)
+    assert table.shape == (3, 5, 5, 6) and table.dtype == np.float32
+    np.testing.assert_allclose(table.sum(axis=(1, 2, 3)), 1.0, rtol=1e-5)
+    for j in range(3):
+        assert np.unravel_index(np.argmax(table[j]), table[j].shape) == (1, 3, 4)
+        assert np.argmax(table[j, 1, 3]) == 4
+    np.testing.assert_allclose(table, _reference_temporal(prev, cur, nxt, config),
+                               rtol=1e-4, atol=1e-9)
+
+
+def test_temporal_entry_by_hand():
+    """[j, a, c, b]: prev a=1 at (1, 0, 0), next c=0 at (0, 0, 0), so the midpoint is
+    (0.5, 0, 0); cur b=1 at (0.5, 0, 0.3) is 0.3 m from it."""
+    prev = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])
+    nxt = np.array([[[0.0, 0.0, 0.0], [0.0, 2.0, 0.0]]])
+    cur = np.array([[[0.0, 0.0, 0.0], [0.5, 0.0, 0.3]]])
+    laplace = temporal_table(prev, cur, nxt, FactorConfig(temporal_form='laplace',
+                                                          temporal_scale=0.5))
+    gauss = temporal_table(prev, cur, nxt, FactorConfig(temporal_form='gauss', temporal_scale=0.5))
+    # [0, 0, 0, 0] is an exact constant-velocity triple (all at the origin): kernel value 1
+    assert laplace[0, 1, 0, 1] / laplace[0, 0, 0, 0] == pytest.approx(np.exp(-0.3 / 0.5), rel=1e-5)
+    assert gauss[0, 1, 0, 1] / gauss[0, 0, 0, 0] == pytest.approx(np.exp(-0.09 / 0.5), rel=1e-5)
+    # swapping a and c changes the midpoint to (0, 1, 0): a different entry
+    d = np.linalg.norm([0.5, -1.0, 0.3])
+    assert laplace[0, 0, 1, 1] / laplace[0, 0, 0, 0] == pytest.approx(np.exp(-d / 0.5), rel=1e-5)
+
+
+def test_temporal_scale_sharpens():
+    rng = np.random.default_rng(1)
+    prev, cur, nxt = rng.normal(scale=0.2, size=(3, 2, 4, 3))
+    cur[:, 0] = 0.5 * (prev[:, 0] + nxt[:, 0])
+    wide = temporal_table(prev, cur, nxt, FactorConfig(temporal_scale=0.5))
+    narrow = temporal_table(prev, cur, nxt, FactorConfig(temporal_scale=0.02))
+    assert np.all(narrow[:, 0, 0, 0] > wide[:, 0, 0, 0])
+
+
+def test_pair_distances():
+    a = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])  # (1, 2, 3)
+    b = np.array([[[0.0, 3.0, 4.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])  # (1, 3, 3)
+    d = pair_distances(a, b)
+    assert d.shape == (1, 2, 3)
+    np.testing.assert_allclose(d[0], [[5.0, 1.0, 0.0], [np.sqrt(26.0), 0.0, 1.0]])
+
+
+def test_collision_repels_coinciding_pairs():
+    config = FactorConfig()
+    right = np.array([[[0.0, 0.0, 1.0], [0.5, 0.0, 1.0], [0.0, 0.5, 1.0]]] * 2)  # (2, 3, 3)
+    left = np.array([[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]]] * 2)  # (2, 2, 3)
+    table = collision_table(right, left, config)
+    assert table.shape == (2, 3, 2) and table.dtype == np.float32  # [right state, left state]
+    np.testing.assert_allclose(table.sum(axis=(-2, -1)), 1.0, rtol=1e-5)
+    rel = table[0] / table[0].max()
+    assert rel[0, 0] < 0.2  # right 0 and left 0 coincide
+    assert rel[0, 1] > 0.99  # 1 m apart
+    # the sigmoid of the distance, up to the normalisation
+    d = pair_distances(right, left)[0]
+    raw = 1.0 / (1.0 + np.exp((config.collision_centre - d) / config.collision_width))
+    np.testing.assert_allclose(table[0], raw / raw.sum(), rtol=1e-5)
+    assert table[0, 0, 0] < table[0, 1, 0] < table[0, 0, 1]
+
+
+def test_limb_table_peaks_at_the_bone_length():
+    config = FactorConfig(limb_sigma=0.05)
+    lengths = np.array([0.30, 0.44])
+    start = np.zeros((2, 1, 3))  # one state for each bone's first joint, at the origin
+    end = np.zeros((2, 31, 3))
+    end[..., 0] = np.linspace(0.0, 0.6, 31)  # 2 cm steps along x
+    d = pair_distances(start, end)  # (2, 1, 31)
+    table = limb_table(d, lengths, config)
+    assert table.shape == (2, 1, 31) and table.dtype == np.float32
+    np.testing.assert_allclose(table.sum(axis=(-2, -1)), 1.0, rtol=1e-5)
+    assert np.argmax(table[0, 0]) == 15 and np.argmax(table[1, 0]) == 22  # 0.30 m, 0.44 m
+    # Gaussian in the length error: 0.40 m is two sigmas beyond 0.30 m
+    assert table[0, 0, 20] / table[0, 0, 15] == pytest.approx(np.exp(-2.0), rel=1e-4)
+    expected = np.exp(-0.5 * ((d - lengths[:, None, None]) / config.limb_sigma) ** 2)
+    np.testing.assert_allclose(table, expected / expected.sum(axis=(-2, -1), keepdims=True),
+                               rtol=1e-5)
+    # batched over leading axes (e.g. people)
+    batched = limb_table(np.stack([d, d]), lengths, config)
+    np.testing.assert_allclose(batched[1], table)
+
+
+@pytest.mark.parametrize('kwargs', [
+    {'temporal_form': 'cauchy'},
+    {'temporal_scale': 0.0},
+    {'temporal_scale': -0.08},
+    {'collision_width': 0.0},
+    {'limb_sigma': -0.05},
+    {'limb_sigma': float('nan')},
+])
+def test_factor_config_rejects_bad_values(kwargs):
+    with pytest.raises(ValueError):
+        FactorConfig(**kwargs)
+
+
+def test_factor_config_defaults():
+    config = FactorConfig()
+    assert config.temporal_form == 'laplace' and config.temporal_scale == pytest.approx(0.08)
+    assert set(TEMPORAL_FORMS) == {'laplace', 'gauss'}

@@ -1,0 +1,182 @@
+"""3D joint hypotheses sampled from sharp heatmaps rendered at the real Shelf cameras' projections
+of a ground-truth pose, and the data term that scores them."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mvpose_ros.core.camera import load_rig
+from mvpose_ros.core.datasets import dataset_dir, load_actors_gt
+from mvpose_ros.core.factors import data_term
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
+from mvpose_ros.core.hypotheses import (SamplingConfig, camera_subsets, sample_hypotheses,
+                                        split_draws)
+
+SIGMA, STRIDE = 1.5, 1.0
+# a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
+SAMPLE_RADIUS_PX = np.sqrt(2) * (MARGIN_SIGMAS * SIGMA + STRIDE)
+
+
+@pytest.fixture(scope='module')
+def rig():
+    return load_rig(dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json')
+
+
+@pytest.fixture(scope='module')
+def truth() -> np.ndarray:
+    """(16, 3) inference joints of actor 2 at frame 300 (seen whole by all five cameras): GT
+    joints 0..13, then two 'ears' 8 cm either side of the head top."""
+    gt = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', [300]).poses[0, 2]
+    assert np.isfinite(gt).all()
+    return np.concatenate([gt, gt[13] + [[-0.08, 0.0, 0.0], [0.08, 0.0, 0.0]]])
+
+
+def _render(rig, points: np.ndarray, sigma: float = SIGMA, stride: float = STRIDE) -> list:
+    """One (camera, heatmap) view per camera: a Gaussian at each joint's projection."""
+    views = []
+    for cam in rig:
+        uv = cam.project(points)
+        assert np.all((uv >= 0) & (uv < (cam.width, cam.height)))
+        box = np.concatenate([uv.min(axis=0), uv.max(axis=0)])
+        views.append((cam, render_heatmap([np.array([[u, v, 1.0]]) for u, v in uv], box,
+                                          stride, sigma)))
+    return views
+
+
+@pytest.fixture(scope='module')
+def views(rig, truth):
+    return _render(rig, truth)
+
+
+def _without(views, joints, cams) -> list:
+    """views with the maps of `joints` emptied in cameras `cams`."""
+    out = []
+    for c, (cam, hm) in enumerate(views):
+        maps = hm.maps.copy()
+        if c in cams:
+            maps[joints] = 0.0
+        out.append((cam, PersonHeatmap(maps=maps, origin=hm.origin, stride=hm.stride)))
+    return out
+
+
+def test_camera_subsets():
+    subsets = camera_subsets(range(5))
+    assert len(subsets) == 26  # 2^5 - 5 singletons - the empty set
+    assert len(set(subsets)) == 26
+    sizes = [len(s) for s in subsets]
+    assert sizes == sorted(sizes, reverse=True) and min(sizes) == 2 and sizes[0] == 5
+    assert all(list(s) == sorted(s) and set(s) <= set(range(5)) for s in subsets)
+    assert len(camera_subsets(range(5), min_size=3)) == 16
+    assert camera_subsets([2, 7]) == [(2, 7)]
+    assert camera_subsets([3]) == []
+
+
+@pytest.mark.parametrize('total, n', [(38, 26), (64, 26), (5, 26), (0, 3), (9, 3)])
+def test_split_draws(total, n):
+    counts = split_draws(total, n)
+    assert counts.shape == (n,) and counts.sum() == total
+    assert counts.max() - counts.min() <= 1
+    assert np.all(np.diff(counts) <= 0)  # the remainder goes to the first subsets
+
+
+def test_sampling_config_is_validated():
+    with pytest.raises(ValueError):
+        SamplingConfig(hypotheses=0)
+
+
+def test_hypotheses_land_on_the_joints(views, truth):
+    hyp = sample_hypotheses(views, np.random.default_rng(0), SamplingConfig(hypotheses=64))
+    assert hyp.shape == (16, 64, 3) and np.isfinite(hyp).all()
+    err = np.linalg.norm(hyp - truth[:, None], axis=-1)  # (16, 64)
+    assert np.median(err) < 0.01
+    assert np.all(np.median(err, axis=1) < 0.01)
+    assert np.percentile(err, 95) < 0.02
+    assert np.all(err.min(axis=1) < 0.005)  # the peak triangulations are ~exact
+    # Not every hypothesis is within 2 cm: Shelf cameras 0 and 4 face each other (rays ~170
+    # degrees apart), so a pair's depth is ill-conditioned and a few-pixel sample offset moves
+    # the point several cm along the rays. Each hypothesis still reprojects onto the sampled
+    # support in at least two cameras.
+    assert err.max() < 0.15
+    reproj = np.stack([np.linalg.norm(cam.project(hyp) - cam.project(truth)[:, None], axis=-1)
+                       for cam, _ in views])  # (C, 16, 64)
+    assert np.all(np.sort(reproj, axis=0)[1] <= SAMPLE_RADIUS_PX)
+
+
+def test_peak_hypotheses_alone(views, truth):
+    """M = 26 = the number of camera subsets: every hypothesis is a peak triangulation, so the
+    result does not depend on the seed and is within a pixel's worth of the truth."""
+    config = SamplingConfig(hypotheses=26, peak_hypotheses=True)
+    a = sample_hypotheses(views, np.random.default_rng(1), config)
+    b = sample_hypotheses(views, np.random.default_rng(2), config)
+    np.testing.assert_array_equal(a, b)
+    assert np.linalg.norm(a - truth[:, None], axis=-1).max() < 0.015
+
+
+@pytest.mark.parametrize('m', [1, 5, 26, 27, 64])
+@pytest.mark.parametrize('peaks', [True, False])
+def test_m_hypotheses_per_joint(views, truth, m, peaks):
+    hyp = sample_hypotheses(views, np.random.default_rng(0), SamplingConfig(m, peaks))
+    assert hyp.shape == (16, m, 3) and np.isfinite(hyp).all()
+    assert np.linalg.norm(hyp - truth[:, None], axis=-1).max() < 0.15
+
+
+def test_deterministic_for_a_seed(views):
+    config = SamplingConfig(hypotheses=40, peak_hypotheses=False)
+    a = sample_hypotheses(views, np.random.default_rng(7), config)
+    b = sample_hypotheses(views, np.random.default_rng(7), config)
+    c = sample_hypotheses(views, np.random.default_rng(8), config)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a, c)
+
+
+def test_joint_seen_by_one_camera_lies_on_its_rays(views, truth):
+    single, unseen = 6, 11  # r_wrist seen by camera 2 only, l_wrist by none
+    sub = _without(views, [single], {0, 1, 3, 4})
+    sub = _without(sub, [unseen], set(range(5)))
+    hyp = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    assert hyp.shape == (16, 32, 3) and np.isfinite(hyp).all()
+    others = np.setdiff1d(np.arange(16), [single, unseen])
+    centre = hyp[others].reshape(-1, 3).mean(axis=0)
+    cam = sub[2][0]
+    # on rays through sampled pixels of camera 2 ...
+    uv = cam.project(hyp[single])
+    assert np.all(np.linalg.norm(uv - cam.project(truth[single]), axis=1) <= SAMPLE_RADIUS_PX)
+    # ... at the depth closest to the person's centre
+    d = hyp[single] - cam.centre
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    np.testing.assert_allclose(np.einsum('md,md->m', hyp[single] - centre, d), 0.0, atol=1e-9)
+    assert np.std(uv, axis=0).min() > 0.3  # the draws differ: rays, not one point
+    # a joint no camera sees gets the centre itself
+    np.testing.assert_allclose(hyp[unseen], np.broadcast_to(centre, (32, 3)), atol=1e-12)
+    # the joints seen by the other four cameras are unaffected in quality
+    err = np.linalg.norm(hyp[others] - truth[others, None], axis=-1)
+    assert np.median(err) < 0.01
+
+
+def test_none_without_a_joint_seen_twice(views):
+    config = SamplingConfig(hypotheses=16)
+    assert sample_hypotheses(views[:1], np.random.default_rng(0), config) is None
+    # camera 0 sees joints 0..7, camera 1 joints 8..15: no joint is seen twice
+    split = _without(views[:2], list(range(8, 16)), {0})
+    split = _without(split, list(range(8)), {1})
+    assert sample_hypotheses(split, np.random.default_rng(0), config) is None
+
+
+@pytest.mark.parametrize('sigma, stride', [(SIGMA, STRIDE), (30.0, 4.0)])
+def test_data_term_prefers_the_true_point(rig, truth, sigma, stride):
+    views = _render(rig, truth, sigma, stride)
+    rng = np.random.default_rng(0)
+    offset = rng.normal(size=(16, 3))
+    offset *= 0.10 / np.linalg.norm(offset, axis=1, keepdims=True)
+    far = truth + (0.0, 0.0, 20.0)  # high above: beyond every heatmap in every view
+    hyp = np.stack([truth, truth + offset, far], axis=1)  # (16, 3, 3)
+    score = data_term(hyp, views)
+    assert score.shape == (16, 3)
+    np.testing.assert_allclose(score.sum(axis=1), 1.0, rtol=1e-6)
+    assert np.all(score[:, 0] > score[:, 1])
+    assert np.all(score[:, 2] == 0)
+    if sigma > 10:  # broad maps: the 10 cm point still has evidence, just less
+        assert np.all(score[:, 1] > 0.05)
+    # no evidence at all for any hypothesis of a joint: uniform row
+    empty = data_term(np.stack([far, far + 1.0], axis=1), views)
+    np.testing.assert_allclose(empty, 0.5)
