@@ -1,0 +1,58 @@
+"""Stable 3D person ids across frames.
+
+A person keeps its id while the per-camera tracks that make it up continue (any shared
+(camera, track) pair votes for the old id); when the tracks all changed (a new box in every
+camera after an occlusion), the id is recovered from the 3D position if the person is within
+`max_jump` metres of where a recently seen person was.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+
+@dataclass
+class _Known:
+    members: set[tuple[int, int]]
+    centre: np.ndarray
+    last_frame: int
+
+
+@dataclass
+class IdentityKeeper:
+    """Assigns ids to each frame's multi-view clusters."""
+
+    max_jump: float = 0.5
+    max_age: int = 25
+    _known: dict[int, _Known] = field(default_factory=dict)
+    _next_id: int = 0
+
+    def assign(self, frame: int, members: Sequence[set[tuple[int, int]]], centres: np.ndarray) -> list[int]:
+        """Ids for this frame's people.
+
+        members: per person the (camera, track id) pairs it was built from; centres: (P, 3)
+        rough 3D centres in metres. Returns one id per person, unique within the frame.
+        """
+        self._known = {k: v for k, v in self._known.items() if frame - v.last_frame <= self.max_age}
+        known_ids = list(self._known)
+        ids = [-1] * len(members)
+        if members and known_ids:
+            shared = np.array([[len(m & self._known[k].members) for k in known_ids] for m in members])
+            jump = np.linalg.norm(centres[:, None] - np.array([self._known[k].centre for k in known_ids])[None],
+                                  axis=-1)
+            allowed = (shared > 0) | (jump <= self.max_jump)
+            # Shared tracks dominate; distance breaks ties and decides when no track survives.
+            cost = np.where(allowed, -100.0 * shared + jump, 1e6)
+            rows, cols = linear_sum_assignment(cost)
+            for r, c in zip(rows, cols):
+                if allowed[r, c]:
+                    ids[r] = known_ids[c]
+        for i, m in enumerate(members):
+            if ids[i] < 0:
+                ids[i] = self._next_id
+                self._next_id += 1
+            self._known[ids[i]] = _Known(set(m), centres[i], frame)
+        return ids

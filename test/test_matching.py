@@ -1,0 +1,251 @@
+"""Cross-view matching, per-frame association and 3D ids on the real Shelf rig and ground truth.
+
+Skeletons are the ground-truth 3D poses projected into each camera with ~2 px noise, so the
+right answer (which skeleton is which actor) is known exactly.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mvpose_ros.core.association import AssociationConfig, Associator
+from mvpose_ros.core.body import NUM_INFERENCE_JOINTS, TOP_HEAD
+from mvpose_ros.core.camera import Camera, load_rig
+from mvpose_ros.core.datasets import dataset_dir, load_actors_gt
+from mvpose_ros.core.heatmap import render_heatmap
+from mvpose_ros.core.identity import IdentityKeeper
+from mvpose_ros.core.matching import MatchingConfig, cluster_views, view_distance
+from mvpose_ros.core.person2d import Person2D
+
+SHELF = dataset_dir('shelf')
+FRAMES = range(576, 594)  # Shelf frames where actors 0, 1 and 2 are all annotated
+FRAME = 580
+NOISE_PX = 2.0
+R_SHOULDER, L_SHOULDER = 8, 9
+
+
+@pytest.fixture(scope='module')
+def rig() -> list[Camera]:
+    return load_rig(SHELF / 'calibration' / 'calibration_shelf.json')
+
+
+@pytest.fixture(scope='module')
+def poses() -> dict[int, np.ndarray]:
+    """actorsGT frame -> (3, 14, 3) metres of actors 0, 1, 2."""
+    gt = load_actors_gt(SHELF / 'actorsGT.mat', FRAMES)
+    assert gt.present[:, :3].all()
+    return {int(f): p[:3] for f, p in zip(gt.frames, gt.poses)}
+
+
+def _inference_points(pose: np.ndarray) -> np.ndarray:
+    """(14, 3) GT joints -> (16, 3): the GT joints then two ears beside and below the head top."""
+    side = pose[R_SHOULDER] - pose[L_SHOULDER]
+    side = 0.08 * side / np.linalg.norm(side)
+    down = np.array([0.0, 0.0, 0.05])
+    return np.concatenate([pose, [pose[TOP_HEAD] + side - down, pose[TOP_HEAD] - side - down]])
+
+
+def _skeleton(cam: Camera, pose: np.ndarray, rng: np.random.Generator) -> Person2D:
+    """The actor as a detector would report it: noisy keypoints, joints outside the image undetected."""
+    uv = cam.project(_inference_points(pose)) + rng.normal(0.0, NOISE_PX, (NUM_INFERENCE_JOINTS, 2))
+    inside = np.all((uv >= 0) & (uv < (cam.width, cam.height)), axis=1)
+    kp = np.column_stack([uv, np.where(inside, 0.9, 0.0)])
+    kp[~inside, :2] = np.nan
+    box = np.concatenate([np.nanmin(kp[:, :2], axis=0), np.nanmax(kp[:, :2], axis=0)])
+    heatmap = render_heatmap([kp[j:j + 1] for j in range(NUM_INFERENCE_JOINTS)], box, 4.0, 5.0)
+    return Person2D(kp, heatmap)
+
+
+def _frame(rig: list[Camera], pose: np.ndarray, rng: np.random.Generator,
+           hidden: dict[int, set[int]] | None = None) -> tuple[list[list[Person2D]], list[list[int]]]:
+    """Each camera's skeletons in a random order, minus the actors hidden from it
+    (hidden: camera -> actors); also the actor of each skeleton."""
+    people, actors = [], []
+    for c, cam in enumerate(rig):
+        visible = [a for a in range(len(pose)) if a not in (hidden or {}).get(c, set())]
+        order = list(rng.permutation(visible))
+        people.append([_skeleton(cam, pose[a], rng) for a in order])
+        actors.append(order)
+    return people, actors
+
+
+def _as_actor_groups(clusters: list[dict[int, int]], actors: list[list[int]]) -> list[set[tuple[int, int]]]:
+    """Each cluster as a set of (camera, actor) pairs."""
+    return [{(c, actors[c][i]) for c, i in cl.items()} for cl in clusters]
+
+
+def _truth(actors: list[list[int]]) -> list[set[tuple[int, int]]]:
+    groups: dict[int, set[tuple[int, int]]] = {}
+    for c, order in enumerate(actors):
+        for a in order:
+            groups.setdefault(a, set()).add((c, a))
+    return [g for g in groups.values() if len(g) >= 2]
+
+
+def test_view_distance_separates_true_and_wrong_pairs(rig, poses):
+    rng = np.random.default_rng(0)
+    people, actors = _frame(rig, poses[FRAME], rng)
+    config = MatchingConfig()
+    true, wrong = [], []
+    for a in range(len(rig)):
+        for b in range(a + 1, len(rig)):
+            dist = view_distance(rig[a], people[a], rig[b], people[b], config)
+            assert dist.shape == (3, 3)
+            same = np.array(actors[a])[:, None] == np.array(actors[b])[None, :]
+            true += list(dist[same])
+            wrong += list(dist[~same])
+    true, wrong = np.array(true), np.array(wrong)
+    assert true.max() < 0.05
+    # Rays of different people can pass fairly close on this rig (camera pairs looking along
+    # the line between two actors), but never as close as a true pair, and mostly far.
+    assert wrong.min() > 2 * true.max()
+    assert np.median(wrong) > 0.2
+    assert np.mean(wrong > config.max_distance) > 0.6
+
+
+def test_view_distance_needs_enough_shared_joints(rig, poses):
+    rng = np.random.default_rng(1)
+    a = _skeleton(rig[0], poses[FRAME][0], rng)
+    b = _skeleton(rig[1], poses[FRAME][0], rng)
+    config = MatchingConfig(min_shared=4)
+    assert np.isfinite(view_distance(rig[0], [a], rig[1], [b], config)[0, 0])
+    few = Person2D(b.keypoints.copy(), b.heatmap)
+    few.keypoints[3:, 2] = 0.0  # only three joints left
+    assert view_distance(rig[0], [a], rig[1], [few], config)[0, 0] == np.inf
+    low = Person2D(b.keypoints.copy(), b.heatmap)
+    low.keypoints[3:, 2] = config.min_score / 2  # detected, but below the score that counts
+    assert view_distance(rig[0], [a], rig[1], [low], config)[0, 0] == np.inf
+    assert view_distance(rig[0], [], rig[1], [b], config).shape == (0, 1)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_cluster_views_recovers_the_actors(rig, poses, seed):
+    rng = np.random.default_rng(seed)
+    people, actors = _frame(rig, poses[FRAME + seed], rng, hidden={1 + seed: {seed}})
+    clusters = cluster_views(rig, people, MatchingConfig())
+    groups = _as_actor_groups(clusters, actors)
+    # each cluster holds one actor only, every camera that sees the actor, one skeleton per camera
+    assert sorted(map(sorted, groups)) == sorted(map(sorted, _truth(actors)))
+    assert all(len(cl) >= 2 for cl in clusters)
+    assert len(groups[0]) + len(groups[1]) + len(groups[2]) == 3 * len(rig) - 1
+
+
+def test_person_seen_by_one_camera_is_dropped(rig, poses):
+    rng = np.random.default_rng(5)
+    people, actors = _frame(rig, poses[FRAME], rng, hidden={1: {2}, 2: {2}, 3: {2}, 4: {2}})
+    clusters = cluster_views(rig, people, MatchingConfig())
+    groups = _as_actor_groups(clusters, actors)
+    assert sorted(map(sorted, groups)) == sorted(map(sorted, _truth(actors)))
+    assert len(clusters) == 2
+    assert all((0, 2) not in g for g in groups)
+
+
+def _observed_actor(observation, skeleton_actor: dict[int, int]) -> int:
+    """The one actor behind every view of an observation."""
+    actors = {skeleton_actor[id(p)] for p in observation.views.values()}
+    assert len(actors) == 1
+    return actors.pop()
+
+
+def _run(associator: Associator, frame: int, people: list[list[Person2D] | None],
+         actors: list[list[int]]) -> dict[int, int]:
+    """actor -> person id for one frame."""
+    skeleton_actor = {id(p): a for ps, order in zip(people, actors) if ps is not None for p, a in zip(ps, order)}
+    out = associator.update(frame, people)
+    ids = {_observed_actor(obs, skeleton_actor): obs.person_id for obs in out}
+    assert len(set(ids.values())) == len(out)
+    return ids
+
+
+def test_associator_keeps_ids_over_consecutive_frames(rig, poses):
+    rng = np.random.default_rng(7)
+    associator = Associator(rig, AssociationConfig())
+    first = None
+    for frame in FRAMES[:8]:
+        people, actors = _frame(rig, poses[frame], rng)
+        if frame == FRAMES[3]:
+            people[2] = None  # a camera missing for one frame
+        ids = _run(associator, frame, people, actors)
+        assert set(ids) == {0, 1, 2}
+        first = first or ids
+        assert ids == first
+    for obs in associator.update(FRAMES[8], _frame(rig, poses[FRAMES[8]], rng)[0]):
+        assert len(obs.views) == len(rig)
+        # the rough centre lies inside the actor's body
+        assert np.min(np.linalg.norm(poses[FRAMES[8]].mean(axis=1) - obs.centre, axis=1)) < 0.2
+
+
+def test_associator_recovers_ids_after_everyone_was_occluded(rig, poses):
+    rng = np.random.default_rng(8)
+    associator = Associator(rig, AssociationConfig())
+    people, actors = _frame(rig, poses[FRAMES[0]], rng)
+    before = _run(associator, FRAMES[0], people, actors)
+    old_tracks = {(c, p.track_id) for c, ps in enumerate(people) for p in ps}
+    assert associator.update(FRAMES[1], [[] for _ in rig]) == []  # nobody detected anywhere
+    people, actors = _frame(rig, poses[FRAMES[2]], rng)
+    after = _run(associator, FRAMES[2], people, actors)
+    # every per-camera track is new, so only the 3D position can carry the ids over
+    assert not old_tracks & {(c, p.track_id) for c, ps in enumerate(people) for p in ps}
+    assert after == before
+
+
+def _gt_centres(poses: dict[int, np.ndarray], frame: int) -> np.ndarray:
+    return poses[frame].mean(axis=1)  # (3, 3)
+
+
+def _members(tracks: list[int]) -> list[set[tuple[int, int]]]:
+    """One person per track id, seen by cameras 0 and 1 under that id."""
+    return [{(0, t), (1, t)} for t in tracks]
+
+
+def test_identity_follows_shared_tracks_even_after_a_jump(poses):
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    centres = _gt_centres(poses, FRAMES[0])
+    ids = keeper.assign(0, _members([0, 1, 2]), centres)
+    assert ids == [0, 1, 2]
+    # listed in another order, the same tracks: same ids, even with a centre 2 m away
+    moved = centres[[2, 0, 1]] + [[2.0, 0, 0], [0, 0, 0], [0, 0, 0]]
+    assert keeper.assign(1, _members([2, 0, 1]), moved) == [2, 0, 1]
+    # one of two cameras switched track: the shared one still votes
+    assert keeper.assign(2, [{(0, 0), (1, 9)}], centres[[0]]) == [0]
+
+
+def test_identity_recovered_by_position_when_all_tracks_changed(poses):
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    start = _gt_centres(poses, FRAMES[0])
+    ids = keeper.assign(0, _members([0, 1, 2]), start)
+    later = _gt_centres(poses, FRAMES[10])
+    assert np.linalg.norm(later - start, axis=1).max() < 0.5
+    order = [1, 2, 0]
+    recovered = keeper.assign(10, _members([10, 11, 12]), later[order])
+    assert recovered == [ids[k] for k in order]
+
+
+@pytest.mark.parametrize('jump, same', [(0.3, True), (0.45, True), (0.55, False), (1.5, False)])
+def test_identity_new_beyond_max_jump(poses, jump, same):
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    centre = _gt_centres(poses, FRAME)[[0]]
+    assert keeper.assign(0, _members([0]), centre) == [0]
+    ids = keeper.assign(1, _members([5]), centre + [jump, 0.0, 0.0])
+    assert ids == ([0] if same else [1])
+
+
+@pytest.mark.parametrize('age, same', [(1, True), (25, True), (26, False), (100, False)])
+def test_identity_new_beyond_max_age(poses, age, same):
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    centre = _gt_centres(poses, FRAME)[[0]]
+    keeper.assign(0, _members([0]), centre)
+    ids = keeper.assign(age, _members([5]), centre + [0.05, 0.0, 0.0])
+    assert ids == ([0] if same else [1])
+
+
+def test_identity_never_reuses_ids_and_is_unique_per_frame(poses):
+    keeper = IdentityKeeper(max_jump=0.5, max_age=2)
+    centres = _gt_centres(poses, FRAME)
+    assert keeper.assign(0, _members([0, 1]), centres[:2]) == [0, 1]
+    # two people both within max_jump of old person 0 only: one keeps it, the other is new
+    near = centres[[0, 0]] + [[0.05, 0, 0], [-0.05, 0, 0]]
+    ids = keeper.assign(1, _members([7, 8]), near)
+    assert sorted(ids) == [0, 2]
+    # everyone expired: a person where 0 was gets a brand new id, not 0 or 1 again
+    assert keeper.assign(10, _members([9]), centres[[0]]) == [3]
