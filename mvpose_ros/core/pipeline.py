@@ -1,0 +1,98 @@
+"""The 3D stage: from each camera's 2D people of one instant to decoded 3D skeletons.
+
+Association (tracking, cross-view matching, ids), hypothesis sampling with the data term, and
+sliding-window BP, with the time each step takes. The ROS nodes split these same calls across
+processes; the offline evaluator calls them in one.
+"""
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from mvpose_ros.core.association import AssociationConfig, Associator, PersonObservation
+from mvpose_ros.core.body import BONES, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.factors import data_term
+from mvpose_ros.core.hypotheses import SamplingConfig, sample_hypotheses
+from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+
+
+@dataclass(frozen=True)
+class StageConfig:
+    """Everything the 3D stage needs; head_model must match the one the 2D side used."""
+
+    association: AssociationConfig = field(default_factory=AssociationConfig)
+    sampling: SamplingConfig = field(default_factory=SamplingConfig)
+    inference: InferenceConfig = field(default_factory=InferenceConfig)
+    head_model: str = 'anatomical'
+    seed: int = 0
+
+
+class StageTimer:
+    """Accumulated wall time per named step, in seconds."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = defaultdict(float)
+
+    def add(self, name: str, since: float) -> float:
+        now = time.perf_counter()
+        self.seconds[name] += now - since
+        return now
+
+
+def person_frame(cameras: Sequence[Camera], obs: PersonObservation, frame: int, config: StageConfig,
+                 timer: StageTimer | None = None) -> PersonFrame | None:
+    """Hypotheses and data term of one observed person; None when no joint is seen twice.
+
+    The generator is seeded by (seed, frame, person id), so the same frame gives the same
+    hypotheses whatever the window or the order of processing.
+    """
+    t0 = time.perf_counter()
+    views = [(cameras[c], p.heatmap) for c, p in sorted(obs.views.items())]
+    rng = np.random.default_rng([config.seed, frame, obs.person_id])
+    hyp = sample_hypotheses(views, rng, config.sampling)
+    if timer:
+        t0 = timer.add('sampling', t0)
+    if hyp is None:
+        return None
+    data = data_term(hyp, views)
+    if timer:
+        timer.add('data term', t0)
+    return PersonFrame(obs.person_id, hyp, data)
+
+
+class Stage3D:
+    """Streaming 3D stage over a fixed rig; push frames in order, then flush at the end."""
+
+    def __init__(self, cameras: Sequence[Camera], config: StageConfig) -> None:
+        self.cameras = list(cameras)
+        self.config = config
+        self.associator = Associator(self.cameras, config.association)
+        self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES))
+        self.timer = StageTimer()
+
+    def push(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[FrameResult]:
+        """people[c]: camera c's 2D people at this frame (None: camera missing)."""
+        t0 = time.perf_counter()
+        observations = self.associator.update(frame, people)
+        t0 = self.timer.add('association', t0)
+        frames = [pf for obs in observations
+                  if (pf := person_frame(self.cameras, obs, frame, self.config, self.timer)) is not None]
+        t0 = time.perf_counter()
+        out = self.window.push(frame, frames)
+        self.timer.add('bp', t0)
+        return [self._finish(r) for r in out]
+
+    def flush(self) -> list[FrameResult]:
+        t0 = time.perf_counter()
+        out = self.window.flush()
+        self.timer.add('bp', t0)
+        return [self._finish(r) for r in out]
+
+    def _finish(self, result: FrameResult) -> FrameResult:
+        return FrameResult(result.frame, result.person_ids, finalize_head(result.joints, self.config.head_model))

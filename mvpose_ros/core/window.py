@@ -1,0 +1,205 @@
+"""Temporal inference over a sliding window of frames (or over a whole clip), per person.
+
+Frames are pushed as they arrive; every pushed frame comes out exactly once, `lag` frames later
+(or at `flush`), with the decoded 3D joints of each person present in it. A person's chain is
+the run of consecutive buffered frames in which that person is present; a gap breaks it.
+Factor tables depend only on hypotheses, which never change once a frame is in, so they are
+computed once per frame and reused while the window slides.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
+from mvpose_ros.core.bp import PairwiseGroup, loopy_bp
+from mvpose_ros.core.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
+
+TERMS = ('data', 'temp', 'col', 'limb')
+
+
+@dataclass(frozen=True)
+class InferenceConfig:
+    """terms: factors to use; window: frames per window (None = the whole clip); lag: frames
+    between a frame's arrival and its output; bp_hypotheses: keep only this many hypotheses per
+    joint (those with the highest data term) inside BP, None = all M."""
+
+    terms: tuple[str, ...] = ('data', 'temp', 'col')
+    window: int | None = 15
+    lag: int = 7
+    iterations: int = 5
+    bp_hypotheses: int | None = None
+    factors: FactorConfig = field(default_factory=FactorConfig)
+
+    def __post_init__(self) -> None:
+        unknown = set(self.terms) - set(TERMS)
+        if unknown or 'data' not in self.terms:
+            raise ValueError(f'terms must include data and come from {TERMS}, got {self.terms}')
+        if self.window is not None and not 0 <= self.lag < self.window:
+            raise ValueError(f'lag must be in [0, window), got lag={self.lag} window={self.window}')
+
+
+@dataclass
+class PersonFrame:
+    """One person's hypotheses (J, M, 3) and normalised data term (J, M) at one frame."""
+
+    person_id: int
+    hypotheses: np.ndarray
+    data: np.ndarray
+
+
+@dataclass
+class FrameResult:
+    """Decoded people of one frame: ids (P,) and joints (P, J, 3) metres."""
+
+    frame: int
+    person_ids: list[int]
+    joints: np.ndarray
+
+
+@dataclass
+class _Slot:
+    frame: int
+    people: dict[int, PersonFrame]
+    temporal: dict[int, np.ndarray] = field(default_factory=dict)
+    collision: dict[int, np.ndarray] = field(default_factory=dict)
+    bone_distances: dict[int, np.ndarray] = field(default_factory=dict)
+
+
+class SlidingWindow:
+    """Sliding-window sum-product BP over the CRF of each person."""
+
+    def __init__(self, config: InferenceConfig, symmetric_pairs: np.ndarray, bones: np.ndarray) -> None:
+        self.config = config
+        self.symmetric_pairs = np.asarray(symmetric_pairs)
+        self.bones = np.asarray(bones)
+        self._slots: deque[_Slot] = deque()
+        self._unsent = 0
+
+    def push(self, frame: int, people: list[PersonFrame]) -> list[FrameResult]:
+        """Add a frame; returns the frames whose output is due (at most one in window mode)."""
+        k = self.config.bp_hypotheses
+        slot = _Slot(frame, {p.person_id: _pruned(p, k) if k else p for p in people})
+        self._slots.append(slot)
+        self._unsent += 1
+        if 'temp' in self.config.terms and len(self._slots) >= 3:
+            self._add_temporal(len(self._slots) - 2)
+        if self.config.window is None:
+            return []
+        while len(self._slots) > self.config.window:
+            self._slots.popleft()
+        if self._unsent <= self.config.lag:
+            return []
+        self._unsent -= 1
+        return [self._decode_at(len(self._slots) - 1 - self.config.lag)]
+
+    def flush(self) -> list[FrameResult]:
+        """Output every frame not yet output (end of stream)."""
+        start = len(self._slots) - self._unsent
+        if self.config.window is None:
+            out = self._decode_all()[start:]
+        else:
+            out = [self._decode_at(i) for i in range(start, len(self._slots))]
+        self._unsent = 0
+        return out
+
+    def _add_temporal(self, i: int) -> None:
+        """Temporal tables of the frame at buffer position i, now that its successor is in."""
+        prev, cur, nxt = self._slots[i - 1], self._slots[i], self._slots[i + 1]
+        for pid in cur.people.keys() & prev.people.keys() & nxt.people.keys():
+            cur.temporal[pid] = temporal_table(prev.people[pid].hypotheses, cur.people[pid].hypotheses,
+                                               nxt.people[pid].hypotheses, self.config.factors)
+
+    def _run(self, pid: int, i: int) -> range:
+        """Buffer positions of the chain of person pid through position i."""
+        lo, hi = i, i
+        while lo > 0 and pid in self._slots[lo - 1].people:
+            lo -= 1
+        while hi + 1 < len(self._slots) and pid in self._slots[hi + 1].people:
+            hi += 1
+        return range(lo, hi + 1)
+
+    def _decode_at(self, i: int) -> FrameResult:
+        slot = self._slots[i]
+        ids = sorted(slot.people)
+        joints = []
+        for pid in ids:
+            run = self._run(pid, i)
+            joints.append(self._solve(pid, run)[i - run.start])
+        return FrameResult(slot.frame, ids, _stack(joints))
+
+    def _decode_all(self) -> list[FrameResult]:
+        decoded: dict[tuple[int, int], np.ndarray] = {}
+        for i, slot in enumerate(self._slots):
+            for pid in slot.people:
+                if (pid, i) not in decoded:
+                    run = self._run(pid, i)
+                    for pos, joints in zip(run, self._solve(pid, run)):
+                        decoded[(pid, pos)] = joints
+        return [FrameResult(s.frame, sorted(s.people), _stack([decoded[(pid, i)] for pid in sorted(s.people)]))
+                for i, s in enumerate(self._slots)]
+
+    def _solve(self, pid: int, run: range) -> np.ndarray:
+        """Decoded joints (T, J, 3) of person pid over the buffer positions `run`."""
+        frames = [self._slots[i].people[pid] for i in run]
+        hyp = np.stack([f.hypotheses for f in frames])  # (T, J, M, 3)
+        data = np.stack([f.data for f in frames])
+        terms = self.config.terms
+        temporal = [None] * len(run)
+        if 'temp' in terms:
+            for t, i in enumerate(run):
+                if 0 < t < len(run) - 1:
+                    temporal[t] = self._slots[i].temporal[pid]
+        groups = []
+        if 'col' in terms:
+            groups.append(PairwiseGroup('collision', self.symmetric_pairs,
+                                        np.stack([self._collision(pid, i) for i in run])))
+        if 'limb' in terms:
+            dist = np.stack([self._bone_distances(pid, i) for i in run])  # (T, E, M, M)
+            groups.append(PairwiseGroup('limb', self.bones, limb_table_from(dist, hyp, data, self.bones,
+                                                                            self.config.factors)))
+        if not groups and not any(t is not None for t in temporal):
+            marginals = data
+        else:
+            marginals, _ = loopy_bp(data, temporal, groups, self.config.iterations)
+        best = marginals.argmax(axis=-1)  # (T, J)
+        return np.take_along_axis(hyp, best[..., None, None], axis=2)[:, :, 0]
+
+    def _collision(self, pid: int, i: int) -> np.ndarray:
+        slot = self._slots[i]
+        if pid not in slot.collision:
+            h = slot.people[pid].hypotheses
+            slot.collision[pid] = collision_table(h[self.symmetric_pairs[:, 0]], h[self.symmetric_pairs[:, 1]],
+                                                  self.config.factors)
+        return slot.collision[pid]
+
+    def _bone_distances(self, pid: int, i: int) -> np.ndarray:
+        slot = self._slots[i]
+        if pid not in slot.bone_distances:
+            h = slot.people[pid].hypotheses
+            slot.bone_distances[pid] = pair_distances(h[self.bones[:, 0]], h[self.bones[:, 1]])
+        return slot.bone_distances[pid]
+
+
+def limb_table_from(dist: np.ndarray, hyp: np.ndarray, data: np.ndarray, bones: np.ndarray,
+                    config: FactorConfig) -> np.ndarray:
+    """Limb tables (T, E, M, M) around each bone's length, estimated as the median over the chain
+    of the bone length between the best-data hypotheses of its endpoints."""
+    best = np.take_along_axis(hyp, data.argmax(-1)[..., None, None], axis=2)[:, :, 0]  # (T, J, 3)
+    lengths = np.median(np.linalg.norm(best[:, bones[:, 0]] - best[:, bones[:, 1]], axis=-1), axis=0)
+    return limb_table(dist, lengths, config)
+
+
+def _pruned(p: PersonFrame, k: int) -> PersonFrame:
+    if k >= p.data.shape[1]:
+        return p
+    keep = np.argsort(-p.data, axis=1, kind='stable')[:, :k]
+    data = np.take_along_axis(p.data, keep, axis=1)
+    return PersonFrame(p.person_id, np.take_along_axis(p.hypotheses, keep[..., None], axis=1),
+                       data / np.maximum(data.sum(axis=1, keepdims=True), np.finfo(float).tiny))
+
+
+def _stack(joints: list[np.ndarray]) -> np.ndarray:
+    return np.stack(joints) if joints else np.zeros((0, NUM_INFERENCE_JOINTS, 3))

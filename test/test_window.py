@@ -1,0 +1,290 @@
+"""Sliding-window and whole-clip temporal inference on synthetic people, and the predictions file.
+
+Each synthetic person moves smoothly; every joint has M hypotheses per frame, one of them the
+true position and the others scattered 10-40 cm around it afresh each frame. The data term
+favours the truth, but in about a third of the (frame, joint) cells a distractor outscores it,
+so the data alone decodes the wrong point there and only the temporal factor can fix it.
+"""
+from __future__ import annotations
+
+import io
+import json
+import re
+
+import numpy as np
+import pytest
+
+from mvpose_ros.core.body import BONES, NUM_INFERENCE_JOINTS, SYMMETRIC_PAIRS
+from mvpose_ros.core.predictions import frame_line, read_predictions, write_predictions
+from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+
+J = NUM_INFERENCE_JOINTS
+M = 10
+T = 30
+IDS = (4, 9)
+FRAME0 = 300  # frame labels need not start at 0
+
+
+def _truth(rng: np.random.Generator, n_frames: int) -> np.ndarray:
+    """(T, J, 3) smooth trajectory: a rigid layout with joints >= 30 cm apart, walking ~2 cm per
+    frame on a gently curving path, metres."""
+    layout = np.stack(np.meshgrid(np.arange(4) * 0.3, np.arange(4) * 0.3, indexing='ij'), -1).reshape(J, 2)
+    layout = np.column_stack([layout, 0.1 * np.arange(J) % 0.4 + 0.5])
+    t = np.arange(n_frames)[:, None]
+    path = rng.uniform(-2, 2, 3) * [1, 1, 0] + np.column_stack(
+        [0.02 * t[:, 0], 0.3 * np.sin(t[:, 0] / 15.0), np.zeros(n_frames)])
+    return path[:, None, :] + layout[None]
+
+
+def _frames(rng: np.random.Generator, truth: np.ndarray, flip: float = 0.35
+            ) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Hypotheses (J, M, 3) and data (J, M) per frame, and whether the data argmax is the truth
+    (T, J)."""
+    n = len(truth)
+    offsets = rng.normal(size=(n, J, M, 3))
+    offsets *= rng.uniform(0.10, 0.40, (n, J, M, 1)) / np.linalg.norm(offsets, axis=-1, keepdims=True)
+    true_at = rng.integers(0, M, (n, J))
+    offsets[np.arange(n)[:, None], np.arange(J)[None], true_at] = 0.0
+    hyp = truth[:, :, None, :] + offsets
+    data = rng.uniform(0.0, 0.6, (n, J, M))
+    data[np.arange(n)[:, None], np.arange(J)[None], true_at] = 1.0
+    beaten = rng.random((n, J)) < flip
+    rival = (true_at + rng.integers(1, M, (n, J))) % M
+    t_idx, j_idx = np.nonzero(beaten)
+    data[t_idx, j_idx, rival[beaten]] = 1.3
+    data /= data.sum(axis=-1, keepdims=True)
+    return list(hyp), list(data), ~beaten
+
+
+def _clip(seed: int = 0, n_frames: int = T, absent: dict[int, set[int]] | None = None):
+    """Per frame the PersonFrames of both people (minus those absent: person id -> frame
+    positions), and the true (T, J, 3) of each person."""
+    rng = np.random.default_rng(seed)
+    truth, data_right, frames = {}, {}, [[] for _ in range(n_frames)]
+    for pid in IDS:
+        truth[pid] = _truth(rng, n_frames)
+        hyp, data, data_right[pid] = _frames(rng, truth[pid])
+        for t in range(n_frames):
+            if t not in (absent or {}).get(pid, set()):
+                frames[t].append(PersonFrame(pid, hyp[t], data[t]))
+    return frames, truth, data_right
+
+
+def _window(**kwargs) -> SlidingWindow:
+    return SlidingWindow(InferenceConfig(**kwargs), np.array(SYMMETRIC_PAIRS), np.array(BONES))
+
+
+def _run(window: SlidingWindow, frames: list[list[PersonFrame]]) -> tuple[list[list[FrameResult]], list[FrameResult]]:
+    """What each push returned, and what flush returned."""
+    pushed = [window.push(FRAME0 + t, people) for t, people in enumerate(frames)]
+    return pushed, window.flush()
+
+
+def _all(pushed: list[list[FrameResult]], flushed: list[FrameResult]) -> list[FrameResult]:
+    return [r for out in pushed for r in out] + flushed
+
+
+def _accuracy(results: list[FrameResult], truth: dict[int, np.ndarray]) -> float:
+    """Fraction of decoded joints that are exactly the true hypothesis."""
+    hits = [np.linalg.norm(joints - truth[pid][r.frame - FRAME0], axis=-1) < 1e-9
+            for r in results for pid, joints in zip(r.person_ids, r.joints)]
+    return float(np.mean(hits))
+
+
+@pytest.fixture(scope='module')
+def clip():
+    return _clip()
+
+
+@pytest.mark.parametrize('window, lag', [(15, 7), (5, 0), (8, 7), (1, 0), (40, 12)])
+def test_window_mode_emits_each_frame_once_lag_frames_late(clip, window, lag):
+    frames, _, _ = clip
+    frames = [list(f) for f in frames]
+    frames[5] = []  # nobody at all in one frame: it still comes out, empty
+    pushed, flushed = _run(_window(window=window, lag=lag), frames)
+    for t, out in enumerate(pushed):
+        assert [r.frame for r in out] == ([FRAME0 + t - lag] if t >= lag else [])
+    assert [r.frame for r in flushed] == [FRAME0 + t for t in range(T - lag, T)]
+    results = _all(pushed, flushed)
+    assert [r.frame for r in results] == [FRAME0 + t for t in range(T)]
+    for r, people in zip(results, frames):
+        assert r.person_ids == sorted(p.person_id for p in people)
+        assert r.joints.shape == (len(people), J, 3)
+
+
+def test_whole_clip_mode_emits_everything_at_flush(clip):
+    frames, _, _ = clip
+    pushed, flushed = _run(_window(window=None), frames)
+    assert all(out == [] for out in pushed)
+    assert [r.frame for r in flushed] == [FRAME0 + t for t in range(T)]
+    assert all(r.person_ids == sorted(IDS) and r.joints.shape == (2, J, 3) for r in flushed)
+
+
+@pytest.mark.parametrize('window', [None, 10])
+def test_flush_twice_emits_nothing_new(clip, window):
+    """flush outputs the frames not yet output: a second flush has none left."""
+    frames, _, _ = clip
+    sliding = _window(window=window, lag=5 if window else 0)
+    _run(sliding, frames)
+    assert sliding.flush() == []
+
+
+def test_absent_person_is_output_only_where_present_and_its_chain_breaks():
+    gap = {9: {0, 1, 12, 13, 14, 29}}
+    frames, truth, _ = _clip(seed=1, absent=gap)
+    for kwargs in ({'window': None}, {'window': 12, 'lag': 6}):
+        results = _all(*_run(_window(**kwargs), frames))
+        for t, r in enumerate(results):
+            assert r.person_ids == ([4] if t in gap[9] else [4, 9])
+    # Whole clip: person 9's segments decode exactly as they do on their own, so nothing links
+    # frame 11 to frame 15; person 4 decodes as if alone.
+    whole = {r.frame: dict(zip(r.person_ids, r.joints)) for r in _run(_window(window=None), frames)[1]}
+    for segment in (range(2, 12), range(15, 29)):
+        alone = _run(_window(window=None), [[p for p in frames[t] if p.person_id == 9] for t in segment])[1]
+        for t, r in zip(segment, alone):
+            np.testing.assert_array_equal(whole[FRAME0 + t][9], r.joints[0])
+    solo = _run(_window(window=None), [[p for p in f if p.person_id == 4] for f in frames])[1]
+    for t, r in enumerate(solo):
+        np.testing.assert_array_equal(whole[FRAME0 + t][4], r.joints[0])
+
+
+@pytest.mark.parametrize('terms', [('data', 'temp'), ('data', 'temp', 'col')])
+@pytest.mark.parametrize('window, lag', [(None, 0), (15, 7)])
+def test_temporal_bp_beats_the_data_term_alone(clip, terms, window, lag):
+    frames, truth, data_right = clip
+    data_only = _all(*_run(_window(terms=('data',), window=window, lag=lag), frames))
+    temporal = _all(*_run(_window(terms=terms, window=window, lag=lag), frames))
+    data_acc = _accuracy(data_only, truth)
+    # data-only decoding is the argmax of the data term, right exactly where the truth wins it
+    assert data_acc == pytest.approx(np.mean([data_right[pid] for pid in IDS]))
+    assert 0.55 < data_acc < 0.75
+    assert _accuracy(temporal, truth) > 0.95
+
+
+@pytest.mark.parametrize('terms', [('data', 'temp', 'col'), ('data', 'temp', 'col', 'limb')])
+@pytest.mark.parametrize('extra', [0, 6])
+def test_window_spanning_the_clip_equals_whole_clip(terms, extra):
+    frames, _, _ = _clip(seed=2, n_frames=12, absent={4: {5}})
+    window = len(frames) + extra
+    sliding = _all(*_run(_window(terms=terms, window=window, lag=window - 1), frames))
+    whole = _run(_window(terms=terms, window=None), frames)[1]
+    assert [r.frame for r in sliding] == [r.frame for r in whole]
+    for a, b in zip(sliding, whole):
+        assert a.person_ids == b.person_ids
+        np.testing.assert_array_equal(a.joints, b.joints)
+
+
+def _top(data: np.ndarray, k: int) -> np.ndarray:
+    """(J, k) indices of the k largest data values of each joint."""
+    return np.argsort(-data, axis=1)[:, :k]
+
+
+def test_bp_hypotheses_keeps_the_top_k_by_data(clip):
+    frames, truth, data_right = clip
+    # k = 1: only the data argmax survives, whatever the other factors say
+    one = _all(*_run(_window(window=None, bp_hypotheses=1), frames))
+    assert _accuracy(one, truth) == pytest.approx(np.mean([data_right[pid] for pid in IDS]))
+    # k = 2: the truth is the best or second best everywhere, so BP can still find it; and
+    # every decoded joint is one of the two best-data hypotheses of its frame
+    two = _all(*_run(_window(window=None, bp_hypotheses=2), frames))
+    assert _accuracy(two, truth) > 0.9
+    for r, people in zip(two, frames):
+        for p, joints in zip(sorted(people, key=lambda q: q.person_id), r.joints):
+            kept = np.take_along_axis(p.hypotheses, _top(p.data, 2)[..., None], axis=1)  # (J, 2, 3)
+            assert np.all(np.min(np.linalg.norm(kept - joints[:, None], axis=-1), axis=1) < 1e-12)
+    # k >= M: the same as no pruning
+    full = _all(*_run(_window(window=None), frames))
+    many = _all(*_run(_window(window=None, bp_hypotheses=M + 3), frames))
+    for a, b in zip(full, many):
+        np.testing.assert_array_equal(a.joints, b.joints)
+
+
+@pytest.mark.parametrize('kwargs', [
+    {'terms': ('temp', 'col')},           # no data term
+    {'terms': ('data', 'velocity')},      # unknown term
+    {'window': 10, 'lag': 10},
+    {'window': 10, 'lag': 12},
+    {'window': 10, 'lag': -1},
+])
+def test_inference_config_rejects(kwargs):
+    with pytest.raises(ValueError):
+        InferenceConfig(**kwargs)
+
+
+@pytest.mark.parametrize('kwargs', [{'window': 10, 'lag': 9}, {'window': 1, 'lag': 0}, {'window': None},
+                                    {'terms': ('data', 'temp', 'col', 'limb')}])
+def test_inference_config_accepts(kwargs):
+    InferenceConfig(**kwargs)
+
+
+# --- predictions file -------------------------------------------------------------------------
+
+def _results(rng: np.random.Generator) -> list[FrameResult]:
+    counts = [2, 0, 3, 1]
+    return [FrameResult(FRAME0 + 2 * i, list(range(7, 7 + n)), rng.uniform(-3, 3, (n, 14, 3)))
+            for i, n in enumerate(counts)]
+
+
+def test_predictions_round_trip(tmp_path):
+    results = _results(np.random.default_rng(0))
+    path = tmp_path / 'pred.jsonl'
+    with open(path, 'w', encoding='utf-8') as f:
+        assert write_predictions(results, f) == len(results)
+    back = read_predictions(path)
+    assert list(back) == [r.frame for r in results]
+    for r in results:
+        assert back[r.frame].shape == r.joints.shape
+        np.testing.assert_allclose(back[r.frame], r.joints, atol=5.1e-5)  # written to 0.1 mm
+    assert len(path.read_text().splitlines()) == len(results)
+
+
+def _write_lines(tmp_path, lines: list[str]):
+    path = tmp_path / 'bad.jsonl'
+    path.write_text(''.join(line + '\n' for line in lines), encoding='utf-8')
+    return path
+
+
+def _good_line(frame: int, rng: np.random.Generator) -> str:
+    return frame_line(FrameResult(frame, [1], rng.uniform(-1, 1, (1, 14, 3))))
+
+
+@pytest.mark.parametrize('bad', [
+    'this is not json',
+    '{"frame": 5}',                                    # no people
+    '{"people": []}',                                  # no frame
+    '{"frame": 5, "people": [{"id": 1, "joints": [[0, 0, 0]]}]}',  # one joint, not 14
+    '[1, 2, 3]',
+])
+def test_read_predictions_names_file_and_line_of_a_malformed_line(tmp_path, bad):
+    rng = np.random.default_rng(1)
+    path = _write_lines(tmp_path, [_good_line(1, rng), _good_line(2, rng), bad])
+    with pytest.raises(ValueError, match=rf'{re.escape(path.name)}:3\b'):
+        read_predictions(path)
+
+
+def test_read_predictions_rejects_nan(tmp_path):
+    rng = np.random.default_rng(2)
+    joints = rng.uniform(-1, 1, (2, 14, 3))
+    joints[1, 4, 2] = np.nan
+    nan_line = frame_line(FrameResult(3, [1, 2], joints))
+    assert 'NaN' in nan_line  # json writes it; the reader must refuse it
+    path = _write_lines(tmp_path, [_good_line(1, rng), nan_line])
+    with pytest.raises(ValueError, match=rf'{re.escape(path.name)}:2\b') as err:
+        read_predictions(path)
+    assert str(path) in str(err.value)
+
+
+def test_read_predictions_rejects_a_repeated_frame(tmp_path):
+    rng = np.random.default_rng(3)
+    path = _write_lines(tmp_path, [_good_line(1, rng), _good_line(2, rng), '', _good_line(1, rng)])
+    with pytest.raises(ValueError, match=rf'{re.escape(path.name)}:4\b') as err:
+        read_predictions(path)
+    assert str(path) in str(err.value) and 'repeated' in str(err.value)
+
+
+def test_write_predictions_streams_one_line_per_frame():
+    stream = io.StringIO()
+    results = _results(np.random.default_rng(4))
+    write_predictions(results, stream)
+    lines = stream.getvalue().splitlines()
+    assert [json.loads(line)['frame'] for line in lines] == [r.frame for r in results]
