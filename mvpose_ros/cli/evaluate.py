@@ -1,0 +1,167 @@
+"""`mvpose-eval`: run the 3D stage offline on Shelf (or Campus) and print the PCP tables.
+
+    mvpose-eval shelf [--data-root DIR] [--terms data,temp,col,limb] [--window N --lag L]
+                      [--predictions FILE]
+    mvpose-eval shelf --score FILE      # score a predictions file (e.g. from the ROS graph)
+    mvpose-eval campus [--campus-dir CampusSeq1]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Sequence, TextIO
+
+from mvpose_ros.core.association import AssociationConfig
+from mvpose_ros.core.body import HEAD_MODELS
+from mvpose_ros.core.campus import campus_sequence
+from mvpose_ros.core.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir,
+                                      load_actors_gt)
+from mvpose_ros.core.evaluation import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
+from mvpose_ros.core.factors import FactorConfig
+from mvpose_ros.core.hypotheses import SamplingConfig
+from mvpose_ros.core.matching import MatchingConfig
+from mvpose_ros.core.offline import Prepared, Sequence2D, as_predictions, infer, prepare, shelf_openpose
+from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
+from mvpose_ros.core.pipeline import StageConfig
+from mvpose_ros.core.predictions import read_predictions, write_predictions
+from mvpose_ros.core.window import TERMS, InferenceConfig
+
+# The paper's ablation rows (its "all terms" is data + temporal + collision).
+ABLATION = (('data only', ('data',)), ('+temporal', ('data', 'temp')), ('+collision', ('data', 'col')),
+            ('all (data+temp+col)', ('data', 'temp', 'col')), ('+limb (ours)', ('data', 'temp', 'col', 'limb')))
+PAPER_ABLATION = {'data only': (86.75, 84.52, 90.68), '+temporal': (88.31, 85.26, 91.30),
+                  '+collision': (86.66, 84.77, 90.68), 'all (data+temp+col)': (88.34, 85.26, 91.30)}
+
+
+def _terms(text: str) -> tuple[str, ...]:
+    terms = tuple(t.strip() for t in text.split(',') if t.strip())
+    bad = [t for t in terms if t not in TERMS]
+    if bad or 'data' not in terms:
+        raise argparse.ArgumentTypeError(f'terms must include data and come from {",".join(TERMS)}; got {text!r}')
+    return terms
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='mvpose-eval', description=__doc__.split('\n')[0])
+    p.add_argument('dataset', choices=('shelf', 'campus'))
+    p.add_argument('--data-root', help='folder holding data/ and models/ (default: $MVPOSE_DATA_ROOT or ../shared)')
+    p.add_argument('--terms', type=_terms, default=('data', 'temp', 'col'),
+                   help='CRF terms, comma separated from data,temp,col,limb (default: data,temp,col)')
+    p.add_argument('--window', type=int, help='sliding window length in frames (default: whole clip)')
+    p.add_argument('--lag', type=int, default=7, help='output lag in frames with --window (default: 7)')
+    p.add_argument('--iterations', type=int, default=5, help='BP iterations (paper: 5)')
+    p.add_argument('--hypotheses', type=int, default=64, help='hypotheses M per joint (paper: 64)')
+    p.add_argument('--bp-hypotheses', type=int, default=24,
+                   help='hypotheses kept per joint inside BP, best data term first (0: all M)')
+    p.add_argument('--head-model', choices=HEAD_MODELS, default='anatomical')
+    p.add_argument('--match-distance', type=float, default=MatchingConfig.max_distance,
+                   help='cross-view matching threshold, metres of mean ray distance')
+    p.add_argument('--collision-centre', type=float, default=FactorConfig.collision_centre)
+    p.add_argument('--collision-width', type=float, default=FactorConfig.collision_width)
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--predictions', type=Path, help='write the predictions here (JSON lines)')
+    p.add_argument('--score', type=Path, help='only score this predictions file')
+    p.add_argument('--no-ablation', action='store_true', help='skip the ablation table')
+    p.add_argument('--campus-dir', type=Path, help='a full CampusSeq1 folder (campus only)')
+    return p
+
+
+def _stage_config(args: argparse.Namespace) -> StageConfig:
+    factors = FactorConfig(collision_centre=args.collision_centre, collision_width=args.collision_width)
+    inference = InferenceConfig(terms=args.terms, window=args.window, lag=args.lag if args.window else 0,
+                                iterations=args.iterations, bp_hypotheses=args.bp_hypotheses or None,
+                                factors=factors)
+    return StageConfig(association=AssociationConfig(matching=MatchingConfig(max_distance=args.match_distance)),
+                       sampling=SamplingConfig(hypotheses=args.hypotheses), inference=inference,
+                       head_model=args.head_model, seed=args.seed)
+
+
+def _summary(ev) -> str:
+    return (f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
+            f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
+            f' | MPJPE {ev.mpjpe_all:5.1f} mm')
+
+
+def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    out = out or sys.stdout
+    config = _stage_config(args)
+    if args.dataset == 'shelf':
+        gt = load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', SHELF_TEST_FRAMES)
+        actors, reference = SHELF_ACTORS, PAPER_SHELF_PCP
+    if args.score:
+        if args.dataset != 'shelf':
+            raise ValueError('--score is for shelf')
+        ev = evaluate(read_predictions(args.score), gt, actors)
+        print(f'{args.score}\n{format_table(ev, reference)}\n{_summary(ev)}', file=out)
+        return 0
+    t0 = time.perf_counter()
+    if args.dataset == 'shelf':
+        seq = shelf_openpose(args.data_root, OpenPoseDetectorConfig())
+    else:
+        seq, gt, head_model = campus_sequence(args.data_root, args.campus_dir)
+        actors, reference = CAMPUS_ACTORS, None
+        if args.campus_dir is None:
+            print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
+                  'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
+        config = replace(config, head_model=head_model)
+    prepared = prepare(seq, config)
+    results, bp_seconds = infer(prepared, config.inference, config.head_model)
+    ev = evaluate(as_predictions(results), gt, actors)
+    mode = f'window {args.window}, lag {args.lag}' if args.window else 'whole clip'
+    print(f'{args.dataset}: {len(seq.frames)} frames, {len(seq.cameras)} cameras, terms {",".join(args.terms)}, '
+          f'{mode}, M={args.hypotheses}, head model {config.head_model}', file=out)
+    print(format_table(ev, reference), file=out)
+    print(_summary(ev), file=out)
+    if args.dataset == 'campus':
+        print(f'paper: Campus average {PAPER_CAMPUS_AVERAGE}', file=out)
+    _print_speed(seq, prepared, bp_seconds, out)
+    if args.predictions:
+        args.predictions.parent.mkdir(parents=True, exist_ok=True)
+        with open(args.predictions, 'w', encoding='utf-8') as f:
+            n = write_predictions(results, f)
+        print(f'wrote {n} frames to {args.predictions}', file=out)
+    if not args.no_ablation:
+        _print_ablation(prepared, config, gt, actors, args.dataset == 'shelf', out)
+    print(f'total {time.perf_counter() - t0:.1f} s', file=out)
+    return 0
+
+
+def _print_speed(seq: Sequence2D, prepared: Prepared, bp_seconds: float, out) -> None:
+    stages = {**seq.seconds, **prepared.timer.seconds, 'bp (window + decoding)': bp_seconds}
+    n = len(seq.frames)
+    total = sum(stages.values())
+    print('3D stage time per frame (all cameras):', file=out)
+    for name, sec in stages.items():
+        print(f'  {name:24s} {1000 * sec / n:7.2f} ms', file=out)
+    print(f'  {"total":24s} {1000 * total / n:7.2f} ms  -> {n / total:.1f} frames/s', file=out)
+
+
+def _print_ablation(prepared: Prepared, config: StageConfig, gt, actors: Sequence[int], paper: bool, out) -> None:
+    print('\nAblation (All PCP per actor, strict | lenient; same hypotheses, same window):', file=out)
+    header = f'{"terms":22s} ' + ' '.join(f'A{a + 1:d} str  A{a + 1:d} len' for a in actors)
+    print(header + '   avg-fw str/len   avg-act str/len' + ('   paper A1/A2/A3' if paper else ''), file=out)
+    for name, terms in ABLATION:
+        results, _ = infer(prepared, replace(config.inference, terms=terms), config.head_model)
+        ev = evaluate(as_predictions(results), gt, actors)
+        cells = ' '.join(f'{ev.pcp("strict", a):6.2f} {ev.pcp("lenient", a):6.2f}' for a in actors)
+        row = (f'{name:22s} {cells}   {ev.frame_weighted("strict"):6.2f}/{ev.frame_weighted("lenient"):6.2f}'
+               f'   {ev.actor_average("strict"):6.2f}/{ev.actor_average("lenient"):6.2f}')
+        if paper and name in PAPER_ABLATION:
+            row += '   ' + '/'.join(f'{v:.2f}' for v in PAPER_ABLATION[name])
+        print(row, file=out)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'mvpose-eval: error: {exc}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())
