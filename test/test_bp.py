@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from mvpose_ros.core.bp import Messages, PairwiseGroup, loopy_bp
+from mvpose_ros.core.bp import ChainBP, Messages, PairwiseGroup, loopy_bp
 
 
 def brute_force(data, temporal, groups):
@@ -110,3 +110,37 @@ def test_sliding_messages_keep_overlap_and_reset_new_frames():
 def test_temporal_entries_must_match_frames():
     with pytest.raises(ValueError):
         loopy_bp(np.ones((3, 1, 2)), [None, None], ())
+
+
+def test_chain_grown_frame_by_frame_reaches_the_batch_fixed_point():
+    """Appending frames one at a time (with a few iterations after each) and iterating to
+    convergence lands on the same beliefs as a batch solve of the whole chain."""
+    rng = np.random.default_rng(5)
+    informative = [(t, 'collision', 0) for t in range(6)] + [(t, 'limb', 0) for t in range(0, 6, 2)]
+    data, temporal, groups = random_problem(rng, 6, 3, 3, informative)
+    batch, _ = loopy_bp(data, temporal, groups, iterations=60)
+    chain = ChainBP.build(data[:1], [None], [PairwiseGroup(g.name, g.edges, g.tables[:1]) for g in groups])
+    for t in range(1, 6):
+        chain.append(data[t], temporal[t - 1], [g.tables[t] for g in groups])
+        chain.run(2)
+    assert not np.allclose(chain.marginals(), batch, atol=1e-6)  # two iterations a frame: not there yet
+    chain.run(60)
+    np.testing.assert_allclose(chain.marginals(), batch, atol=1e-6)
+
+
+def test_dropped_frames_leave_their_evidence_as_a_prior():
+    """After drop_front the first kept frame still carries what the dropped frames said, and
+    the dropped factors are frozen, not re-run."""
+    rng = np.random.default_rng(6)
+    data, temporal, groups = random_problem(rng, 5, 2, 3, [])
+    chain = ChainBP.build(data, temporal, groups)
+    chain.run(5)
+    kept = chain.total[2:].copy()
+    chain.drop_front(2)
+    assert len(chain) == 3 and chain.temporal[0] is None and chain.messages.temporal.shape[1] == 3
+    np.testing.assert_array_equal(chain.total, kept)
+    plain = ChainBP.build(data[2:], [None, temporal[3], None], [PairwiseGroup(g.name, g.edges, g.tables[2:])
+                                                                for g in groups])
+    plain.run(5)
+    chain.run(5)
+    assert not np.allclose(chain.marginals()[0], plain.marginals()[0])  # the prior still counts

@@ -96,12 +96,13 @@ def clip():
     return _clip()
 
 
+@pytest.mark.parametrize('slide', [None, 1])
 @pytest.mark.parametrize('window, lag', [(15, 7), (5, 0), (8, 7), (1, 0), (40, 12)])
-def test_window_mode_emits_each_frame_once_lag_frames_late(clip, window, lag):
+def test_window_mode_emits_each_frame_once_lag_frames_late(clip, window, lag, slide):
     frames, _, _ = clip
     frames = [list(f) for f in frames]
     frames[5] = []  # nobody at all in one frame: it still comes out, empty
-    pushed, flushed = _run(_window(window=window, lag=lag), frames)
+    pushed, flushed = _run(_window(window=window, lag=lag, slide_iterations=slide), frames)
     for t, out in enumerate(pushed):
         assert [r.frame for r in out] == ([FRAME0 + t - lag] if t >= lag else [])
     assert [r.frame for r in flushed] == [FRAME0 + t for t in range(T - lag, T)]
@@ -132,7 +133,7 @@ def test_flush_twice_emits_nothing_new(clip, window):
 def test_absent_person_is_output_only_where_present_and_its_chain_breaks():
     gap = {9: {0, 1, 12, 13, 14, 29}}
     frames, truth, _ = _clip(seed=1, absent=gap)
-    for kwargs in ({'window': None}, {'window': 12, 'lag': 6}):
+    for kwargs in ({'window': None}, {'window': 12, 'lag': 6}, {'window': 12, 'lag': 6, 'slide_iterations': 1}):
         results = _all(*_run(_window(**kwargs), frames))
         for t, r in enumerate(results):
             assert r.person_ids == ([4] if t in gap[9] else [4, 9])
@@ -149,11 +150,11 @@ def test_absent_person_is_output_only_where_present_and_its_chain_breaks():
 
 
 @pytest.mark.parametrize('terms', [('data', 'temp'), ('data', 'temp', 'col')])
-@pytest.mark.parametrize('window, lag', [(None, 0), (15, 7)])
-def test_temporal_bp_beats_the_data_term_alone(clip, terms, window, lag):
+@pytest.mark.parametrize('window, lag, slide', [(None, 0, None), (15, 7, None), (15, 7, 1), (8, 3, 1)])
+def test_temporal_bp_beats_the_data_term_alone(clip, terms, window, lag, slide):
     frames, truth, data_right = clip
-    data_only = _all(*_run(_window(terms=('data',), window=window, lag=lag), frames))
-    temporal = _all(*_run(_window(terms=terms, window=window, lag=lag), frames))
+    data_only = _all(*_run(_window(terms=('data',), window=window, lag=lag, slide_iterations=slide), frames))
+    temporal = _all(*_run(_window(terms=terms, window=window, lag=lag, slide_iterations=slide), frames))
     data_acc = _accuracy(data_only, truth)
     # data-only decoding is the argmax of the data term, right exactly where the truth wins it
     assert data_acc == pytest.approx(np.mean([data_right[pid] for pid in IDS]))
@@ -172,6 +173,30 @@ def test_window_spanning_the_clip_equals_whole_clip(terms, extra):
     for a, b in zip(sliding, whole):
         assert a.person_ids == b.person_ids
         np.testing.assert_array_equal(a.joints, b.joints)
+
+
+@pytest.mark.parametrize('kwargs', [{'window': None}, {'window': 10, 'lag': 4},
+                                    {'window': 10, 'lag': 4, 'slide_iterations': 1}])
+def test_a_skipped_frame_number_breaks_every_chain(kwargs):
+    """Frames 300..309 then 311..319: nothing links 309 to 311, so each side decodes as if the
+    other did not exist."""
+    frames, _, _ = _clip(seed=3, n_frames=20)
+    labels = [FRAME0 + t + (t >= 10) for t in range(20)]
+    window = _window(**kwargs)
+    both = [r for f, people in zip(labels, frames) for r in window.push(f, people)] + window.flush()
+    assert [r.frame for r in both] == labels
+    for part in (slice(0, 10), slice(10, 20)):
+        alone = _window(**kwargs)
+        out = [r for f, people in zip(labels[part], frames[part]) for r in alone.push(f, people)] + alone.flush()
+        for a, b in zip(out, both[part]):
+            np.testing.assert_array_equal(a.joints, b.joints)
+
+
+def test_frames_must_increase():
+    window = _window(window=10, lag=4)
+    window.push(FRAME0, [])
+    with pytest.raises(ValueError, match='frames must increase'):
+        window.push(FRAME0, [])
 
 
 def _top(data: np.ndarray, k: int) -> np.ndarray:

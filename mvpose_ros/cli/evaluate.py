@@ -53,8 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--window', type=int, help='sliding window length in frames (default: whole clip)')
     p.add_argument('--lag', type=int, default=7, help='output lag in frames with --window (default: 7)')
     p.add_argument('--iterations', type=int, default=5, help='BP iterations (paper: 5)')
+    p.add_argument('--slide-iterations', type=int, default=1,
+                   help='with --window: warm-start each slide from the last with this many iterations '
+                        '(default: 1; 0: re-solve every window from scratch with --iterations)')
     p.add_argument('--hypotheses', type=int, default=64, help='hypotheses M per joint (paper: 64)')
-    p.add_argument('--bp-hypotheses', type=int, default=24,
+    p.add_argument('--bp-hypotheses', type=int, default=16,
                    help='hypotheses kept per joint inside BP, best data term first (0: all M)')
     p.add_argument('--head-model', choices=HEAD_MODELS, default='anatomical')
     p.add_argument('--match-distance', type=float, default=MatchingConfig.max_distance,
@@ -73,6 +76,7 @@ def _stage_config(args: argparse.Namespace) -> StageConfig:
     factors = FactorConfig(collision_centre=args.collision_centre, collision_width=args.collision_width)
     inference = InferenceConfig(terms=args.terms, window=args.window, lag=args.lag if args.window else 0,
                                 iterations=args.iterations, bp_hypotheses=args.bp_hypotheses or None,
+                                slide_iterations=(args.slide_iterations or None) if args.window else None,
                                 factors=factors)
     return StageConfig(association=AssociationConfig(matching=MatchingConfig(max_distance=args.match_distance)),
                        sampling=SamplingConfig(hypotheses=args.hypotheses), inference=inference,

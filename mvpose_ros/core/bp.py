@@ -9,7 +9,7 @@ windows neither underflow nor drift.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -69,6 +69,81 @@ def _log_message(m: np.ndarray) -> np.ndarray:
     return _log_normalise(np.log(np.maximum(m, np.finfo(np.float64).tiny)))
 
 
+@dataclass
+class ChainBP:
+    """BP state over one person's chain of consecutive frames, kept between calls so that a
+    sliding window warm-starts: frames are appended at the end and forgotten at the front.
+
+    total: (T, J, M) log beliefs, the log data term plus every factor's current message.
+    """
+
+    temporal: list[np.ndarray | None]
+    groups: list[PairwiseGroup]
+    messages: Messages
+    total: np.ndarray
+
+    @classmethod
+    def build(cls, data: np.ndarray, temporal: Sequence[np.ndarray | None],
+              groups: Sequence[PairwiseGroup] = (), messages: Messages | None = None) -> ChainBP:
+        """data: (T, J, M) non-negative unary potentials; temporal and groups as in loopy_bp."""
+        t_len = len(data)
+        if len(temporal) != t_len or (t_len and (temporal[0] is not None or temporal[-1] is not None)):
+            raise ValueError('temporal needs one entry per frame, None at both ends')
+        msgs = messages or Messages.uniform(data.shape, [len(g.edges) for g in groups])
+        tm = msgs.temporal
+        total = _log(data)
+        total[:-1] += tm[0, 1:]
+        total += tm[1]
+        total[1:] += tm[2, :-1]
+        for group, pm in zip(groups, msgs.pairwise):
+            np.add.at(total, (slice(None), group.edges[:, 0]), pm[:, :, 0])
+            np.add.at(total, (slice(None), group.edges[:, 1]), pm[:, :, 1])
+        return cls(list(temporal), list(groups), msgs, total)
+
+    def __len__(self) -> int:
+        return len(self.total)
+
+    def append(self, data: np.ndarray, temporal_prev: np.ndarray | None,
+               tables: Sequence[np.ndarray] = ()) -> None:
+        """Add a frame at the end. data: (J, M) its unary potentials; temporal_prev: the (J, M, M,
+        M) factor centred at the previous last frame, which needed this one (None: no factor);
+        tables: this frame's (E, M, M) table for each pairwise group. New messages start uniform."""
+        if self.temporal:
+            self.temporal[-1] = temporal_prev
+        self.temporal.append(None)
+        self.groups = [replace(g, tables=np.concatenate([g.tables, t[None]])) for g, t in zip(self.groups, tables)]
+        self.messages = self.messages.slid(0, 1)
+        self.total = np.concatenate([self.total, _log(data)[None]])
+
+    def drop_front(self, n: int) -> None:
+        """Forget the first n frames. What they already told the remaining frames stays in those
+        beliefs as a prior; the factors that touched them are frozen."""
+        if n <= 0:
+            return
+        self.temporal = self.temporal[n:]
+        if self.temporal:
+            self.temporal[0] = None
+        self.groups = [replace(g, tables=g.tables[n:]) for g in self.groups]
+        self.messages = self.messages.slid(n, 0)
+        self.total = self.total[n:]
+
+    def run(self, iterations: int) -> None:
+        """The paper's schedule: per iteration, temporal factors forward then backward through the
+        chain, then each pairwise type over all frames."""
+        tm = self.messages.temporal
+        inner = [t for t in range(1, len(self) - 1) if self.temporal[t] is not None]
+        for _ in range(iterations):
+            for sweep in (inner, inner[::-1]):
+                for t in sweep:
+                    _update_temporal(t, self.temporal[t], self.total, tm)
+            for group, pm in zip(self.groups, self.messages.pairwise):
+                _update_pairwise(group, self.total, pm)
+
+    def marginals(self) -> np.ndarray:
+        """(T, J, M) normalised beliefs."""
+        return _softmax(self.total)
+
+
 def loopy_bp(
     data: np.ndarray,
     temporal: Sequence[np.ndarray | None],
@@ -83,28 +158,13 @@ def loopy_bp(
     factors.temporal_table); entries 0 and T-1 must be None. messages: a warm start of matching
     shape. Returns the marginals (T, J, M) and the final messages.
     """
-    t_len, n_joints, m = data.shape
-    if len(temporal) != t_len or (t_len and (temporal[0] is not None or temporal[-1] is not None)):
-        raise ValueError('temporal needs one entry per frame, None at both ends')
-    msgs = messages or Messages.uniform(data.shape, [len(g.edges) for g in groups])
-    tm = msgs.temporal
-    total = np.log(np.maximum(data, np.finfo(np.float64).tiny))
-    total[:-1] += tm[0, 1:]
-    total += tm[1]
-    total[1:] += tm[2, :-1]
-    for group, pm in zip(groups, msgs.pairwise):
-        for e, (i, k) in enumerate(group.edges):
-            total[:, i] += pm[:, e, 0]
-            total[:, k] += pm[:, e, 1]
+    chain = ChainBP.build(data, temporal, groups, messages)
+    chain.run(iterations)
+    return chain.marginals(), chain.messages
 
-    inner = [t for t in range(1, t_len - 1) if temporal[t] is not None]
-    for _ in range(iterations):
-        for sweep in (inner, inner[::-1]):
-            for t in sweep:
-                _update_temporal(t, temporal[t], total, tm)
-        for group, pm in zip(groups, msgs.pairwise):
-            _update_pairwise(group, total, pm)
-    return _softmax(total), msgs
+
+def _log(data: np.ndarray) -> np.ndarray:
+    return np.log(np.maximum(data, np.finfo(np.float64).tiny))
 
 
 def _update_temporal(t: int, table: np.ndarray, total: np.ndarray, tm: np.ndarray) -> None:

@@ -100,9 +100,12 @@ def _triangulate_subsets(cams, joints, rays, peak_rays, m, with_peaks) -> np.nda
     parts = [closest_point_to_rays(np.concatenate([o for o, _ in group], axis=1),
                                    np.concatenate([d for _, d in group], axis=1))
              for group in by_size.values()]
+    peaks = []
     if n_peaks:
-        peak_points = [closest_point_to_rays(np.stack([peak_rays[c][0][joints] for c in s], axis=-2),
-                                             np.stack([peak_rays[c][1][joints] for c in s], axis=-2))
-                       for s in subsets]
-        parts.insert(0, np.stack(peak_points, axis=1))
-    return np.concatenate(parts, axis=1)
+        o = np.stack([r[0][joints] for r in peak_rays], axis=1)  # (J', V, 3)
+        d = np.stack([r[1][joints] for r in peak_rays], axis=1)
+        # one solve per subset size; subsets come largest first, so their order is kept
+        for size in sorted({len(s) for s in subsets}, reverse=True):
+            same = np.array([s for s in subsets if len(s) == size])  # (S, size)
+            peaks.append(closest_point_to_rays(o[:, same], d[:, same]))  # (J', S, 3)
+    return np.concatenate(peaks + parts, axis=1)

@@ -5,6 +5,11 @@ Frames are pushed as they arrive; every pushed frame comes out exactly once, `la
 the run of consecutive buffered frames in which that person is present; a gap breaks it.
 Factor tables depend only on hypotheses, which never change once a frame is in, so they are
 computed once per frame and reused while the window slides.
+
+Two window schedules: the reference re-solves every window from uniform messages with
+`iterations` iterations; with `slide_iterations` set, each person keeps one BP state per chain
+(bp.ChainBP) that every new frame extends and warm-starts with that many iterations, so a slide
+costs a fraction of a solve.
 """
 from __future__ import annotations
 
@@ -14,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.bp import PairwiseGroup, loopy_bp
+from mvpose_ros.core.bp import ChainBP, PairwiseGroup, loopy_bp
 from mvpose_ros.core.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 
 TERMS = ('data', 'temp', 'col', 'limb')
@@ -24,13 +29,16 @@ TERMS = ('data', 'temp', 'col', 'limb')
 class InferenceConfig:
     """terms: factors to use; window: frames per window (None = the whole clip); lag: frames
     between a frame's arrival and its output; bp_hypotheses: keep only this many hypotheses per
-    joint (those with the highest data term) inside BP, None = all M."""
+    joint (those with the highest data term) inside BP, None = all M; slide_iterations: in window
+    mode, warm-start each slide from the previous one with this many iterations (None: re-solve
+    every window from scratch with `iterations`)."""
 
     terms: tuple[str, ...] = ('data', 'temp', 'col')
     window: int | None = 15
     lag: int = 7
     iterations: int = 5
     bp_hypotheses: int | None = None
+    slide_iterations: int | None = None
     factors: FactorConfig = field(default_factory=FactorConfig)
 
     def __post_init__(self) -> None:
@@ -39,6 +47,8 @@ class InferenceConfig:
             raise ValueError(f'terms must include data and come from {TERMS}, got {self.terms}')
         if self.window is not None and not 0 <= self.lag < self.window:
             raise ValueError(f'lag must be in [0, window), got lag={self.lag} window={self.window}')
+        if self.slide_iterations is not None and self.slide_iterations < 1:
+            raise ValueError(f'slide_iterations must be >= 1 or None, got {self.slide_iterations}')
 
 
 @dataclass
@@ -68,6 +78,21 @@ class _Slot:
     bone_distances: dict[int, np.ndarray] = field(default_factory=dict)
 
 
+@dataclass
+class _Chain:
+    """Warm-started BP of one person over the consecutive frames first .. first + len(bp) - 1;
+    best: each frame's best-data joints (J, 3), for the limb lengths."""
+
+    first: int
+    bp: ChainBP | None = None
+    hypotheses: deque[np.ndarray] = field(default_factory=deque)
+    best: deque[np.ndarray] = field(default_factory=deque)
+
+    @property
+    def last(self) -> int:
+        return self.first + len(self.bp) - 1
+
+
 class SlidingWindow:
     """Sliding-window sum-product BP over the CRF of each person."""
 
@@ -77,9 +102,18 @@ class SlidingWindow:
         self.bones = np.asarray(bones)
         self._slots: deque[_Slot] = deque()
         self._unsent = 0
+        self._chains: dict[int, _Chain] = {}  # warm-started mode: each present person's chain
+        self._ended: list[tuple[int, _Chain]] = []  # (person id, chain) broken, with frames still to output
+
+    @property
+    def _warm(self) -> bool:
+        return self.config.window is not None and self.config.slide_iterations is not None
 
     def push(self, frame: int, people: list[PersonFrame]) -> list[FrameResult]:
-        """Add a frame; returns the frames whose output is due (at most one in window mode)."""
+        """Add a frame (frames must increase; a skipped number breaks every chain); returns the
+        frames whose output is due (at most one in window mode)."""
+        if self._slots and frame <= self._slots[-1].frame:
+            raise ValueError(f'frame {frame} pushed after frame {self._slots[-1].frame}: frames must increase')
         k = self.config.bp_hypotheses
         slot = _Slot(frame, {p.person_id: _pruned(p, k) if k else p for p in people})
         self._slots.append(slot)
@@ -88,6 +122,8 @@ class SlidingWindow:
             self._add_temporal(len(self._slots) - 2)
         if self.config.window is None:
             return []
+        if self._warm:
+            self._slide(len(self._slots) - 1)
         while len(self._slots) > self.config.window:
             self._slots.popleft()
         if self._unsent <= self.config.lag:
@@ -105,30 +141,86 @@ class SlidingWindow:
         self._unsent = 0
         return out
 
+    def _slide(self, i: int) -> None:
+        """Extend each present person's chain with the frame at buffer position i and warm-start
+        its BP; a person absent here, or back after a gap, ends its chain."""
+        slot = self._slots[i]
+        for pid in list(self._chains):
+            if pid not in slot.people or self._chains[pid].last != slot.frame - 1:
+                self._ended.append((pid, self._chains.pop(pid)))
+        for pid, p in slot.people.items():
+            chain = self._chains.get(pid)
+            if chain is None:
+                chain = self._chains[pid] = _Chain(slot.frame)
+            chain.hypotheses.append(p.hypotheses)
+            chain.best.append(np.take_along_axis(p.hypotheses, p.data.argmax(-1)[:, None, None], axis=1)[:, 0])
+            groups = self._groups(pid, i, chain.best)
+            if chain.bp is None:
+                chain.bp = ChainBP.build(p.data[None], [None], groups)
+            else:
+                chain.bp.append(p.data, self._slots[i - 1].temporal.get(pid), [g.tables[0] for g in groups])
+            excess = len(chain.bp) - self.config.window
+            if excess > 0:
+                chain.bp.drop_front(excess)
+                for _ in range(excess):
+                    chain.hypotheses.popleft()
+                    chain.best.popleft()
+                chain.first += excess
+            chain.bp.run(self.config.slide_iterations)
+
+    def _groups(self, pid: int, i: int, best: deque[np.ndarray]) -> list[PairwiseGroup]:
+        """The pairwise groups of person pid at buffer position i, as one-frame tables; limb
+        lengths from the median over its chain's best-data joints `best`."""
+        groups = []
+        if 'col' in self.config.terms:
+            groups.append(PairwiseGroup('collision', self.symmetric_pairs, self._collision(pid, i)[None]))
+        if 'limb' in self.config.terms:
+            best = np.stack(best)
+            lengths = np.median(np.linalg.norm(best[:, self.bones[:, 0]] - best[:, self.bones[:, 1]], axis=-1), axis=0)
+            groups.append(PairwiseGroup('limb', self.bones,
+                                        limb_table(self._bone_distances(pid, i)[None], lengths, self.config.factors)))
+        return groups
+
     def _add_temporal(self, i: int) -> None:
-        """Temporal tables of the frame at buffer position i, now that its successor is in."""
+        """Temporal tables of the frame at buffer position i, now that its successor is in; none
+        across a gap in frame numbers."""
         prev, cur, nxt = self._slots[i - 1], self._slots[i], self._slots[i + 1]
+        if not prev.frame + 1 == cur.frame == nxt.frame - 1:
+            return
         for pid in cur.people.keys() & prev.people.keys() & nxt.people.keys():
             cur.temporal[pid] = temporal_table(prev.people[pid].hypotheses, cur.people[pid].hypotheses,
                                                nxt.people[pid].hypotheses, self.config.factors)
 
     def _run(self, pid: int, i: int) -> range:
-        """Buffer positions of the chain of person pid through position i."""
+        """Buffer positions of the chain of person pid through position i (consecutive frames)."""
+        s = self._slots
         lo, hi = i, i
-        while lo > 0 and pid in self._slots[lo - 1].people:
+        while lo > 0 and pid in s[lo - 1].people and s[lo - 1].frame == s[lo].frame - 1:
             lo -= 1
-        while hi + 1 < len(self._slots) and pid in self._slots[hi + 1].people:
+        while hi + 1 < len(s) and pid in s[hi + 1].people and s[hi + 1].frame == s[hi].frame + 1:
             hi += 1
         return range(lo, hi + 1)
 
     def _decode_at(self, i: int) -> FrameResult:
         slot = self._slots[i]
         ids = sorted(slot.people)
-        joints = []
-        for pid in ids:
-            run = self._run(pid, i)
-            joints.append(self._solve(pid, run)[i - run.start])
+        if self._warm:
+            joints = [self._decode_warm(pid, slot.frame) for pid in ids]
+            self._ended = [(q, c) for q, c in self._ended if c.last > slot.frame]
+        else:
+            joints = []
+            for pid in ids:
+                run = self._run(pid, i)
+                joints.append(self._solve(pid, run)[i - run.start])
         return FrameResult(slot.frame, ids, _stack(joints))
+
+    def _decode_warm(self, pid: int, frame: int) -> np.ndarray:
+        """Joints (J, 3) of person pid at `frame` from the current beliefs of its chain."""
+        chains = [c for q, c in self._ended if q == pid] + ([self._chains[pid]] if pid in self._chains else [])
+        chain = next(c for c in chains if c.first <= frame <= c.last)
+        row = frame - chain.first
+        best = chain.bp.total[row].argmax(axis=-1)  # (J,)
+        return np.take_along_axis(chain.hypotheses[row], best[:, None, None], axis=1)[:, 0]
 
     def _decode_all(self) -> list[FrameResult]:
         decoded: dict[tuple[int, int], np.ndarray] = {}
