@@ -44,9 +44,11 @@ def rough_centre(cameras: Sequence[Camera], views: dict[int, Person2D], min_scor
     origins = np.stack([r[0] for r in rays], axis=1)  # (J, V, 3)
     dirs = np.stack([r[1] for r in rays], axis=1)
     seen = (kp[..., 2] > min_score).T  # (J, V)
-    points = [closest_point_to_rays(origins[j, seen[j]], dirs[j, seen[j]])
-              for j in np.flatnonzero(seen.sum(axis=1) >= 2)]
-    return np.mean(points, axis=0) if points else np.full(3, np.nan)
+    twice = seen.sum(axis=1) >= 2
+    if not twice.any():
+        return np.full(3, np.nan)
+    points = closest_point_to_rays(origins[twice], dirs[twice], seen[twice])
+    return np.nanmean(points, axis=0)
 
 
 class Associator:

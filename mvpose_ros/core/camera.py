@@ -193,16 +193,22 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
     raise FileNotFoundError(f'{path}: no calibration_*.json or P<i>.txt files')
 
 
-def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """(..., K, 3) lines (K >= 2) -> (..., 3) point minimising the sum of squared distances.
 
-    Directions need not be unit. Degenerate sets (all lines parallel, or non-finite input) give NaN.
+    Directions need not be unit. weights (..., K), optional: 0 leaves a line out, so sets of
+    different sizes can share one padded call. Degenerate sets (fewer than two non-parallel
+    lines, or non-finite input) give NaN.
     """
     o = np.asarray(origins, dtype=float)
     d = np.asarray(dirs, dtype=float)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     # Each line contributes the projector onto its normal plane: A = sum(I - d d^T), b = sum(.. o).
     proj = np.eye(3) - d[..., :, None] * d[..., None, :]
+    if weights is not None:
+        keep = np.asarray(weights, dtype=float)[..., None, None]
+        proj = np.where(keep > 0, proj * keep, 0.0)  # padded lines may hold NaN
+        o = np.where(keep[..., 0] > 0, o, 0.0)
     A = proj.sum(axis=-3)
     b = (proj @ o[..., None]).sum(axis=-3)
     n_lines = d.shape[-2]

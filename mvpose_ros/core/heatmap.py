@@ -45,17 +45,23 @@ class PersonHeatmap:
         """Draw n pixels per joint (J, n, 2) with each map as a pmf over its cells (probability
         proportional to the value), jittered uniformly within the cell; NaN rows for empty maps."""
         n_j, h, w = self.maps.shape
-        flat = self.maps.reshape(n_j, -1).astype(np.float64)
-        cum = np.cumsum(flat, axis=1)
-        total = cum[:, -1:]
-        empty = total[:, 0] <= 0
-        # joint j's CDF runs from j to j + 1, so one searchsorted serves every joint
-        cdf = (np.arange(n_j)[:, None] + np.divide(cum, total, out=np.ones_like(cum),
-                                                   where=total > 0)).ravel()
-        q = np.arange(n_j)[:, None] + rng.random((n_j, n))
-        idx = np.searchsorted(cdf, q.ravel(), side='right').reshape(n_j, n)
-        cell = np.clip(idx - np.arange(n_j)[:, None] * (h * w), 0, h * w - 1)
-        row, col = np.divmod(cell, w)
+        flat = self.maps.reshape(n_j, -1)
+        # Only non-zero cells can be drawn, and maps are mostly zero: one CDF over the non-zero
+        # cells of every joint (in joint order), each joint drawing inside its own stretch.
+        joint, cell = np.nonzero(flat)
+        if len(cell) == 0:
+            return np.full((n_j, n, 2), np.nan)
+        cum = np.cumsum(flat[joint, cell], dtype=np.float64)
+        first = np.searchsorted(joint, np.arange(n_j))
+        end = np.searchsorted(joint, np.arange(n_j), side='right')
+        before = np.concatenate([[0.0], cum])[first]  # (J,) mass of the joints before j
+        total = np.concatenate([[0.0], cum])[end] - before
+        q = before[:, None] + rng.random((n_j, n)) * total[:, None]
+        idx = np.searchsorted(cum, q, side='right')
+        empty = end == first
+        # rounding can step past a joint's stretch; empty joints point anywhere (NaN below)
+        idx = np.minimum(np.clip(idx, first[:, None], np.maximum(end - 1, first)[:, None]), len(cell) - 1)
+        row, col = np.divmod(cell[idx], w)
         jitter = rng.random((n_j, n, 2)) - 0.5
         uv = self.origin + self.stride * (np.stack([col, row], axis=-1) + jitter)
         uv[empty] = np.nan

@@ -8,6 +8,7 @@ heatmap peaks, so the most likely point is never left to chance.
 """
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 from typing import Sequence
@@ -62,19 +63,24 @@ def sample_hypotheses(
     for j in range(n_joints):
         patterns.setdefault(tuple(np.flatnonzero(seen[:, j])), []).append(j)
 
-    pools = [hm.sample(rng, m) for _, hm in views]  # (J, m, 2) per camera
-    rays = [cam.rays(pool) for (cam, _), pool in zip(views, pools)]
-    peak_rays = [cam.rays(p[:, :2]) for (cam, _), p in zip(views, peaks)]
+    # every camera's m sampled pixels per joint plus its peak as draw m: one back-projection each
+    pixels = [np.concatenate([hm.sample(rng, m), p[:, None, :2]], axis=1) for (_, hm), p in zip(views, peaks)]
+    rays = [cam.rays(px) for (cam, _), px in zip(views, pixels)]
+    origins = np.stack([r[0] for r in rays])  # (C, J, m + 1, 3)
+    dirs = np.stack([r[1] for r in rays])
 
     for cams, joints in patterns.items():
         if len(cams) >= 2:
-            out[joints] = _triangulate_subsets(cams, joints, rays, peak_rays, m, config.peak_hypotheses)
+            cam_of, draw, weight = _plan(len(cams), m, config.peak_hypotheses)  # (m, K) each
+            view = np.asarray(cams)[cam_of][None]
+            jj = np.asarray(joints)[:, None, None]
+            out[joints] = closest_point_to_rays(origins[view, jj, draw[None]], dirs[view, jj, draw[None]], weight)
     if np.all(np.isnan(out)):
         return None
     centre = np.nanmean(out.reshape(-1, 3), axis=0)
     for cams, joints in patterns.items():
         if len(cams) == 1:
-            origin, direction = (r[joints] for r in rays[cams[0]])
+            origin, direction = origins[cams[0], joints, :m], dirs[cams[0], joints, :m]
             depth = np.einsum('jmd,jmd->jm', centre - origin, direction)
             out[joints] = origin + depth[..., None] * direction
         elif not cams:
@@ -82,30 +88,26 @@ def sample_hypotheses(
     return out
 
 
-def _triangulate_subsets(cams, joints, rays, peak_rays, m, with_peaks) -> np.ndarray:
-    """(len(joints), m, 3) hypotheses of joints that share the camera set `cams`."""
-    subsets = camera_subsets(cams)
+@functools.lru_cache(maxsize=64)
+def _plan(n_cams: int, m: int, with_peaks: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which rays make each of the m hypotheses of a joint seen by cameras 0..n_cams-1: camera
+    (m, K) and draw (m, K) indices (draw m is the peak's ray) and weights (m, K), 0 where a
+    subset smaller than K = n_cams is padded. First one peak triangulation per subset (when they
+    fit in m), then the m - peaks draws shared evenly over the subsets, each camera's draws used
+    once."""
+    subsets = camera_subsets(range(n_cams))
     n_peaks = len(subsets) if with_peaks and len(subsets) <= m else 0
-    counts = split_draws(m - n_peaks, len(subsets))
-    used = dict.fromkeys(cams, 0)
-    by_size: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for subset, n in zip(subsets, counts):
-        if n == 0:
-            continue
-        o = np.stack([rays[c][0][joints, used[c]:used[c] + n] for c in subset], axis=-2)
-        d = np.stack([rays[c][1][joints, used[c]:used[c] + n] for c in subset], axis=-2)
+    rows = [(s, [m] * len(s)) for s in subsets[:n_peaks]]
+    used = [0] * n_cams
+    for subset, n in zip(subsets, split_draws(m - n_peaks, len(subsets))):
+        rows += [(subset, [used[c] + k for c in subset]) for k in range(n)]
         for c in subset:
             used[c] += n
-        by_size.setdefault(len(subset), []).append((o, d))
-    parts = [closest_point_to_rays(np.concatenate([o for o, _ in group], axis=1),
-                                   np.concatenate([d for _, d in group], axis=1))
-             for group in by_size.values()]
-    peaks = []
-    if n_peaks:
-        o = np.stack([r[0][joints] for r in peak_rays], axis=1)  # (J', V, 3)
-        d = np.stack([r[1][joints] for r in peak_rays], axis=1)
-        # one solve per subset size; subsets come largest first, so their order is kept
-        for size in sorted({len(s) for s in subsets}, reverse=True):
-            same = np.array([s for s in subsets if len(s) == size])  # (S, size)
-            peaks.append(closest_point_to_rays(o[:, same], d[:, same]))  # (J', S, 3)
-    return np.concatenate(peaks + parts, axis=1)
+    cam_of = np.zeros((m, n_cams), dtype=np.intp)
+    draw = np.zeros((m, n_cams), dtype=np.intp)
+    weight = np.zeros((m, n_cams))
+    for i, (subset, draws) in enumerate(rows):
+        cam_of[i, :len(subset)] = subset
+        draw[i, :len(subset)] = draws
+        weight[i, :len(subset)] = 1.0
+    return cam_of, draw, weight

@@ -65,7 +65,7 @@ def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
         observations = associator.update(frame, people)
         timer.add('association', t0)
         out.append([pf for obs in observations
-                    if (pf := person_frame(seq.cameras, obs, frame, config, timer)) is not None])
+                    if (pf := person_frame(seq.cameras, obs.person_id, obs.views, frame, config, timer)) is not None])
     return Prepared(list(seq.frames), out, timer)
 
 

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.association import AssociationConfig, Associator, PersonObservation
+from mvpose_ros.core.association import AssociationConfig
 from mvpose_ros.core.body import BONES, SYMMETRIC_PAIRS, finalize_head
 from mvpose_ros.core.camera import Camera
 from mvpose_ros.core.factors import data_term
@@ -45,44 +45,42 @@ class StageTimer:
         return now
 
 
-def person_frame(cameras: Sequence[Camera], obs: PersonObservation, frame: int, config: StageConfig,
-                 timer: StageTimer | None = None) -> PersonFrame | None:
-    """Hypotheses and data term of one observed person; None when no joint is seen twice.
+def person_frame(cameras: Sequence[Camera], person_id: int, views: dict[int, Person2D], frame: int,
+                 config: StageConfig, timer: StageTimer | None = None) -> PersonFrame | None:
+    """Hypotheses and data term of one person seen by `views` (camera index -> 2D person); None
+    when no joint is seen twice.
 
     The generator is seeded by (seed, frame, person id), so the same frame gives the same
-    hypotheses whatever the window or the order of processing.
+    hypotheses whatever the window, the order of processing or the process doing it.
     """
     t0 = time.perf_counter()
-    views = [(cameras[c], p.heatmap) for c, p in sorted(obs.views.items())]
-    rng = np.random.default_rng([config.seed, frame, obs.person_id])
-    hyp = sample_hypotheses(views, rng, config.sampling)
+    pairs = [(cameras[c], p.heatmap) for c, p in sorted(views.items())]
+    rng = np.random.default_rng([config.seed, frame, person_id])
+    hyp = sample_hypotheses(pairs, rng, config.sampling)
     if timer:
         t0 = timer.add('sampling', t0)
     if hyp is None:
         return None
-    data = data_term(hyp, views)
+    data = data_term(hyp, pairs)
     if timer:
         timer.add('data term', t0)
-    return PersonFrame(obs.person_id, hyp, data)
+    return PersonFrame(person_id, hyp, data)
 
 
-class Stage3D:
-    """Streaming 3D stage over a fixed rig; push frames in order, then flush at the end."""
+class Inference3D:
+    """From associated people (id and views) of each frame to decoded 3D skeletons: sampling,
+    data term, sliding-window BP and the head model. The bp_solver node runs this."""
 
     def __init__(self, cameras: Sequence[Camera], config: StageConfig) -> None:
         self.cameras = list(cameras)
         self.config = config
-        self.associator = Associator(self.cameras, config.association)
         self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES))
         self.timer = StageTimer()
 
-    def push(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[FrameResult]:
-        """people[c]: camera c's 2D people at this frame (None: camera missing)."""
-        t0 = time.perf_counter()
-        observations = self.associator.update(frame, people)
-        t0 = self.timer.add('association', t0)
-        frames = [pf for obs in observations
-                  if (pf := person_frame(self.cameras, obs, frame, self.config, self.timer)) is not None]
+    def push(self, frame: int, people: Sequence[tuple[int, dict[int, Person2D]]]) -> list[FrameResult]:
+        """people: (person id, camera index -> 2D person) of this frame; returns the frames due."""
+        frames = [pf for pid, views in people
+                  if (pf := person_frame(self.cameras, pid, views, frame, self.config, self.timer)) is not None]
         t0 = time.perf_counter()
         out = self.window.push(frame, frames)
         self.timer.add('bp', t0)
