@@ -1,0 +1,192 @@
+"""Encodings B and C: 2D people of one camera (keypoints and quantised heatmaps, one record per
+person) and per-3D-person bundles of views (one record per (person, camera))."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Header
+
+from msg_adapters.records import UINT16_MAX, UINT32_MAX, from_cloud, to_cloud
+from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
+from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.person2d import Person2D
+
+J = NUM_INFERENCE_JOINTS  # 16 keypoints and maps per person
+BUNDLE_KEYS = [('person', '<u4'), ('camera', '<u2')]
+
+
+def people_dtype(n_cells: int, keys: Sequence[tuple[str, str]] = ()) -> np.dtype:
+    """Record dtype of encoding B (after keys, for C), heatmap count n_cells = 16 * h * w."""
+    return np.dtype([*keys, ('keypoints', '<f4', (3 * J,)), ('origin', '<f4', (2,)),
+                     ('stride', '<f4'), ('grid', '<u2', (2,)), ('heatmap', 'u1', (n_cells,))])
+
+
+def quantise(maps: np.ndarray) -> np.ndarray:
+    """Heatmap values in [0, 1] (clipped) -> uint8 steps of 1/255, the wire format."""
+    return np.round(np.clip(maps, 0, 1) * 255).astype(np.uint8)
+
+
+def _check_people(keypoints: np.ndarray, origin: np.ndarray, stride: np.ndarray,
+                  label: str) -> None:
+    """Raise ValueError for the first invalid person: keypoints (P, 16, 3) with a finite score,
+    u, v finite or (where the score is 0) NaN; origin (P, 2) finite; stride (P,) finite > 0."""
+    uv, score = keypoints[..., :2], keypoints[..., 2]
+    checks = (
+        (~np.isfinite(score), 'keypoint score is not finite'),
+        (np.isinf(uv).any(axis=-1), 'keypoint u, v infinite'),
+        (np.isnan(uv).any(axis=-1) & (score != 0), 'keypoint u, v NaN with score != 0'),
+    )
+    for mask, problem in checks:
+        if mask.any():
+            p, j = np.argwhere(mask)[0]
+            raise ValueError(f'{label} {p} joint {j}: {problem} (u, v, score = '
+                             f'{tuple(keypoints[p, j].tolist())})')
+    bad = ~np.isfinite(origin).all(axis=-1)
+    if bad.any():
+        p = int(np.argmax(bad))
+        raise ValueError(f'{label} {p} heatmap origin: not finite ({origin[p].tolist()})')
+    bad = ~(np.isfinite(stride) & (stride > 0))
+    if bad.any():
+        p = int(np.argmax(bad))
+        raise ValueError(f'{label} {p} heatmap stride: must be finite and > 0, got {stride[p]}')
+
+
+def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
+                    label: str) -> np.ndarray:
+    """Records (P,) of B's fields (keys left zero) with every map zero-padded to the common grid;
+    errors name the offending entry as f'{label} {index}'."""
+    maps = []
+    for p, person in enumerate(people):
+        kp = np.shape(person.keypoints)
+        if kp != (J, 3):
+            raise ValueError(f'{label} {p} keypoints: expected ({J}, 3), got {kp}')
+        m = np.asarray(person.heatmap.maps)
+        if m.ndim != 3 or m.shape[0] != J or min(m.shape[1:]) < 1 or max(m.shape[1:]) > UINT16_MAX:
+            raise ValueError(f'{label} {p} heatmap maps: expected ({J}, h, w) with 1 <= h, w <= '
+                             f'{UINT16_MAX}, got {m.shape}')
+        if not np.isfinite(m).all():
+            raise ValueError(f'{label} {p} heatmap maps: non-finite values')
+        if np.shape(person.heatmap.origin) != (2,):
+            raise ValueError(f'{label} {p} heatmap origin: expected (2,), got '
+                             f'{np.shape(person.heatmap.origin)}')
+        maps.append(m)
+    n = len(people)
+    keypoints = np.array([p.keypoints for p in people], dtype=np.float32).reshape(n, J, 3)
+    origin = np.array([p.heatmap.origin for p in people], dtype=np.float32).reshape(n, 2)
+    stride = np.array([p.heatmap.stride for p in people], dtype=np.float32)
+    _check_people(keypoints, origin, stride, label)
+    h, w = np.max([m.shape[1:] for m in maps], axis=0) if maps else (0, 0)
+    if J * h * w > UINT32_MAX:
+        raise ValueError(f'heatmap grid ({h}, {w}): {J} * h * w exceeds the PointField count range')
+    heat = np.zeros((n, J, h, w), dtype=np.uint8)
+    for p, m in enumerate(maps):  # pad at the bottom/right: a zero cell is "no evidence"
+        heat[p, :, :m.shape[1], :m.shape[2]] = quantise(m)
+    records = np.zeros(n, dtype=people_dtype(J * h * w, keys))
+    records['keypoints'] = keypoints.reshape(n, 3 * J)
+    records['origin'] = origin
+    records['stride'] = stride
+    records['grid'] = (h, w)
+    records['heatmap'] = heat.reshape(n, J * h * w)
+    return records
+
+
+def _records_from_msg(msg: PointCloud2, keys: Sequence[tuple[str, str]]) -> np.ndarray:
+    """Decode B's layout (after keys) with the heatmap count the message declares, then check
+    the grid against it."""
+    slot = len(keys) + 4  # the heatmap field's position; its name is checked by from_cloud
+    n_cells = msg.fields[slot].count if len(msg.fields) > slot else 0
+    if n_cells > len(msg.data):  # also keeps a corrupt count from sizing a huge dtype
+        raise ValueError(f'people heatmap count {n_cells}: more than the {len(msg.data)} data bytes')
+    records = from_cloud(msg, people_dtype(n_cells, keys))
+    if len(records) == 0:
+        if n_cells != 0:
+            raise ValueError(f'people heatmap count: expected 0 with no records, got {n_cells}')
+        return records
+    grid = records['grid']
+    other = (grid != grid[0]).any(axis=1)
+    if other.any():
+        i = int(np.argmax(other))
+        raise ValueError(f'people grid mismatch: record {i} has {tuple(grid[i].tolist())}, '
+                         f'record 0 has {tuple(grid[0].tolist())}')
+    h, w = (int(x) for x in grid[0])
+    if h < 1 or w < 1 or J * h * w != n_cells:
+        raise ValueError(f'people grid ({h}, {w}): needs h, w >= 1 and heatmap count {J} * h * w'
+                         f' = {J * h * w}, got count {n_cells}')
+    return records
+
+
+def _people_from_records(records: np.ndarray) -> list[Person2D]:
+    """Person2D (track_id -1) of each record (P,) of B's fields, values validated."""
+    n = len(records)
+    keypoints = records['keypoints'].reshape(n, J, 3)
+    _check_people(keypoints, records['origin'], records['stride'], 'record')
+    if n == 0:
+        return []
+    h, w = (int(x) for x in records['grid'][0])
+    maps = records['heatmap'].reshape(n, J, h, w).astype(np.float32) / np.float32(255)
+    keypoints = keypoints.astype(np.float64)
+    origin = records['origin'].astype(np.float64)
+    return [Person2D(keypoints=keypoints[p],
+                     heatmap=PersonHeatmap(maps=maps[p], origin=origin[p],
+                                           stride=float(records['stride'][p])))
+            for p in range(n)]
+
+
+def people_to_msg(people: Sequence[Person2D], header: Header) -> PointCloud2:
+    """Encoding B: one record per person (none = an empty message, 'nobody')."""
+    return to_cloud(_people_records(people, (), 'person'), header)
+
+
+def msg_to_people(msg: PointCloud2) -> list[Person2D]:
+    """Decode encoding B; maps come back on the message's common grid, as float32 / 255."""
+    return _people_from_records(_records_from_msg(msg, ()))
+
+
+def _is_int(x: object) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
+
+
+def bundles_to_msg(bundles: Sequence[tuple[int, dict[int, Person2D]]],
+                   header: Header) -> PointCloud2:
+    """Encoding C: one record per (person id, camera), sorted by person id then camera. Person
+    ids must be distinct, each bundle must hold at least one view."""
+    for person_id, views in bundles:
+        if not _is_int(person_id) or not 0 <= person_id <= UINT32_MAX:
+            raise ValueError(f'bundle person id {person_id!r}: not an integer in UINT32')
+        if not views:
+            raise ValueError(f'bundle of person {person_id}: no views')
+        for camera in views:
+            if not _is_int(camera) or not 0 <= camera <= UINT16_MAX:
+                raise ValueError(f'bundle of person {person_id}: camera {camera!r} not an '
+                                 f'integer in UINT16')
+    ids, cameras, people = [], [], []
+    for person_id, views in sorted(bundles, key=lambda bundle: bundle[0]):
+        if ids and ids[-1] == person_id:
+            raise ValueError(f'bundle person id {person_id}: given twice')
+        for camera, person in sorted(views.items()):
+            ids.append(person_id)
+            cameras.append(camera)
+            people.append(person)
+    records = _people_records(people, BUNDLE_KEYS, 'bundle view')
+    records['person'] = ids
+    records['camera'] = cameras
+    return to_cloud(records, header)
+
+
+def msg_to_bundles(msg: PointCloud2) -> list[tuple[int, dict[int, Person2D]]]:
+    """Decode encoding C (records in any order) into (person id, {camera: Person2D}) in
+    increasing person id; a (person, camera) pair given twice is an error."""
+    records = _records_from_msg(msg, BUNDLE_KEYS)
+    records = records[np.lexsort((records['camera'], records['person']))]
+    person, camera = records['person'], records['camera']
+    repeated = (np.diff(person) == 0) & (np.diff(camera) == 0)
+    if repeated.any():
+        i = int(np.argmax(repeated))
+        raise ValueError(f'bundles: person {person[i]} camera {camera[i]} given twice')
+    people = _people_from_records(records)
+    ids, starts = np.unique(person, return_index=True)
+    ends = np.append(starts[1:], len(records))
+    return [(int(pid), {int(c): p for c, p in zip(camera[s:e], people[s:e])})
+            for pid, s, e in zip(ids, starts, ends)]

@@ -1,0 +1,36 @@
+"""The dataset timeline: frame f is stamped f / rate seconds exactly (rate 25 Hz: frame 300 ->
+12 s), and a stamp maps back to the nearest frame."""
+from __future__ import annotations
+
+from fractions import Fraction
+
+from builtin_interfaces.msg import Time
+
+NS_PER_S = 1_000_000_000
+MAX_SEC = (1 << 31) - 1  # Time.sec is INT32
+
+
+def _check_rate(rate: float) -> Fraction:
+    if not rate > 0 or rate == float('inf'):
+        raise ValueError(f'frame rate: must be finite and > 0, got {rate}')
+    return Fraction(rate)
+
+
+def stamp_of_frame(frame: int, rate: float = 25.0) -> Time:
+    """Header stamp of dataset frame (>= 0) at rate frames per second, rounded to the ns."""
+    if int(frame) != frame or frame < 0:
+        raise ValueError(f'frame: expected an integer >= 0, got {frame}')
+    ns = round(int(frame) * NS_PER_S / _check_rate(rate))  # exact rational arithmetic
+    if ns // NS_PER_S > MAX_SEC:
+        raise ValueError(f'frame {frame} at {rate} Hz: stamp beyond the INT32 seconds range')
+    return Time(sec=ns // NS_PER_S, nanosec=ns % NS_PER_S)
+
+
+def stamp_ns(stamp: Time) -> int:
+    """A stamp in integer nanoseconds (also the bag record time)."""
+    return stamp.sec * NS_PER_S + stamp.nanosec
+
+
+def frame_of_stamp(stamp: Time, rate: float = 25.0) -> int:
+    """The frame nearest to stamp at rate frames per second."""
+    return round(stamp_ns(stamp) * _check_rate(rate) / NS_PER_S)

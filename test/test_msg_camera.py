@@ -1,0 +1,129 @@
+"""CameraInfo from the real Shelf rig, Image conversion and the frame <-> stamp timeline."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+
+from msg_adapters.camera_info_msg import camera_to_info, check_info, info_to_intrinsics
+from msg_adapters.image_msg import image_to_msg, msg_to_image
+from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
+from mvpose_ros.core.camera import load_rig
+from mvpose_ros.core.datasets import dataset_dir
+
+
+@pytest.fixture(scope='module')
+def rig():
+    return load_rig(dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json')
+
+
+def test_camera_info_round_trip(rig):
+    for c, cam in enumerate(rig):
+        msg = camera_to_info(cam, Header(frame_id=f'cam{c}', stamp=stamp_of_frame(300)))
+        assert (msg.width, msg.height) == (1032, 776)
+        assert msg.distortion_model == 'plumb_bob' and len(msg.d) == 5
+        np.testing.assert_array_equal(np.reshape(msg.r, (3, 3)), np.eye(3))
+        np.testing.assert_array_equal(np.reshape(msg.p, (3, 4)), np.column_stack([cam.K, np.zeros(3)]))
+        back = deserialize_message(serialize_message(msg), CameraInfo)
+        K, dist, width, height = info_to_intrinsics(back)
+        np.testing.assert_array_equal(K, cam.K)
+        np.testing.assert_array_equal(dist, cam.dist)
+        assert (width, height) == (cam.width, cam.height)
+        check_info(back, cam)
+
+
+def test_check_info_detects_changes(rig):
+    cam = rig[1]
+    msg = camera_to_info(cam, Header())
+    msg.k[0] += 0.4  # within 0.5 px
+    check_info(msg, cam)
+    msg.k[0] += 1.0
+    with pytest.raises(ValueError, match='CameraInfo fx'):
+        check_info(msg, cam)
+    msg = camera_to_info(cam, Header())
+    msg.width = 1030
+    with pytest.raises(ValueError, match='CameraInfo size: 1030x776'):
+        check_info(msg, cam)
+    msg = camera_to_info(cam, Header())
+    msg.k[5] -= 2
+    with pytest.raises(ValueError, match='CameraInfo cy'):
+        check_info(msg, cam)
+    msg = camera_to_info(dataclasses.replace(cam, dist=np.array([0.05, 0, 0, 0, 0])), Header())
+    with pytest.raises(ValueError, match='CameraInfo distortion'):
+        check_info(msg, cam)
+    msg = camera_to_info(dataclasses.replace(cam, dist=np.array([1e-7, 0, 0, 0, 0])), Header())
+    check_info(msg, cam)  # far below a pixel at the corners
+
+
+def test_info_to_intrinsics_rejects(rig):
+    msg = camera_to_info(rig[0], Header())
+    msg.distortion_model = 'equidistant'
+    with pytest.raises(ValueError, match="distortion_model: expected 'plumb_bob'"):
+        info_to_intrinsics(msg)
+    msg = camera_to_info(rig[0], Header())
+    msg.d = [0.0] * 4
+    with pytest.raises(ValueError, match='CameraInfo d: expected 5'):
+        info_to_intrinsics(msg)
+    msg = camera_to_info(rig[0], Header())
+    msg.k[8] = 0
+    with pytest.raises(ValueError, match='CameraInfo k'):
+        info_to_intrinsics(msg)
+
+
+def _image(h: int = 6, w: int = 7) -> np.ndarray:
+    return np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
+
+
+def test_image_round_trip():
+    bgr = _image()
+    msg = image_to_msg(bgr, Header(frame_id='cam2'))
+    assert (msg.encoding, msg.height, msg.width, msg.step) == ('bgr8', 6, 7, 21)
+    back = msg_to_image(deserialize_message(serialize_message(msg), Image))
+    assert back.dtype == np.uint8 and np.array_equal(back, bgr)
+
+
+def test_image_rgb8_and_padded_step():
+    bgr = _image()
+    rows = np.zeros((6, 25), np.uint8)  # 4 bytes of padding per row
+    rows[:, :21] = bgr[..., ::-1].reshape(6, 21)
+    msg = Image(height=6, width=7, encoding='rgb8', step=25, data=rows.tobytes())
+    assert np.array_equal(msg_to_image(msg), bgr)
+    msg.encoding = 'bgr8'
+    assert np.array_equal(msg_to_image(msg), bgr[..., ::-1])
+
+
+def test_image_rejects():
+    msg = image_to_msg(_image(), Header())
+    msg.encoding = 'mono8'
+    with pytest.raises(ValueError, match="encoding: expected one of .* got 'mono8'"):
+        msg_to_image(msg)
+    msg = image_to_msg(_image(), Header())
+    msg.height = 7
+    with pytest.raises(ValueError, match='Image data: expected step'):
+        msg_to_image(msg)
+    msg = image_to_msg(_image(), Header())
+    msg.step = 20
+    with pytest.raises(ValueError, match='Image step'):
+        msg_to_image(msg)
+    with pytest.raises(ValueError, match=r'expected \(H, W, 3\) uint8'):
+        image_to_msg(_image().astype(np.float32), Header())
+
+
+def test_stamps():
+    assert (stamp_of_frame(300).sec, stamp_of_frame(300).nanosec) == (12, 0)
+    assert (stamp_of_frame(572).sec, stamp_of_frame(572).nanosec) == (22, 880_000_000)
+    assert stamp_ns(stamp_of_frame(572)) == 22_880_000_000
+    assert all(frame_of_stamp(stamp_of_frame(f)) == f for f in range(1001))
+    assert all(stamp_ns(stamp_of_frame(f)) == 40_000_000 * f for f in range(1001))
+    assert frame_of_stamp(Time(sec=12, nanosec=19_000_000)) == 300  # nearest frame
+    assert frame_of_stamp(Time(sec=12, nanosec=21_000_000)) == 301
+    assert frame_of_stamp(stamp_of_frame(90, rate=30.0), rate=30.0) == 90
+    with pytest.raises(ValueError, match='frame'):
+        stamp_of_frame(-1)
+    with pytest.raises(ValueError, match='frame rate'):
+        stamp_of_frame(3, rate=0.0)

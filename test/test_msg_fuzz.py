@@ -1,0 +1,243 @@
+"""Property-based tests of the PointCloud2 decoders: arbitrary record bytes under a correct
+field layout either decode to a valid result (which re-encodes to the same thing) or raise
+ValueError, never another exception; and random valid inputs survive encode -> decode."""
+from __future__ import annotations
+
+import array
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+from std_msgs.msg import Header
+
+from msg_adapters.openpose_msg import OPENPOSE_DTYPE, msg_to_openpose, openpose_to_msg
+from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles, msg_to_people,
+                                     people_dtype, people_to_msg)
+from msg_adapters.records import to_cloud
+from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
+from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
+from mvpose_ros.core.person2d import Person2D
+
+FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+HEADER = Header(frame_id='cam0')
+floats32 = st.floats(width=32, allow_nan=True, allow_infinity=True)
+
+
+def _cloud(dtype: np.dtype, n: int, data: bytes):
+    """A message with dtype's exact layout for n records but arbitrary data."""
+    msg = to_cloud(np.zeros(n, dtype), HEADER)
+    msg.data = array.array('B', data)
+    return msg
+
+
+@st.composite
+def raw_clouds(draw, dtype_of_count):
+    """(dtype, message): random bytes, of the right length or not, under a correct layout."""
+    dtype = dtype_of_count(draw(st.sampled_from([0, 16, 32, 96])))
+    n = draw(st.integers(0, 6))
+    size = n * dtype.itemsize + draw(st.sampled_from([0, 0, 0, -1, 1, -dtype.itemsize]))
+    data = draw(st.binary(min_size=max(size, 0), max_size=max(size, 0)))
+    return _cloud(dtype, n, data)
+
+
+def _decodes_or_value_error(decode, msg):
+    try:
+        return decode(msg)
+    except ValueError:
+        return None
+
+
+def _same_frame(a: OpenPoseFrame, b: OpenPoseFrame) -> bool:
+    return all(np.array_equal(x, y) for x, y in zip(a.candidates + a.pafs, b.candidates + b.pafs))
+
+
+def _same_people(a: list[Person2D], b: list[Person2D]) -> bool:
+    return len(a) == len(b) and all(
+        np.array_equal(p.keypoints, q.keypoints, equal_nan=True)
+        and np.array_equal(p.heatmap.maps, q.heatmap.maps)
+        and np.array_equal(p.heatmap.origin, q.heatmap.origin)
+        and p.heatmap.stride == q.heatmap.stride for p, q in zip(a, b))
+
+
+def _check_frame(frame: OpenPoseFrame) -> None:
+    assert len(frame.candidates) == 25 and len(frame.pafs) == 26
+    assert all(c.ndim == 2 and c.shape[1] == 3 and np.isfinite(c).all() for c in frame.candidates)
+    for (a, b), paf in zip(BODY25_PAF_PAIRS, frame.pafs):
+        assert paf.shape == (len(frame.candidates[a]), len(frame.candidates[b]))
+    assert _same_frame(frame, msg_to_openpose(openpose_to_msg(frame, HEADER)))
+
+
+def _check_people(people: list[Person2D]) -> None:
+    for p in people:
+        assert p.keypoints.shape == (16, 3) and np.isfinite(p.keypoints[:, 2]).all()
+        assert ((p.heatmap.maps >= 0) & (p.heatmap.maps <= 1)).all()
+        assert p.heatmap.stride > 0 and np.isfinite(p.heatmap.origin).all()
+    assert _same_people(people, msg_to_people(people_to_msg(people, HEADER)))
+
+
+# --- arbitrary bytes ---------------------------------------------------------------------
+
+@FUZZ
+@given(raw_clouds(lambda _: OPENPOSE_DTYPE))
+def test_openpose_decoder_on_random_bytes(msg):
+    frame = _decodes_or_value_error(msg_to_openpose, msg)
+    if frame is not None:
+        _check_frame(frame)
+
+
+@FUZZ
+@given(raw_clouds(people_dtype))
+def test_people_decoder_on_random_bytes(msg):
+    people = _decodes_or_value_error(msg_to_people, msg)
+    if people is not None:
+        _check_people(people)
+
+
+@FUZZ
+@given(raw_clouds(lambda n: people_dtype(n, BUNDLE_KEYS)))
+def test_bundles_decoder_on_random_bytes(msg):
+    bundles = _decodes_or_value_error(msg_to_bundles, msg)
+    if bundles is not None:
+        _check_people([p for _, views in bundles for p in views.values()])
+
+
+@FUZZ
+@given(raw_clouds(lambda _: SKELETON_DTYPE))
+def test_skeleton_decoder_on_random_bytes(msg):
+    result = _decodes_or_value_error(msg_to_skeletons, msg)
+    if result is not None:
+        ids, joints = result
+        assert joints.shape == (len(ids), 14, 3) and np.isfinite(joints).all()
+
+
+# --- plausible records: small fields, so the semantic checks are reached -----------------
+
+@st.composite
+def openpose_records(draw):
+    n = draw(st.integers(0, 40))
+    small = st.integers(0, 2)
+    records = np.zeros(n, OPENPOSE_DTYPE)
+    records['kind'] = draw(hnp.arrays(np.uint8, n, elements=st.sampled_from([0, 0, 1, 1, 2])))
+    records['part'] = draw(hnp.arrays(np.uint8, n, elements=st.integers(0, 26)))
+    records['a'] = draw(hnp.arrays(np.uint16, n, elements=small))
+    records['b'] = draw(hnp.arrays(np.uint16, n, elements=small))
+    for field in ('u', 'v', 'score'):
+        records[field] = draw(hnp.arrays(np.float32, n, elements=floats32))
+    return records
+
+
+@FUZZ
+@given(openpose_records())
+def test_openpose_decoder_on_plausible_records(records):
+    frame = _decodes_or_value_error(msg_to_openpose, to_cloud(records, HEADER))
+    if frame is not None:
+        _check_frame(frame)
+
+
+@FUZZ
+@given(st.data())
+def test_skeleton_decoder_on_plausible_records(data):
+    n = data.draw(st.sampled_from([0, 13, 14, 28, 29]))
+    records = np.zeros(n, SKELETON_DTYPE)
+    records['person'] = np.sort(data.draw(hnp.arrays(np.uint32, n, elements=st.integers(0, 2))))
+    records['joint'] = np.arange(n) % 14
+    if data.draw(st.booleans()):
+        records['joint'] = data.draw(hnp.arrays(np.uint8, n, elements=st.integers(0, 14)))
+    for field in 'xyz':
+        records[field] = data.draw(hnp.arrays(np.float32, n, elements=floats32))
+    result = _decodes_or_value_error(msg_to_skeletons, to_cloud(records, HEADER))
+    if result is not None:
+        ids, joints = result
+        assert np.isfinite(joints).all() and (np.diff(ids) > 0).all()
+
+
+@FUZZ
+@given(st.data())
+def test_people_decoder_on_plausible_records(data):
+    n = data.draw(st.integers(0, 3))
+    h, w = data.draw(st.integers(1, 3)), data.draw(st.integers(1, 3))
+    records = np.zeros(n, people_dtype(16 * h * w if n else 0))
+    records['grid'] = (h, w)
+    if n > 1 and data.draw(st.booleans()):
+        records['grid'][-1] = data.draw(st.tuples(st.integers(0, 3), st.integers(0, 3)))
+    special = st.sampled_from([0.0, np.nan, np.inf, -1.0, 500.0])
+    values = st.one_of(special, floats32)
+    kp = data.draw(hnp.arrays(np.float32, (n, 16, 3), elements=st.one_of(special, special, floats32)))
+    records['keypoints'] = kp.reshape(n, 48)
+    records['origin'] = data.draw(hnp.arrays(np.float32, (n, 2), elements=values))
+    records['stride'] = data.draw(hnp.arrays(np.float32, n, elements=values))
+    records['heatmap'] = data.draw(hnp.arrays(np.uint8, records['heatmap'].shape))
+    people = _decodes_or_value_error(msg_to_people, to_cloud(records, HEADER))
+    if people is not None:
+        _check_people(people)
+
+
+# --- valid inputs round trip -------------------------------------------------------------
+
+@st.composite
+def frames(draw):
+    counts = draw(st.lists(st.integers(0, 3), min_size=25, max_size=25))
+    values = st.floats(-1e4, 1e4, width=32)
+    candidates = [draw(hnp.arrays(np.float64, (n, 3), elements=values)) for n in counts]
+    pafs = [draw(hnp.arrays(np.float64, (counts[a], counts[b]), elements=values))
+            for a, b in BODY25_PAF_PAIRS]
+    return OpenPoseFrame(candidates, pafs)
+
+
+@st.composite
+def people(draw, max_people: int = 3):
+    out = []
+    for _ in range(draw(st.integers(0, max_people))):
+        h, w = draw(st.integers(1, 5)), draw(st.integers(1, 5))
+        kp = draw(hnp.arrays(np.float64, (16, 3), elements=st.floats(0, 2000, width=32)))
+        kp[draw(hnp.arrays(bool, 16)), :] = (np.nan, np.nan, 0.0)
+        maps = draw(hnp.arrays(np.float32, (16, h, w), elements=st.floats(-1, 2, width=32)))
+        origin = draw(hnp.arrays(np.float64, 2, elements=st.floats(-1e3, 1e3, width=32)))
+        stride = draw(st.floats(0.5, 16, width=32))
+        out.append(Person2D(kp, PersonHeatmap(maps, origin, stride)))
+    return out
+
+
+@FUZZ
+@given(frames())
+def test_openpose_round_trip(frame):
+    assert _same_frame(frame, msg_to_openpose(openpose_to_msg(frame, HEADER)))
+
+
+@FUZZ
+@given(people())
+def test_people_round_trip(people_in):
+    back = msg_to_people(people_to_msg(people_in, HEADER))
+    assert len(back) == len(people_in)
+    for p, q in zip(people_in, back):
+        assert np.array_equal(p.keypoints, q.keypoints, equal_nan=True)
+        assert np.array_equal(p.heatmap.origin, q.heatmap.origin) and p.heatmap.stride == q.heatmap.stride
+        _, h, w = p.heatmap.maps.shape
+        err = np.abs(q.heatmap.maps[:, :h, :w] - np.clip(p.heatmap.maps, 0, 1)).max()
+        assert err <= 0.5 / 255 + 1e-7
+        assert not q.heatmap.maps[:, h:].any() and not q.heatmap.maps[:, :, w:].any()
+
+
+@FUZZ
+@given(st.dictionaries(st.integers(0, 2 ** 32 - 1), st.dictionaries(st.integers(0, 9), st.just(0),
+                                                                    min_size=1, max_size=3),
+                       max_size=3), people(max_people=1).filter(bool))
+def test_bundles_round_trip(layout, one):
+    bundles = [(pid, {c: one[0] for c in cams}) for pid, cams in layout.items()]
+    back = msg_to_bundles(bundles_to_msg(bundles, HEADER))
+    assert [(pid, sorted(v)) for pid, v in back] == sorted((pid, sorted(v)) for pid, v in bundles)
+    decoded = msg_to_people(people_to_msg(one, HEADER))  # the same quantisation as in a bundle
+    assert all(_same_people([p], decoded) for _, views in back for p in views.values())
+
+
+@FUZZ
+@given(st.lists(st.integers(0, 2 ** 32 - 1), max_size=4, unique=True), st.data())
+def test_skeleton_round_trip(ids, data):
+    joints = data.draw(hnp.arrays(np.float64, (len(ids), 14, 3),
+                                  elements=st.floats(-1e4, 1e4, width=32)))
+    back_ids, back = msg_to_skeletons(skeletons_to_msg(np.array(ids, dtype=np.int64), joints, HEADER))
+    order = np.argsort(ids)
+    assert back_ids.tolist() == sorted(ids)
+    assert np.array_equal(back, joints[order])
