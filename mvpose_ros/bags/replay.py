@@ -1,0 +1,146 @@
+"""Replay pacing, free of ROS: which bag messages form a frame, when each frame is due, how stamps
+move on for later loops, how far ahead of downstream the player may run, and header stamps
+rewritten in place in the serialised (CDR) bytes.
+
+A frame is every message sharing one log stamp (all cameras of one dataset frame). Loop k >= 1
+replays the bag with every stamp moved on by k * (last - first + one frame period), so the stream
+stays strictly increasing and keeps its frame spacing across the seam.
+"""
+from __future__ import annotations
+
+import struct
+from bisect import bisect_right
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Iterator
+
+FRAME_RATE = 25.0  # Hz, the datasets' frame rate (frame f has stamp f / 25 s)
+FRAME_PERIOD_NS = 40_000_000  # 1 / FRAME_RATE s, exact in ns
+NS = 1_000_000_000
+
+# CDR encapsulation identifiers (first two bytes, big-endian) and the struct order they imply.
+_BYTE_ORDER = {b'\x00\x00': '>', b'\x00\x01': '<'}
+_ENCAPSULATION = 4  # bytes before the payload; a leading std_msgs/Header puts its stamp right after
+
+
+@dataclass
+class Frame:
+    """Messages of one log stamp, in bag order.
+
+    messages: (topic, msgtype, CDR bytes) tuples.
+    """
+
+    stamp_ns: int
+    messages: list[tuple[str, str, bytes]] = field(default_factory=list)
+
+
+def group_frames(messages: Iterable[tuple[str, str, int, bytes]]) -> Iterator[Frame]:
+    """(topic, msgtype, stamp ns, CDR) in log-time order -> frames of equal stamps.
+
+    A stamp lower than its predecessor is a ValueError: frames would be split and replayed out
+    of order.
+    """
+    frame: Frame | None = None
+    for topic, msgtype, stamp, cdr in messages:
+        if frame is not None and stamp != frame.stamp_ns:
+            if stamp < frame.stamp_ns:
+                raise ValueError(f'messages out of log-time order: {topic} at {stamp} ns after '
+                                 f'{frame.stamp_ns} ns')
+            yield frame
+            frame = None
+        if frame is None:
+            frame = Frame(stamp)
+        frame.messages.append((topic, msgtype, cdr))
+    if frame is not None:
+        yield frame
+
+
+def loop_offset_ns(loop: int, first_ns: int, last_ns: int, period_ns: int = FRAME_PERIOD_NS) -> int:
+    """Stamp shift of replay `loop` (0-based) of a bag whose frames span first_ns..last_ns."""
+    if loop < 0 or last_ns < first_ns:
+        raise ValueError(f'loop must be >= 0 and last >= first; got loop {loop}, {first_ns}..{last_ns} ns')
+    return loop * (last_ns - first_ns + period_ns)
+
+
+def looped(frames_of_pass: Callable[[], Iterable[Frame]], loops: int,
+           period_ns: int = FRAME_PERIOD_NS) -> Iterator[tuple[int, int, Frame]]:
+    """(loop, stamp offset ns, frame) over `loops` passes; each pass calls frames_of_pass anew.
+
+    The offsets come from the first pass's first and last stamps (a later pass of the same bag
+    has the same frames)."""
+    if loops < 1:
+        raise ValueError(f'loops must be >= 1; got {loops}')
+    first = last = None
+    for loop in range(loops):
+        offset = 0 if loop == 0 else loop_offset_ns(loop, first, last, period_ns)
+        for frame in frames_of_pass():
+            if loop == 0:
+                first = frame.stamp_ns if first is None else first
+                last = frame.stamp_ns
+            yield loop, offset, frame
+        if first is None:  # an empty pass: nothing to repeat
+            return
+
+
+def due_s(stamp_ns: int, first_ns: int, rate: float) -> float:
+    """Seconds after the first frame's publication that the frame at stamp_ns is due (rate > 0)."""
+    if not rate > 0:
+        raise ValueError(f'rate must be > 0 for paced replay; got {rate}')
+    return (stamp_ns - first_ns) / NS / rate
+
+
+class InFlight:
+    """Frames published but not yet seen downstream (rate 0: as fast as downstream keeps up).
+
+    Downstream reports stamps in increasing order, and a stamp it reports means every frame up
+    to it is done (a frame it skipped must not hold the player back forever).
+    """
+
+    def __init__(self, limit: int) -> None:
+        if limit < 1:
+            raise ValueError(f'max_in_flight must be >= 1; got {limit}')
+        self.limit = limit
+        self._stamps: list[int] = []  # increasing
+        self._last: int | None = None  # last stamp published, acked or not
+
+    def __len__(self) -> int:
+        return len(self._stamps)
+
+    @property
+    def full(self) -> bool:
+        """Publishing another frame would exceed the limit."""
+        return len(self._stamps) >= self.limit
+
+    def published(self, stamp_ns: int) -> None:
+        if self._last is not None and stamp_ns <= self._last:
+            raise ValueError(f'published stamps must increase; got {stamp_ns} after {self._last} ns')
+        self._stamps.append(stamp_ns)
+        self._last = stamp_ns
+
+    def acked(self, stamp_ns: int) -> int:
+        """Downstream finished the frame at stamp_ns (and all before it); returns frames released."""
+        done = bisect_right(self._stamps, stamp_ns)
+        del self._stamps[:done]
+        return done
+
+
+def _byte_order(cdr: bytes) -> str:
+    if len(cdr) < _ENCAPSULATION + 8 or cdr[:2] not in _BYTE_ORDER:
+        raise ValueError(f'not a plain CDR message with a header stamp (first bytes {cdr[:4].hex()}, '
+                         f'{len(cdr)} bytes)')
+    return _BYTE_ORDER[cdr[:2]]
+
+
+def header_stamp_ns(cdr: bytes) -> int:
+    """Header stamp (ns) of a serialised message whose first field is a std_msgs/Header."""
+    sec, nanosec = struct.unpack_from(_byte_order(cdr) + 'iI', cdr, _ENCAPSULATION)
+    return sec * NS + nanosec
+
+
+def with_header_stamp(cdr: bytes, stamp_ns: int) -> bytes:
+    """The serialised message with its header stamp replaced; every other byte unchanged."""
+    sec, nanosec = divmod(int(stamp_ns), NS)
+    if not -2 ** 31 <= sec < 2 ** 31:
+        raise ValueError(f'stamp {stamp_ns} ns does not fit builtin_interfaces/Time')
+    out = bytearray(cdr)
+    struct.pack_into(_byte_order(cdr) + 'iI', out, _ENCAPSULATION, sec, nanosec)
+    return bytes(out)

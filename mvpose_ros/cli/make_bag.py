@@ -1,0 +1,99 @@
+"""`mvpose-make-bag`: build a rosbag2 (MCAP) bag of the real data for the ROS graph.
+
+    mvpose-make-bag shelf|shelf_images [--data-root DIR] [--output DIR] [--force]
+    mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]
+
+A bag that is complete and made from the current inputs by the current recipe is left alone
+(exit 0), so scripts can call this every time; any other existing output needs --force.
+"""
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import Sequence, TextIO
+
+from mvpose_ros.bags.io import bag_summary, write_bag
+from mvpose_ros.bags.recipes import RECIPES, Recipe, make_recipe
+
+RECIPE_KEY = 'mvpose_recipe'
+FINGERPRINT_KEY = 'mvpose_fingerprint'
+# All a bag folder may hold before --force deletes it (storage files, their sqlite journals).
+_BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-shm', '.db3-wal', '.db3-journal', '.zstd')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='mvpose-make-bag', description=__doc__.split('\n')[0])
+    p.add_argument('recipe', choices=RECIPES)
+    p.add_argument('--data-root', help='folder holding data/ (default: $MVPOSE_DATA_ROOT or ../shared)')
+    p.add_argument('--campus-dir', help='CampusSeq1 folder (Camera0..2/, actorsGT.mat, calibration_campus.json)')
+    p.add_argument('--output', help='bag folder to write (default: bags/<recipe>)')
+    p.add_argument('--force', action='store_true', help='replace an existing bag folder')
+    return p
+
+
+def _size_mb(path: Path) -> float:
+    return sum(f.stat().st_size for f in path.iterdir() if f.is_file()) / 1e6
+
+
+def _stale_reason(output: Path, recipe: Recipe, fingerprint: str) -> str | None:
+    """Why the existing `output` is not the bag `recipe` would make now (None: it is)."""
+    try:
+        custom = bag_summary(output).custom_data
+    except (FileNotFoundError, ValueError) as exc:
+        return f'is not a complete bag ({exc})'
+    if custom.get(RECIPE_KEY) != recipe.name:
+        return f'holds recipe {custom.get(RECIPE_KEY) or "unknown"!r}, not {recipe.name!r}'
+    if custom.get(FINGERPRINT_KEY) != fingerprint:
+        return 'is out of date (its inputs or the recipe changed)'
+    return None
+
+
+def _remove_bag(output: Path) -> None:
+    """Delete a bag folder, refusing anything that holds other files (a mistyped --output)."""
+    if not output.is_dir():
+        raise FileExistsError(f'{output}: exists and is not a folder; not replacing it')
+    foreign = [f.name for f in output.iterdir()
+               if f.name != 'metadata.yaml' and not f.name.endswith(_BAG_FILE_SUFFIXES)]
+    if foreign:
+        raise FileExistsError(f'{output}: holds non-bag files ({", ".join(sorted(foreign)[:3])}); '
+                              f'not deleting it')
+    shutil.rmtree(output)
+
+
+def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    out = out or sys.stdout
+    recipe = make_recipe(args.recipe, args.data_root, args.campus_dir)
+    output = Path(args.output or Path('bags') / args.recipe)
+    fingerprint = recipe.fingerprint()
+    if output.exists():
+        reason = _stale_reason(output, recipe, fingerprint)
+        if reason is None and not args.force:
+            print(f'{output}: {recipe.name} bag already made and up to date', file=out)
+            return 0
+        if not args.force:
+            raise FileExistsError(f'{output}: exists and {reason}; pass --force to replace it')
+        _remove_bag(output)
+    start = time.perf_counter()
+    write_bag(output, recipe.items(), custom_data={RECIPE_KEY: recipe.name, FINGERPRINT_KEY: fingerprint})
+    seconds = time.perf_counter() - start
+    summary = bag_summary(output)
+    print(f'{output}: {recipe.name} bag, {summary.message_count} messages on {len(summary.topics)} '
+          f'topics, stamps {summary.first_ns / 1e9:.2f}..{summary.last_ns / 1e9:.2f} s, '
+          f'{_size_mb(output):.1f} MB, made in {seconds:.1f} s', file=out)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)
+    except (OSError, ValueError) as exc:
+        print(f'mvpose-make-bag: error: {exc}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,232 @@
+"""The bag_player node: replays a rosbag2 bag frame by frame into the graph.
+
+Every message of one stamp (a frame: all cameras) is published together, at the recorded rate
+times `rate` (wall-clock paced from the first stamp) or, with rate 0, as fast as downstream keeps
+up: at most `max_in_flight` frames ahead of the last stamp seen on `ack_topic`. Messages go out
+as the bag's CDR bytes; for loop k >= 1 only the header stamp bytes are rewritten (pacing and
+stamp arithmetic: mvpose_ros.bags.replay). Optionally publishes /clock with the bag stamp.
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import time
+from typing import Any
+
+import rclpy
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
+from rclpy.exceptions import NameValidationException, ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import PointCloud2
+
+from mvpose_ros.bags.io import bag_summary, has_header, read_bag
+from mvpose_ros.bags.replay import (NS, Frame, InFlight, due_s, group_frames, header_stamp_ns, looped,
+                                   with_header_stamp)
+from mvpose_ros.nodes.runtime import DATA_QOS, StartupError
+LOG_EVERY = 100  # frames between progress lines
+ACK_TIMEOUT_S = 5.0  # at the end, wait this long for subscribers to confirm receipt
+_POLL_S = 0.05  # subscriber polling period while waiting to start
+
+
+def _message_class(msgtype: str) -> Any:
+    """The rclpy class of 'pkg/msg/Name'."""
+    package, kind, name = msgtype.split('/')
+    try:
+        return getattr(importlib.import_module(f'{package}.{kind}'), name)
+    except (ImportError, AttributeError):
+        raise StartupError(f'no Python message class for {msgtype} (is its package installed?)') from None
+
+
+class BagPlayerNode(Node):
+    """Publishes a bag's frames; `finished` completes with the process exit code."""
+
+    def __init__(self) -> None:
+        super().__init__('bag_player')
+        self.finished = Future()
+        try:
+            self._configure()
+        except (StartupError, FileNotFoundError, ValueError, ParameterException, NameValidationException) as exc:
+            self.get_logger().fatal(' '.join(str(exc).split()))
+            self.destroy_node()
+            raise SystemExit(2) from None
+
+    def _declare(self) -> dict[str, Any]:
+        """Declare the parameters; returns their values."""
+        string = ParameterType.PARAMETER_STRING
+        specs = (
+            ('bag', 'bags/shelf', string, 'rosbag2 folder to play'),
+            ('rate', 1.0, None, 'x recorded speed; 0.0 = as fast as downstream keeps up (see max_in_flight)'),
+            ('clock', False, None, 'publish /clock with the current bag stamp'),
+            ('loops', 1, None, 'passes over the bag; later passes move stamps on'),
+            # An empty list cannot type itself: declared by type, unset means all topics.
+            ('topics', Parameter.Type.STRING_ARRAY, ParameterType.PARAMETER_STRING_ARRAY,
+             'topics to play; empty = all'),
+            ('wait_subscribers', 10.0, None,
+             's to wait for a subscriber on every /cam*/openpose (else /cam*/image_raw) topic'),
+            ('ack_topic', '/skeletons', string, 'downstream output whose stamps release frames when rate is 0'),
+            ('max_in_flight', 16, None,
+             'rate 0: at most this many frames published but not yet seen on ack_topic'),
+        )
+        values = {}
+        for name, default, type_, description in specs:
+            descriptor = ParameterDescriptor(description=description)
+            if type_ is not None:
+                descriptor.type = type_
+            values[name] = self.declare_parameter(name, default, descriptor).value
+        return values
+
+    def _configure(self) -> None:
+        p = self._declare()
+        if not (math.isfinite(p['rate']) and p['rate'] >= 0):
+            raise StartupError(f'parameter rate: expected a finite value >= 0, got {p["rate"]}')
+        if p['loops'] < 1:
+            raise StartupError(f'parameter loops: expected >= 1, got {p["loops"]}')
+        if not (math.isfinite(p['wait_subscribers']) and p['wait_subscribers'] >= 0):
+            raise StartupError(f'parameter wait_subscribers: expected >= 0 s, got {p["wait_subscribers"]}')
+        self._bag, self._rate, self._loops = p['bag'], p['rate'], p['loops']
+        self._in_flight = InFlight(p['max_in_flight']) if p['rate'] == 0 else None
+        if self._in_flight is not None and not p['ack_topic']:
+            raise StartupError('parameter ack_topic: required with rate 0')
+
+        summary = bag_summary(self._bag)
+        wanted = list(p['topics'] or [])
+        unknown = sorted(set(wanted) - set(summary.topics))
+        if unknown:
+            raise StartupError(f'parameter topics: {", ".join(unknown)} not in {self._bag} '
+                               f'(it has {", ".join(summary.topics)})')
+        self._topics = wanted or list(summary.topics)
+        self._pubs = {t: self.create_publisher(_message_class(summary.topics[t][0]), t, DATA_QOS)
+                      for t in self._topics}
+        self._stamped = {t: has_header(summary.topics[t][0]) for t in self._topics}
+        self._clock_pub = self.create_publisher(ClockMsg, '/clock', DATA_QOS) if p['clock'] else None
+        if self._in_flight is not None:
+            self.create_subscription(PointCloud2, p['ack_topic'], self._on_ack, DATA_QOS, raw=True)
+
+        # Start when the 2D stage listens: detections if the bag has them, else images.
+        inputs = [t for t in self._topics if t.startswith('/cam') and t.endswith('/openpose')]
+        self._awaited = inputs or [t for t in self._topics if t.startswith('/cam') and t.endswith('/image_raw')]
+        self._wait_until = time.monotonic() + p['wait_subscribers']
+
+        self._frames = looped(lambda: group_frames(read_bag(self._bag, self._topics)), self._loops)
+        self._next = None  # the (loop, offset, frame) to publish next
+        self._first_ns = None
+        self._start = 0.0
+        self._playing = False
+        self._frames_out = self._messages_out = 0
+        self.get_logger().info(f'{self._bag}: {summary.message_count} messages on {len(summary.topics)} topics, '
+                               f'playing {len(self._topics)} at rate {self._rate:g}, loops {self._loops}')
+        self._timer = self.create_timer(_POLL_S, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _on_timer(self) -> None:
+        if not self._playing:
+            idle = [t for t in self._awaited if self._pubs[t].get_subscription_count() == 0]
+            if idle and time.monotonic() < self._wait_until:
+                return
+            if idle:
+                self.get_logger().warning(f'no subscriber on {", ".join(idle)}; playing anyway')
+            self._playing = True
+            self._start = time.monotonic()
+            if not self._advance():
+                return
+        self._play()
+
+    def _on_ack(self, cdr: bytes) -> None:
+        try:
+            stamp = header_stamp_ns(cdr)
+        except ValueError as exc:
+            self.get_logger().warning(f'ignoring a message on the ack topic: {exc}')
+            return
+        if self._in_flight.acked(stamp) and self._playing and not self.finished.done():
+            self._play()
+
+    def _advance(self) -> bool:
+        """Read the next frame into self._next; False once finished (end of bag or damage)."""
+        try:
+            self._next = next(self._frames, None)
+        except (FileNotFoundError, ValueError) as exc:
+            self.get_logger().fatal(str(exc))
+            self._finish(2)
+            return False
+        if self._next is None:
+            self._finish(0)
+            return False
+        if self._first_ns is None:
+            self._first_ns = self._next[2].stamp_ns
+        return True
+
+    def _play(self) -> None:
+        """Publish every frame that is due, then sleep until the next one (or the next ack)."""
+        while True:
+            loop, offset, frame = self._next
+            stamp = frame.stamp_ns + offset
+            if self._in_flight is None:
+                wait = self._start + due_s(stamp, self._first_ns, self._rate) - time.monotonic()
+                if wait > 0:
+                    self._timer.timer_period_ns = max(1, int(wait * NS))
+                    self._timer.reset()
+                    return
+            elif self._in_flight.full:
+                self._timer.cancel()  # _on_ack resumes
+                return
+            self._publish(loop, stamp, offset, frame)
+            if not self._advance():
+                return
+
+    def _publish(self, loop: int, stamp: int, offset: int, frame: Frame) -> None:
+        if self._clock_pub is not None:
+            self._clock_pub.publish(ClockMsg(clock=Time(sec=stamp // NS, nanosec=stamp % NS)))
+        for topic, _, cdr in frame.messages:
+            self._pubs[topic].publish(with_header_stamp(cdr, stamp) if offset and self._stamped[topic] else cdr)
+        if self._in_flight is not None:
+            self._in_flight.published(stamp)
+        self._frames_out += 1
+        self._messages_out += len(frame.messages)
+        if self._frames_out % LOG_EVERY == 0:
+            elapsed = time.monotonic() - self._start
+            self.get_logger().info(f'{self._frames_out} frames (stamp {stamp / NS:.3f} s, loop {loop + 1}/'
+                                   f'{self._loops}), {self._frames_out / max(elapsed, 1e-9):.1f} frames/s')
+
+    def _finish(self, code: int) -> None:
+        self._timer.cancel()
+        if code == 0:
+            elapsed = time.monotonic() - self._start
+            self.get_logger().info(f'done: {self._frames_out} frames, {self._messages_out} messages, '
+                                   f'{self._loops} loop(s) in {elapsed:.2f} s '
+                                   f'({self._frames_out / max(elapsed, 1e-9):.1f} frames/s)')
+            deadline = time.monotonic() + ACK_TIMEOUT_S
+            publishers = [*self._pubs.values(), *([self._clock_pub] if self._clock_pub else [])]
+            unacked = [pub.topic_name for pub in publishers if not pub.wait_for_all_acked(
+                Duration(nanoseconds=max(0, int((deadline - time.monotonic()) * NS))))]
+            if unacked:
+                self.get_logger().warning(f'not confirmed by every subscriber within {ACK_TIMEOUT_S:g} s: '
+                                          f'{", ".join(unacked)}')
+        self.finished.set_result(code)
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = BagPlayerNode()
+        rclpy.spin_until_future_complete(node, node.finished)
+        code = node.finished.result() or 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if code:
+        raise SystemExit(code)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,83 @@
+"""What every mvpose_ros node shares: typed parameter declaration, the data QoS, the rig from
+the `calibration` parameter, one-line start-up errors, and the rclpy main loop."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from mvpose_ros.core.camera import Camera, load_rig
+from mvpose_ros.core.datasets import data_root
+
+# Reliable and keep-all: a node that falls behind queues frames (and in the end slows its
+# publishers down) rather than dropping them; no frame may be lost silently.
+DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+# (name, default, description); string and array defaults carry their type explicitly
+ParameterSpec = tuple[str, Any, str]
+
+_TYPES = {str: ParameterType.PARAMETER_STRING, list: ParameterType.PARAMETER_STRING_ARRAY}
+
+
+class StartupError(Exception):
+    """A bad parameter or file: the node cannot start (one line, exit code 2)."""
+
+
+def declare(node: Node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:
+    """Declare typed, described parameters; returns their values (from -p or --params-file)."""
+    for name, default, description in specs:
+        descriptor = ParameterDescriptor(description=description)
+        if type(default) in _TYPES:
+            descriptor.type = _TYPES[type(default)]
+        try:
+            node.declare_parameter(name, default, descriptor)
+        except ParameterException as exc:
+            raise StartupError(f'parameter {name}: {exc}') from None
+    return {name: node.get_parameter(name).value for name, *_ in specs}
+
+
+def rig_parameters(default_calibration: str) -> list[ParameterSpec]:
+    return [
+        ('data_root', '', "folder holding data/ and models/ ('' = $MVPOSE_DATA_ROOT or ../shared)"),
+        ('calibration', default_calibration, 'calibration json (Shelf layout); relative paths are under data_root'),
+    ]
+
+
+def load_rig_parameter(values: dict[str, Any]) -> list[Camera]:
+    """The rig named by the `calibration` and `data_root` parameter values."""
+    path = Path(values['calibration'])
+    try:
+        if not path.is_absolute():
+            path = data_root(values['data_root'] or None) / path
+        return load_rig(path)
+    except (OSError, ValueError, KeyError) as exc:
+        raise StartupError(f'parameter calibration: {" ".join(str(exc).split())}') from None
+
+
+def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
+    """rclpy main: spin the node until Ctrl-C or shutdown; a StartupError exits with code 2
+    after one fatal log line, not a traceback."""
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except StartupError as exc:
+        rclpy.logging.get_logger('mvpose_ros').fatal(str(exc))
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if code:
+        raise SystemExit(code)

@@ -1,0 +1,357 @@
+"""rosbag2 bags: write/read round trip, the Shelf and Campus recipes against the real data,
+damaged bags, and the `mvpose-make-bag` command."""
+from __future__ import annotations
+
+import json
+import random
+import shutil
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import scipy.io
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_msgs.msg import Header
+
+from msg_adapters.camera_info_msg import check_info
+from msg_adapters.image_msg import msg_to_image
+from msg_adapters.openpose_msg import msg_to_openpose
+from msg_adapters.skeleton_msg import msg_to_skeletons
+from mvpose_ros.bags import recipes
+from mvpose_ros.bags.io import bag_summary, has_header, read_bag, typestore, write_bag
+from mvpose_ros.bags.recipes import campus_image, campus_recipe, shelf_recipe
+from mvpose_ros.cli.make_bag import main as make_bag
+from mvpose_ros.core.camera import load_rig
+from mvpose_ros.core.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.openpose import read_body25
+
+S = 1_000_000_000
+FRAME_NS = 40_000_000
+SHELF = dataset_dir('shelf')
+TYPES = {'/cam0/camera_info': CameraInfo, '/cam0/openpose': PointCloud2, '/cam1/image_raw': Image}
+
+
+def _sample_items(n_frames: int = 20):
+    """Messages of three topics over n_frames, written in shuffled order."""
+    rng = random.Random(3)
+    items = []
+    for f in range(n_frames):
+        header = Header(frame_id='cam0')
+        header.stamp.sec, header.stamp.nanosec = divmod(f * FRAME_NS, S)
+        items.append(('/cam0/camera_info', CameraInfo(header=header, width=f + 1, d=[0.1 * f] * 5), f * FRAME_NS))
+        cloud = PointCloud2(header=header, width=f, data=rng.randbytes(16 * f))
+        items.append(('/cam0/openpose', cloud, f * FRAME_NS))
+        if f % 5 == 0:
+            items.append(('/cam1/image_raw', Image(header=header, height=2, width=3, encoding='bgr8', step=9,
+                                                   data=rng.randbytes(18)), f * FRAME_NS))
+    shuffled = items[:]
+    rng.shuffle(shuffled)
+    return items, shuffled
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_write_read_round_trip(tmp_path, storage):
+    items, shuffled = _sample_items()
+    path = tmp_path / 'bag'
+    write_bag(path, shuffled, storage=storage, custom_data={'k': 'v'})
+    suffix = 'mcap' if storage == 'mcap' else 'db3'
+    assert sorted(p.name for p in path.iterdir()) == [f'bag.{suffix}', 'metadata.yaml']
+    assert not list(tmp_path.glob('.*partial*'))
+
+    read = list(read_bag(path))
+    assert [stamp for _, _, stamp, _ in read] == sorted(stamp for _, _, stamp in items)
+    expected = {(topic, stamp): msg for topic, msg, stamp in items}
+    assert len(read) == len(expected)
+    for topic, msgtype, stamp, cdr in read:
+        assert msgtype == f'sensor_msgs/msg/{TYPES[topic].__name__}'
+        assert deserialize_message(cdr, TYPES[topic]) == expected[topic, stamp]
+
+    only = list(read_bag(path, ['/cam1/image_raw']))
+    assert [(t, s) for t, _, s, _ in only] == [('/cam1/image_raw', f * FRAME_NS) for f in range(0, 20, 5)]
+
+    summary = bag_summary(path)
+    assert summary.topics == {'/cam0/camera_info': ('sensor_msgs/msg/CameraInfo', 20),
+                              '/cam0/openpose': ('sensor_msgs/msg/PointCloud2', 20),
+                              '/cam1/image_raw': ('sensor_msgs/msg/Image', 4)}
+    assert (summary.message_count, summary.first_ns, summary.last_ns) == (44, 0, 19 * FRAME_NS)
+    assert summary.custom_data == {'k': 'v'}
+
+
+def test_writer_refuses_bad_input(tmp_path):
+    items, _ = _sample_items(2)
+    write_bag(tmp_path / 'bag', items)
+    with pytest.raises(FileExistsError):
+        write_bag(tmp_path / 'bag', items)
+    with pytest.raises(ValueError, match='storage'):
+        write_bag(tmp_path / 'other', items, storage='rosbag1')
+    mixed = [('/x', CameraInfo(), 0), ('/x', PointCloud2(), 1)]
+    with pytest.raises(ValueError, match='/x'):
+        write_bag(tmp_path / 'mixed', mixed)
+    # a failed write leaves nothing behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag']
+    with pytest.raises(ValueError, match='no topic /nope'):
+        list(read_bag(tmp_path / 'bag', ['/nope']))
+
+
+def test_types_carry_the_definitions_ros2_bag_needs():
+    """The hash stored per topic is the one the installed message packages declare, so real
+    `ros2 bag play` matches the types; Header-first types are the ones whose stamp is rewritten."""
+    for msgtype in ('sensor_msgs/msg/PointCloud2', 'sensor_msgs/msg/CameraInfo', 'sensor_msgs/msg/Image'):
+        package, _, name = msgtype.split('/')
+        description = Path(sys.prefix) / 'share' / package / 'msg' / f'{name}.json'
+        hashes = {h['type_name']: h['hash_string'] for h in json.loads(description.read_text())['type_hashes']}
+        assert typestore().hash_rihs01(msgtype) == hashes[msgtype]
+        assert typestore().generate_msgdef(msgtype, ros_version=2)[0].startswith('std_msgs/Header header')
+        assert has_header(msgtype)
+    assert not has_header('rosgraph_msgs/msg/Clock')
+    assert not has_header('visualization_msgs/msg/MarkerArray')
+
+
+@pytest.fixture(scope='module')
+def shelf_bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp('shelf') / 'shelf'
+    write_bag(path, shelf_recipe(SHELF).items())
+    return path
+
+
+@pytest.fixture(scope='module')
+def shelf_messages(shelf_bag):
+    by_topic = {}
+    for topic, msgtype, stamp, cdr in read_bag(shelf_bag):
+        by_topic.setdefault(topic, []).append((msgtype, stamp, cdr))
+    return by_topic
+
+
+def test_shelf_bag_has_every_test_frame_of_every_camera(shelf_bag, shelf_messages):
+    stamps = [f * FRAME_NS for f in SHELF_TEST_FRAMES]
+    assert stamps[0] == 12 * S and len(stamps) == 301
+    summary = bag_summary(shelf_bag)
+    assert (summary.first_ns, summary.last_ns) == (12 * S, 24 * S)
+    for c in range(5):
+        for kind in ('openpose', 'camera_info'):
+            assert [s for _, s, _ in shelf_messages[f'/cam{c}/{kind}']] == stamps
+        assert [s for _, s, _ in shelf_messages[f'/cam{c}/image_raw']] == [572 * FRAME_NS]
+    assert len(shelf_messages) == 15
+
+
+def test_shelf_openpose_messages_are_the_real_detections(shelf_messages):
+    rig = load_rig(SHELF / 'calibration' / 'calibration_shelf.json')
+    for c, cam in enumerate(rig):
+        frames = read_body25(SHELF / 'openpose_body25' / f'{c}.txt', cam.width, cam.height)
+        messages = shelf_messages[f'/cam{c}/openpose']
+        assert len(messages) == len(frames) == 301
+        for (msgtype, stamp, cdr), expected, f in zip(messages, frames, SHELF_TEST_FRAMES):
+            assert msgtype == 'sensor_msgs/msg/PointCloud2'
+            msg = deserialize_message(cdr, PointCloud2)
+            assert msg.header.frame_id == f'cam{c}'
+            assert msg.header.stamp.sec * S + msg.header.stamp.nanosec == stamp == f * FRAME_NS
+            got = msg_to_openpose(msg)
+            # encoding A stores float32: the decoded frame is read_body25's, rounded to float32
+            assert len(got.candidates) == 25 and len(got.pafs) == 26
+            for g, e in zip(got.candidates + got.pafs, expected.candidates + expected.pafs):
+                assert g.shape == e.shape
+                assert np.array_equal(np.asarray(g, np.float32), e.astype(np.float32))
+
+
+def test_shelf_camera_info_and_images(shelf_messages):
+    rig = load_rig(SHELF / 'calibration' / 'calibration_shelf.json')
+    for c, cam in enumerate(rig):
+        for _, stamp, cdr in shelf_messages[f'/cam{c}/camera_info'][::50]:
+            info = deserialize_message(cdr, CameraInfo)
+            check_info(info, cam, tol_px=1e-9)
+            assert np.array_equal(np.reshape(info.k, (3, 3)), cam.K) and np.array_equal(info.d, cam.dist)
+            assert (info.width, info.height, info.header.frame_id) == (1032, 776, f'cam{c}')
+        [(_, stamp, cdr)] = shelf_messages[f'/cam{c}/image_raw']
+        image = deserialize_message(cdr, Image)
+        assert (image.encoding, image.header.frame_id) == ('bgr8', f'cam{c}')
+        expected = cv2.imread(str(SHELF / 'frames' / f'cam{c}_000572.png'))
+        assert np.array_equal(msg_to_image(image), expected)
+
+
+def test_shelf_images_recipe_is_frame_572_only(tmp_path):
+    path = tmp_path / 'shelf_images'
+    write_bag(path, shelf_recipe(SHELF, images_only=True).items())
+    summary = bag_summary(path)
+    assert summary.topics == {**{f'/cam{c}/camera_info': ('sensor_msgs/msg/CameraInfo', 1) for c in range(5)},
+                              **{f'/cam{c}/image_raw': ('sensor_msgs/msg/Image', 1) for c in range(5)}}
+    assert summary.first_ns == summary.last_ns == 572 * FRAME_NS
+
+
+# Campus: (frame, cameras with an image) and the actors annotated in that frame.
+CAMPUS_IMAGES = {350: (0, 1, 2), 351: (0, 1, 2), 470: (0, 2), 700: (1,)}
+CAMPUS_ACTORS = {350: (0,), 351: (0, 2), 470: (), 700: (1,)}
+
+
+def _cell_column(n_frames: int, empty) -> np.ndarray:
+    column = np.empty((n_frames, 1), dtype=object)
+    for f in range(n_frames):
+        column[f, 0] = empty()
+    return column
+
+
+@pytest.fixture(scope='module')
+def campus_dir(tmp_path_factory):
+    """A CampusSeq1-layout folder: Camera{c}/ PNGs, actorsGT.mat (MATLAB cells), calibration."""
+    root = tmp_path_factory.mktemp('CampusSeq1')
+    rng = np.random.default_rng(0)
+    for f, cams in CAMPUS_IMAGES.items():
+        for c in cams:
+            path = campus_image(root, c, f)
+            path.parent.mkdir(exist_ok=True)
+            cv2.imwrite(str(path), rng.integers(0, 256, (288, 360, 3), dtype=np.uint8))
+    (root / 'Camera0' / 'campus4-c0-00100.png').write_bytes(b'')  # not a test frame: ignored
+    n_frames, n_actors = 760, 3
+    actor3d, actor2d = np.empty((1, n_actors), dtype=object), np.empty((1, n_actors), dtype=object)
+    for a in range(n_actors):
+        actor3d[0, a] = _cell_column(n_frames, lambda: np.zeros((1, 0)))
+
+        def no_views():
+            views = np.empty((1, 3), dtype=object)
+            for c in range(3):
+                views[0, c] = np.zeros((1, 0))
+            return views
+        actor2d[0, a] = _cell_column(n_frames, no_views)
+    poses = {}
+    for f, actors in CAMPUS_ACTORS.items():
+        for a in actors:
+            poses[f, a] = rng.uniform(-2, 2, (14, 3))
+            actor3d[0, a][f, 0] = poses[f, a]
+    scipy.io.savemat(root / 'actorsGT.mat', {'actor3D': actor3d, 'actor2D': actor2d})
+    calibration = dataset_dir('campus') / 'calibration' / 'calibration_campus.json'
+    shutil.copy(calibration, root / 'calibration_campus.json')
+    return root, poses
+
+
+def test_campus_recipe_gives_images_camera_info_and_ground_truth(campus_dir, tmp_path):
+    root, poses = campus_dir
+    path = tmp_path / 'campus'
+    write_bag(path, campus_recipe(root).items())
+    summary = bag_summary(path)
+    frames = sorted(CAMPUS_IMAGES)
+    assert all(f in CAMPUS_TEST_FRAMES for f in frames)
+    assert summary.topics == {
+        **{f'/cam{c}/camera_info': ('sensor_msgs/msg/CameraInfo', 4) for c in range(3)},
+        **{f'/cam{c}/image_raw': ('sensor_msgs/msg/Image', sum(c in cams for cams in CAMPUS_IMAGES.values()))
+           for c in range(3)},
+        '/ground_truth/skeletons': ('sensor_msgs/msg/PointCloud2', 4)}
+    rig = load_rig(root / 'calibration_campus.json')
+    gt = [(stamp, deserialize_message(cdr, PointCloud2))
+          for _, _, stamp, cdr in read_bag(path, ['/ground_truth/skeletons'])]
+    assert [stamp for stamp, _ in gt] == [f * FRAME_NS for f in frames]
+    for (_, msg), f in zip(gt, frames):
+        ids, joints = msg_to_skeletons(msg)
+        assert msg.header.frame_id == 'world'
+        assert ids.tolist() == list(CAMPUS_ACTORS[f])
+        for a, pose in zip(ids, joints):
+            np.testing.assert_array_equal(pose, poses[f, a].astype(np.float32))
+    for topic, _, stamp, cdr in read_bag(path, [f'/cam{c}/image_raw' for c in range(3)]):
+        c, f = int(topic[4]), stamp // FRAME_NS
+        image = msg_to_image(deserialize_message(cdr, Image))
+        assert np.array_equal(image, cv2.imread(str(campus_image(root, c, f))))
+    for topic, _, _, cdr in read_bag(path, ['/cam2/camera_info']):
+        check_info(deserialize_message(cdr, CameraInfo), rig[2], tol_px=1e-9)
+
+
+def test_campus_recipe_errors(campus_dir, tmp_path):
+    with pytest.raises(FileNotFoundError, match='not found'):
+        campus_recipe(tmp_path / 'nowhere')
+    (tmp_path / 'empty').mkdir()
+    with pytest.raises(FileNotFoundError, match='actorsGT.mat'):
+        campus_recipe(tmp_path / 'empty')
+    root, _ = campus_dir
+    bad = tmp_path / 'bad'
+    shutil.copytree(root, bad)
+    cv2.imwrite(str(campus_image(bad, 1, 700)), np.zeros((100, 100, 3), np.uint8))
+    with pytest.raises(ValueError, match='image size 100x100'):
+        write_bag(tmp_path / 'bag', campus_recipe(bad).items())
+    assert not (tmp_path / 'bag').exists()
+
+
+def _damage(bag: Path, tmp_path: Path, how) -> Path:
+    copy = tmp_path / f'damaged_{how.__name__}'
+    shutil.copytree(bag, copy)
+    [data_file] = copy.glob('*.mcap')
+    data_file.write_bytes(how(data_file.read_bytes()))
+    return copy
+
+
+def truncated(data: bytes) -> bytes:
+    return data[:len(data) // 2]
+
+
+def garbage(data: bytes) -> bytes:
+    return b'not a bag at all ' * 100
+
+
+def scrambled_chunk(data: bytes) -> bytes:
+    # inside the compressed OpenPose chunks before frame 572's images (a stored, incompressible
+    # block could be damaged silently: rosbags writes no chunk CRC)
+    out = bytearray(data)
+    start = len(out) // 20
+    out[start:start + 4096] = bytes(b ^ 0x5A for b in out[start:start + 4096])
+    return bytes(out)
+
+
+@pytest.mark.parametrize('how', [truncated, garbage, scrambled_chunk])
+def test_damaged_bags_are_clear_one_line_errors(shelf_bag, tmp_path, how):
+    damaged = _damage(shelf_bag, tmp_path, how)
+    with pytest.raises(ValueError) as err:
+        bag_summary(damaged)
+        list(read_bag(damaged))
+    assert str(damaged) in str(err.value) and '\n' not in str(err.value)
+
+
+def test_missing_and_incomplete_bags(tmp_path):
+    with pytest.raises(FileNotFoundError, match='bag not found'):
+        bag_summary(tmp_path / 'nope')
+    with pytest.raises(FileNotFoundError, match='bag not found'):
+        list(read_bag(tmp_path / 'nope'))
+    (tmp_path / 'half').mkdir()
+    with pytest.raises(ValueError, match='no metadata.yaml'):
+        bag_summary(tmp_path / 'half')
+
+
+def test_make_bag_exit_codes(tmp_path, capsys, campus_dir, monkeypatch):
+    out = tmp_path / 'images'
+    assert make_bag(['shelf_images', '--output', str(out)]) == 0
+    assert '10 messages on 10 topics' in capsys.readouterr().out
+    made = (out / 'images.mcap').stat().st_mtime_ns
+    assert make_bag(['shelf_images', '--output', str(out)]) == 0
+    assert 'already made' in capsys.readouterr().out
+    assert (out / 'images.mcap').stat().st_mtime_ns == made
+
+    # another recipe's bag, or an out-of-date one, needs --force
+    assert make_bag(['shelf', '--output', str(out)]) == 2
+    assert "holds recipe 'shelf_images'" in capsys.readouterr().err
+    monkeypatch.setattr(recipes, 'RECIPE_VERSION', recipes.RECIPE_VERSION + 1)
+    assert make_bag(['shelf_images', '--output', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert 'out of date' in err and '--force' in err and len(err.strip().splitlines()) == 1
+    assert make_bag(['shelf_images', '--output', str(out), '--force']) == 0
+    assert 'made in' in capsys.readouterr().out
+    assert make_bag(['shelf_images', '--output', str(out)]) == 0
+
+    # a damaged bag is not "made"
+    [data_file] = out.glob('*.mcap')
+    data_file.write_bytes(data_file.read_bytes()[:1000])
+    assert make_bag(['shelf_images', '--output', str(out)]) == 2
+    assert 'not a complete bag' in capsys.readouterr().err
+
+    # --force deletes bag folders only
+    other = tmp_path / 'notes'
+    other.mkdir()
+    (other / 'thesis.tex').write_text('precious')
+    assert make_bag(['shelf_images', '--output', str(other), '--force']) == 2
+    assert 'non-bag files' in capsys.readouterr().err and (other / 'thesis.tex').exists()
+
+    assert make_bag(['campus', '--output', str(tmp_path / 'c')]) == 2
+    assert '--campus-dir' in capsys.readouterr().err
+    assert make_bag(['campus', '--campus-dir', str(campus_dir[0]), '--output', str(tmp_path / 'c')]) == 0
+    assert '7 topics' in capsys.readouterr().out
+    assert make_bag(['shelf', '--data-root', str(tmp_path / 'nowhere'), '--output', str(tmp_path / 's')]) == 2
+    err = capsys.readouterr().err
+    assert 'nowhere' in err and 'Traceback' not in err
+    assert not (tmp_path / 's').exists()
