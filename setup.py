@@ -15,7 +15,10 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml')),
+        (f'share/{PACKAGE}/launch', glob('launch/*.py')),
+        # Node launchers, where `ros2 run` looks for a package's executables.
+        (f'lib/{PACKAGE}', glob('scripts/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -26,6 +29,8 @@ setup(
     entry_points={
         'console_scripts': [
             'mvpose-eval = mvpose_ros.cli.evaluate:main',
+            'mvpose-graph = mvpose_ros.cli.graph:main',
+            'mvpose-make-bag = mvpose_ros.cli.make_bag:main',
         ],
     },
 )

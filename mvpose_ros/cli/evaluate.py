@@ -60,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--bp-hypotheses', type=int, default=16,
                    help='hypotheses kept per joint inside BP, best data term first (0: all M)')
     p.add_argument('--head-model', choices=HEAD_MODELS, default='anatomical')
+    p.add_argument('--heatmap-stride', type=float, default=OpenPoseDetectorConfig.stride,
+                   help='heatmap cell size in pixels (default: 4; the ROS graph config uses 8)')
     p.add_argument('--match-distance', type=float, default=MatchingConfig.max_distance,
                    help='cross-view matching threshold, metres of mean ray distance')
     p.add_argument('--collision-centre', type=float, default=FactorConfig.collision_centre)
@@ -103,7 +105,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return 0
     t0 = time.perf_counter()
     if args.dataset == 'shelf':
-        seq = shelf_openpose(args.data_root, OpenPoseDetectorConfig())
+        seq = shelf_openpose(args.data_root, OpenPoseDetectorConfig(stride=args.heatmap_stride))
     else:
         seq, gt, head_model = campus_sequence(args.data_root, args.campus_dir)
         actors, reference = CAMPUS_ACTORS, None

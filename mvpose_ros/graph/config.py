@@ -1,0 +1,157 @@
+"""The graph's configuration: the ROS 2 parameter file read as data, the runner's own settings
+in it (pseudo node `mvpose_graph`), and the nodes of the graph with their command lines.
+
+The parameter file is handed to every node unchanged (`--params-file`); per-process values (a
+detector's camera, the player's bag and rate) follow it as `-p` overrides, because ROS applies
+parameter arguments in order and the last one wins.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence, get_type_hints
+
+import yaml
+
+RUNNER_SECTION = 'mvpose_graph'
+PARAMS_KEY = 'ros__parameters'
+NODE_PACKAGE = 'mvpose_ros.nodes'
+
+# ROS parameter type names, as `ros2 param describe` prints them.
+_TYPE_NAMES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
+
+
+@dataclass(frozen=True)
+class GraphSettings:
+    """The runner's settings (section `mvpose_graph`); paths relative to the working directory."""
+
+    dataset: str
+    cameras: int
+    bag: str
+    predictions: str
+    frame_rate: float
+    rate: float
+    timeout: float
+
+    def __post_init__(self) -> None:
+        if self.cameras < 1:
+            raise ValueError(f'cameras must be >= 1; got {self.cameras}')
+        if not self.frame_rate > 0 or not self.timeout > 0 or not self.rate >= 0:
+            raise ValueError(f'frame_rate and timeout must be > 0 and rate >= 0; '
+                             f'got {self.frame_rate}, {self.timeout}, {self.rate}')
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One node process: its executable (= node name), namespace ('' = root) and the parameters
+    given on its command line after the parameter file."""
+
+    executable: str
+    namespace: str = ''
+    parameters: dict[str, bool | int | float | str] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """Process name: 'cam2/heatmap_detector', 'association'."""
+        return f'{self.namespace}/{self.executable}' if self.namespace else self.executable
+
+
+def load_params(path: str | Path) -> dict[str, dict[str, object]]:
+    """Node key (e.g. 'bag_player', '/**/heatmap_detector') -> its `ros__parameters` mapping."""
+    try:
+        with open(path, encoding='utf-8') as f:
+            doc = yaml.safe_load(f)
+    except FileNotFoundError:
+        raise FileNotFoundError(f'parameter file not found: {path}') from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f'{path}: not YAML ({" ".join(str(exc).split())})') from None
+    if not isinstance(doc, dict):
+        raise ValueError(f'{path}: expected a mapping of node names, got {type(doc).__name__}')
+    out = {}
+    for node, section in doc.items():
+        params = section.get(PARAMS_KEY) if isinstance(section, dict) else None
+        if not isinstance(params, dict):
+            raise ValueError(f'{path}: {node}: expected a mapping with {PARAMS_KEY}')
+        out[str(node)] = params
+    return out
+
+
+def _typed(path: str | Path, key: str, value: object, kind: type) -> object:
+    # Strict like ROS: a double parameter rejects `120` (integer), a string rejects `5`.
+    if type(value) is not kind:
+        raise ValueError(f'{path}: {RUNNER_SECTION}.{key}: expected {_TYPE_NAMES[kind]}, '
+                         f'got {_TYPE_NAMES.get(type(value), type(value).__name__)} {value!r}')
+    return value
+
+
+def graph_settings(path: str | Path) -> GraphSettings:
+    """The runner's settings from the parameter file; ValueError naming the file and key when one
+    is missing, unknown, of the wrong type or out of range."""
+    params = load_params(path)
+    if RUNNER_SECTION not in params:
+        raise ValueError(f'{path}: no {RUNNER_SECTION} section')
+    section = params[RUNNER_SECTION]
+    kinds = get_type_hints(GraphSettings)
+    unknown = sorted(set(section) - set(kinds))
+    if unknown:
+        raise ValueError(f'{path}: {RUNNER_SECTION}.{unknown[0]}: unknown setting (known: {", ".join(kinds)})')
+    missing = [k for k in kinds if k not in section]
+    if missing:
+        raise ValueError(f'{path}: {RUNNER_SECTION}.{missing[0]}: missing')
+    values = {k: _typed(path, k, section[k], kind) for k, kind in kinds.items()}
+    try:
+        return GraphSettings(**values)
+    except ValueError as exc:
+        raise ValueError(f'{path}: {RUNNER_SECTION}: {exc}') from None
+
+
+def graph_nodes(cameras: int, bag: str, rate: float, data_root: str | None = None) -> list[NodeSpec]:
+    """The Shelf graph in start order: a heatmap_detector per camera (namespace cam{c}),
+    association, bp_solver, then bag_player (one pass: the runner expects one output per stamp)."""
+    data = {'data_root': data_root} if data_root is not None else {}
+    return [*(NodeSpec('heatmap_detector', f'cam{c}', {'camera': c, **data}) for c in range(cameras)),
+            NodeSpec('association', '', dict(data)),
+            NodeSpec('bp_solver', '', dict(data)),
+            NodeSpec('bag_player', '', {'bag': bag, 'rate': float(rate), 'loops': 1})]
+
+
+def _ros_value(value: bool | int | float | str) -> str:
+    """A `-p name:=value` value, which ROS parses as YAML: JSON strings are YAML strings, so a
+    path such as '2024' or 'true' stays a string."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, float)):
+        return repr(value)
+    return json.dumps(value)
+
+
+def node_command(spec: NodeSpec, params_file: str | Path, python: str = sys.executable) -> list[str]:
+    """The command running `spec` with this interpreter, so that nodes run the runner's own code."""
+    cmd = [python, '-m', f'{NODE_PACKAGE}.{spec.executable}', '--ros-args']
+    if spec.namespace:
+        cmd += ['-r', f'__ns:=/{spec.namespace}']
+    cmd += ['--params-file', str(params_file)]
+    for name, value in spec.parameters.items():
+        cmd += ['-p', f'{name}:={_ros_value(value)}']
+    return cmd
+
+
+def expected_connections(cameras: int) -> dict[str, Sequence[str]]:
+    """Topic -> endpoints ('pub', 'sub') that must exist before the player may start."""
+    topics: dict[str, Sequence[str]] = {}
+    for c in range(cameras):
+        topics[f'/cam{c}/openpose'] = ('sub',)
+        topics[f'/cam{c}/people2d'] = ('pub', 'sub')
+    topics['/people/bundles'] = ('pub', 'sub')
+    topics['/skeletons'] = ('pub',)
+    return topics
+
+
+def unknown_nodes(params: Mapping[str, object], nodes: Sequence[NodeSpec]) -> list[str]:
+    """Sections of the parameter file that match none of `nodes` (typos) besides the runner's."""
+    known = {RUNNER_SECTION}
+    for spec in nodes:
+        known |= {spec.executable, f'/{spec.name}', f'/**/{spec.executable}'}
+    return sorted(set(params) - known)

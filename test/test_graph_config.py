@@ -1,0 +1,170 @@
+"""config/shelf.yaml as the real nodes read it, the runner's settings and their errors, the node
+command lines, and the runner's pure report helpers."""
+from __future__ import annotations
+
+import importlib
+import io
+from collections import Counter
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import PointCloud2
+
+from mvpose_ros.bags.io import write_bag
+from mvpose_ros.cli.graph import Outcome, frame_ranges, latency_ms, report
+from mvpose_ros.graph.config import (RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections, graph_nodes,
+                                     graph_settings, load_params, node_command, unknown_nodes)
+
+DOMAIN_ID = 173
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'shelf.yaml'
+SECTIONS = {'bag_player': 'bag_player', 'heatmap_detector': '/**/heatmap_detector',
+            'association': 'association', 'bp_solver': 'bp_solver'}
+NODE_CLASSES = {'bag_player': 'BagPlayerNode', 'heatmap_detector': 'HeatmapDetectorNode',
+                'association': 'AssociationNode', 'bp_solver': 'BpSolverNode'}
+# The contract's runner settings (section mvpose_graph).
+RUNNER_DEFAULTS = GraphSettings(dataset='shelf', cameras=5, bag='bags/shelf', predictions='out/shelf_graph.jsonl',
+                                frame_rate=25.0, rate=1.0, timeout=120.0)
+
+
+def test_sections_and_runner_settings():
+    assert set(load_params(CONFIG)) == {*SECTIONS.values(), RUNNER_SECTION}
+    assert graph_settings(CONFIG) == RUNNER_DEFAULTS
+
+
+def test_real_nodes_take_every_value_of_the_file(tmp_path, monkeypatch):
+    """Each node class, started with its runner command line: every key of its section is a
+    parameter it declares (ROS silently ignores others) and arrives with the file's value and type
+    (a double written as `1` would stop the node), the per-process overrides after it, and the
+    namespace from the remap."""
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(DOMAIN_ID))
+    bag = tmp_path / '2024'  # a name ROS would read as an integer unless quoted
+    write_bag(bag, [('/cam0/openpose', PointCloud2(), 12_000_000_000)])
+    params = load_params(CONFIG)
+    nodes = graph_nodes(5, str(bag), 0.5)
+    assert [n.name for n in nodes] == [*(f'cam{c}/heatmap_detector' for c in range(5)), 'association',
+                                       'bp_solver', 'bag_player']
+    for spec in nodes[3:]:  # cam3, cam4 and every other node
+        cmd = node_command(spec, CONFIG, python='python')
+        assert cmd[:4] == ['python', '-m', f'mvpose_ros.nodes.{spec.executable}', '--ros-args']
+        node_class = getattr(importlib.import_module(f'mvpose_ros.nodes.{spec.executable}'),
+                             NODE_CLASSES[spec.executable])
+        rclpy.init(args=['prog', *cmd[3:]], signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        try:
+            node = node_class()
+            declared = set(node.list_parameters([], 0).names)
+            section = params[SECTIONS[spec.executable]]
+            assert set(section) <= declared, f'{spec.name}: not parameters of the node: {set(section) - declared}'
+            expected = {**section, **spec.parameters}
+            got = {name: node.get_parameter(name).value for name in expected}
+            fqn = node.get_fully_qualified_name()
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        assert got == expected, spec.name
+        assert {k: type(v) for k, v in got.items()} == {k: type(v) for k, v in expected.items()}, spec.name
+        assert fqn == f'/{spec.name}'
+
+
+def test_command_puts_overrides_after_the_file():
+    spec = NodeSpec('heatmap_detector', 'cam3', {'camera': 3, 'data_root': 'true'})
+    cmd = node_command(spec, '/p.yaml', python='py')
+    assert cmd == ['py', '-m', 'mvpose_ros.nodes.heatmap_detector', '--ros-args', '-r', '__ns:=/cam3',
+                   '--params-file', '/p.yaml', '-p', 'camera:=3', '-p', 'data_root:="true"']
+    assert [n.parameters.get('data_root') for n in graph_nodes(2, 'b', 1.0, data_root='/d')] == ['/d'] * 4 + [None]
+
+
+def test_expected_connections_and_unknown_sections():
+    links = expected_connections(2)
+    assert links == {'/cam0/openpose': ('sub',), '/cam0/people2d': ('pub', 'sub'), '/cam1/openpose': ('sub',),
+                     '/cam1/people2d': ('pub', 'sub'), '/people/bundles': ('pub', 'sub'), '/skeletons': ('pub',)}
+    nodes = graph_nodes(5, 'b', 1.0)
+    params = {'bag_player': {}, '/**/heatmap_detector': {}, '/cam1/heatmap_detector': {}, '/**/heatmap_detectr': {},
+              'association': {}, 'bpsolver': {}, RUNNER_SECTION: {}}
+    assert unknown_nodes(params, nodes) == ['/**/heatmap_detectr', 'bpsolver']
+
+
+def _edited(tmp_path: Path, **changes) -> Path:
+    doc = yaml.safe_load(CONFIG.read_text())
+    section = doc[RUNNER_SECTION]['ros__parameters']
+    for key, value in changes.items():
+        if value is None:
+            del section[key]
+        else:
+            section[key] = value
+    path = tmp_path / 'edited.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+@pytest.mark.parametrize('changes, message', [
+    ({'timeout': '120'}, r'mvpose_graph\.timeout: expected double, got string'),
+    ({'timeout': 120}, r'mvpose_graph\.timeout: expected double, got integer 120'),
+    ({'cameras': 5.0}, r'mvpose_graph\.cameras: expected integer, got double'),
+    ({'cameras': True}, r'mvpose_graph\.cameras: expected integer, got bool'),
+    ({'dataset': 3}, r'mvpose_graph\.dataset: expected string'),
+    ({'predictions': None}, r'mvpose_graph\.predictions: missing'),
+    ({'timout': 1.0}, r'mvpose_graph\.timout: unknown setting'),
+    ({'rate': -1.0}, r'mvpose_graph: .*rate >= 0'),
+    ({'cameras': 0}, r'mvpose_graph: cameras must be >= 1'),
+])
+def test_bad_runner_settings_name_file_and_key(tmp_path, changes, message):
+    path = _edited(tmp_path, **changes)
+    with pytest.raises(ValueError, match=f'^{path}: {message}'):
+        graph_settings(path)
+
+
+@pytest.mark.parametrize('text, message', [
+    ('bag_player: [1, 2\n', 'not YAML'),
+    ('- a\n- b\n', 'expected a mapping of node names'),
+    ('bag_player:\n  rate: 1.0\n', 'bag_player: expected a mapping with ros__parameters'),
+    ('bag_player:\n  ros__parameters:\n    rate: 1.0\n', 'no mvpose_graph section'),
+])
+def test_malformed_files(tmp_path, text, message):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        graph_settings(path)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match=f'parameter file not found: {tmp_path}/none.yaml'):
+        graph_settings(tmp_path / 'none.yaml')
+
+
+def test_frame_ranges_and_latency():
+    assert frame_ranges([305, 300, 301, 302, 410, 303, 304, 412, 411, 500]) == '300-305, 410-412, 500'
+    assert frame_ranges([]) == 'none'
+    t0 = 1_795_000_000_000_000_000  # ns since the epoch: int64 keeps every nanosecond
+    lat = latency_ms({1: t0, 2: t0 + 40_000_000, 3: t0 + 80_000_000},
+                     {2: t0 + 290_000_000, 3: t0 + 580_000_001, 4: t0})
+    np.testing.assert_allclose(lat, [250.0, 500.000001], rtol=0, atol=1e-9)
+
+
+def test_report_counts_missing_duplicate_unexpected_and_bad_outputs():
+    ns = [f * 40_000_000 for f in range(300, 306)]  # frames 300..305 at 25 Hz
+    stray = 400 * 40_000_000
+    one = (np.array([0]), np.zeros((1, 14, 3)))
+    node = SimpleNamespace(
+        info_at={s: 1_000 + i for i, s in enumerate(ns)},
+        outputs={s: one for s in ns[:2] + ns[4:] + [stray]},  # 302 and 303 missing
+        output_at={s: 2_001_000 + i for i, s in enumerate(ns[:2] + ns[4:] + [stray])},
+        received=Counter({**{s: 1 for s in ns[:2] + ns[4:] + [stray]}, ns[1]: 3}),
+        bad=['12040000000 ns: person 0 has 13 joints'])
+    out = io.StringIO()
+    problems = report(Outcome(ns), node, RUNNER_DEFAULTS, out)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == 'frames in 6 (seen on /cam0/camera_info: 6), frames out 4'
+    assert lines[1] == 'missing 2: 302-303; duplicate 1: 301; unexpected 1: 400'
+    assert lines[2].startswith('latency /cam0/camera_info -> /skeletons: p50 2.0 ms')
+    assert lines[2].endswith('(4 frames)')
+    assert problems == ['2 of 6 input stamps got no /skeletons', '1 stamps got more than one /skeletons',
+                        '1 /skeletons stamps are not in the bag',
+                        '1 undecodable /skeletons messages, first: 12040000000 ns: person 0 has 13 joints']

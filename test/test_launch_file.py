@@ -1,0 +1,107 @@
+"""launch/shelf.launch.py, read with `ast` (launch and launch_ros are not on PyPI): it starts the
+runner's nodes with the same executables, names and namespaces, with the package's shelf.yaml
+and the bag and rate launch arguments."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from mvpose_ros.graph.config import graph_nodes, graph_settings
+
+REPO = Path(__file__).resolve().parents[1]
+LAUNCH = REPO / 'launch' / 'shelf.launch.py'
+
+
+def _calls(tree: ast.AST, name: str) -> list[ast.Call]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id == name]
+
+
+def _constants(tree: ast.Module) -> dict[str, object]:
+    """Module-level NAME = <literal> assignments."""
+    out = {}
+    for stmt in tree.body:
+        if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and isinstance(stmt.targets[0], ast.Name):
+            try:
+                out[stmt.targets[0].id] = ast.literal_eval(stmt.value)
+            except ValueError:
+                pass
+    return out
+
+
+def _evaluate(expr: ast.expr, names: dict[str, object]) -> object:
+    """A keyword's value, e.g. f'cam{c}', given the module constants and loop variables."""
+    return eval(compile(ast.Expression(expr), str(LAUNCH), 'eval'), {'__builtins__': {'range': range}}, names)
+
+
+def launched_nodes() -> list[dict[str, object]]:
+    """Keyword arguments of every Node(...) the file creates, comprehensions unrolled."""
+    tree = ast.parse(LAUNCH.read_text(), str(LAUNCH))
+    consts = _constants(tree)
+    in_comprehension = {}
+    for comp in ast.walk(tree):
+        if isinstance(comp, ast.ListComp) and isinstance(comp.elt, ast.Call):
+            (gen,) = comp.generators
+            in_comprehension[id(comp.elt)] = (gen.target.id, _evaluate(gen.iter, consts))
+    nodes = []
+    for call in _calls(tree, 'Node'):
+        var, values = in_comprehension.get(id(call), (None, [None]))
+        for value in values:
+            names = {**consts, var: value} if var else consts
+            nodes.append({kw.arg: (_evaluate(kw.value, names) if kw.arg in ('package', 'executable', 'name',
+                                                                             'namespace') else kw.value)
+                          for kw in call.keywords})
+    return nodes
+
+
+def test_same_nodes_as_the_runner():
+    nodes = launched_nodes()
+    settings = graph_settings(REPO / 'config' / 'shelf.yaml')
+    runner = graph_nodes(settings.cameras, settings.bag, settings.rate)
+    assert sorted((n['executable'], n.get('namespace', '')) for n in nodes) == \
+        sorted((s.executable, s.namespace) for s in runner)
+    assert all(n['package'] == 'mvpose_ros' and n['name'] == n['executable'] for n in nodes)
+
+
+def test_every_node_gets_the_shelf_params_and_its_overrides():
+    tree = ast.parse(LAUNCH.read_text())
+    # The file is found in the installed package's share folder.
+    (share,) = _calls(tree, 'get_package_share_directory')
+    assert _evaluate(share.args[0], _constants(tree)) == 'mvpose_ros'
+    assigned = {ast.unparse(n.targets[0]): ast.unparse(n.value) for n in ast.walk(tree) if isinstance(n, ast.Assign)}
+    assert assigned['config'] == "os.path.join(get_package_share_directory(PACKAGE), 'config')"
+    assert assigned['params'] == "os.path.join(config, 'shelf.yaml')"
+    # The same Fast DDS profile as mvpose-graph, set before any node starts.
+    (env,) = _calls(tree, 'SetEnvironmentVariable')
+    assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "
+                                "os.path.join(config, 'fastdds.xml'))")
+    actions = [ast.unparse(a) for a in _calls(tree, 'LaunchDescription')[0].args[0].elts]
+    assert actions.index(ast.unparse(env)) < actions.index('*detectors')
+    for node in launched_nodes():
+        params = node['parameters']
+        assert isinstance(params, ast.List) and ast.unparse(params.elts[0]) == 'params', node['executable']
+        overrides = {ast.literal_eval(k): ast.unparse(v) for d in params.elts[1:] for k, v in zip(d.keys, d.values)}
+        if node['executable'] == 'heatmap_detector':
+            assert overrides == {'camera': 'c'}
+        elif node['executable'] == 'bag_player':
+            assert overrides == {'bag': 'bag', 'rate': 'ParameterValue(rate, value_type=float)'}
+        else:
+            assert overrides == {}
+
+
+def test_launch_arguments_and_imports():
+    tree = ast.parse(LAUNCH.read_text())
+    args = {ast.literal_eval(c.args[0]): ast.literal_eval(next(k.value for k in c.keywords if k.arg == 'default_value'))
+            for c in _calls(tree, 'DeclareLaunchArgument')}
+    assert args == {'bag': 'bags/shelf', 'rate': '1.0'}
+    configs = {ast.unparse(n.targets[0]): ast.literal_eval(n.value.args[0]) for n in ast.walk(tree)
+               if isinstance(n, ast.Assign) and isinstance(n.value, ast.Call)
+               and ast.unparse(n.value.func) == 'LaunchConfiguration'}
+    assert configs == {'bag': 'bag', 'rate': 'rate'}
+    imported = {(n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
+    assert imported == {('ament_index_python.packages', 'get_package_share_directory'),
+                        ('launch', 'LaunchDescription'), ('launch.actions', 'DeclareLaunchArgument'),
+                        ('launch.actions', 'SetEnvironmentVariable'),
+                        ('launch.substitutions', 'LaunchConfiguration'), ('launch_ros.actions', 'Node'),
+                        ('launch_ros.parameter_descriptions', 'ParameterValue')}
+    (gen,) = [f for f in tree.body if isinstance(f, ast.FunctionDef)]
+    assert gen.name == 'generate_launch_description'
