@@ -242,6 +242,9 @@ def report(outcome: Outcome, node: RecorderNode, settings: GraphSettings, out: T
         p50, p95 = np.percentile(lat, [50, 95])
         print(f'latency {TIMING_TOPIC} -> {OUTPUT_TOPIC}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, '
               f'max {lat.max():.1f} ms ({lat.size} frames)', file=out)
+        # a graph that falls behind real time shows latency growing through the run
+        quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
+        print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
     problems = [f'{len(missing)} of {len(outcome.stamps)} input stamps got no {OUTPUT_TOPIC}'] if missing else []
     problems += [f'{len(duplicate)} stamps got more than one {OUTPUT_TOPIC}'] if duplicate else []
     problems += [f'{len(unexpected)} {OUTPUT_TOPIC} stamps are not in the bag'] if unexpected else []

@@ -19,7 +19,6 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import NameValidationException, ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -29,7 +28,7 @@ from sensor_msgs.msg import PointCloud2
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import (NS, Frame, InFlight, due_s, group_frames, header_stamp_ns, looped,
                                    with_header_stamp)
-from mvpose_ros.nodes.runtime import DATA_QOS, StartupError
+from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, run
 LOG_EVERY = 100  # frames between progress lines
 ACK_TIMEOUT_S = 5.0  # at the end, wait this long for subscribers to confirm receipt
 _POLL_S = 0.05  # subscriber polling period while waiting to start
@@ -211,21 +210,7 @@ class BagPlayerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = BagPlayerNode()
-        rclpy.spin_until_future_complete(node, node.finished)
-        code = node.finished.result() or 0
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if code:
-        raise SystemExit(code)
+    run(BagPlayerNode, args)
 
 
 if __name__ == '__main__':

@@ -62,14 +62,20 @@ def load_rig_parameter(values: dict[str, Any]) -> list[Camera]:
 
 
 def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
-    """rclpy main: spin the node until Ctrl-C or shutdown; a StartupError exits with code 2
+    """rclpy main: spin the node until Ctrl-C or shutdown, or, for a node with a `finished`
+    future, until it completes (its result is the exit code); a StartupError exits with code 2
     after one fatal log line, not a traceback."""
     rclpy.init(args=args)
     node = None
     code = 0
     try:
         node = factory()
-        rclpy.spin(node)
+        finished = getattr(node, 'finished', None)
+        if finished is None:
+            rclpy.spin(node)
+        else:
+            rclpy.spin_until_future_complete(node, finished)
+            code = finished.result() or 0
     except StartupError as exc:
         rclpy.logging.get_logger('mvpose_ros').fatal(str(exc))
         code = 2
