@@ -1,8 +1,7 @@
-"""The 3D stage: from each camera's 2D people of one instant to decoded 3D skeletons.
-
-Association (tracking, cross-view matching, ids), hypothesis sampling with the data term, and
-sliding-window BP, with the time each step takes. The ROS nodes split these same calls across
-processes; the offline evaluator calls them in one.
+"""The solver half of the 3D stage: from associated people (an id and its views) to decoded
+3D skeletons: hypothesis sampling with the data term, sliding-window BP and the head model, with
+the time each step takes. The bp_solver node runs it; the offline evaluator calls the same
+person_frame and window (core.offline), after core.association.
 """
 from __future__ import annotations
 
