@@ -19,7 +19,7 @@ BUNDLE_KEYS = [('person', '<u4'), ('camera', '<u2')]
 
 def people_dtype(n_cells: int, keys: Sequence[tuple[str, str]] = ()) -> np.dtype:
     """Record dtype of encoding B (after keys, for C), heatmap count n_cells = 16 * h * w."""
-    return np.dtype([*keys, ('keypoints', '<f4', (3 * J,)), ('origin', '<f4', (2,)),
+    return np.dtype([*keys, ('keypoints', '<f4', (3 * J,)), ('origin', '<f4', (2 * J,)),
                      ('stride', '<f4'), ('grid', '<u2', (2,)), ('heatmap', 'u1', (n_cells,))])
 
 
@@ -31,7 +31,7 @@ def quantise(maps: np.ndarray) -> np.ndarray:
 def _check_people(keypoints: np.ndarray, origin: np.ndarray, stride: np.ndarray,
                   label: str) -> None:
     """Raise ValueError for the first invalid person: keypoints (P, 16, 3) with a finite score,
-    u, v finite or (where the score is 0) NaN; origin (P, 2) finite; stride (P,) finite > 0."""
+    u, v finite or (where the score is 0) NaN; origin (P, 2 * 16) finite; stride (P,) finite > 0."""
     uv, score = keypoints[..., :2], keypoints[..., 2]
     checks = (
         (~np.isfinite(score), 'keypoint score is not finite'),
@@ -68,13 +68,13 @@ def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
                              f'{UINT16_MAX}, got {m.shape}')
         if not np.isfinite(m).all():
             raise ValueError(f'{label} {p} heatmap maps: non-finite values')
-        if np.shape(person.heatmap.origin) != (2,):
-            raise ValueError(f'{label} {p} heatmap origin: expected (2,), got '
+        if np.shape(person.heatmap.origin) != (J, 2):
+            raise ValueError(f'{label} {p} heatmap origin: expected ({J}, 2), got '
                              f'{np.shape(person.heatmap.origin)}')
         maps.append(m)
     n = len(people)
     keypoints = np.array([p.keypoints for p in people], dtype=np.float32).reshape(n, J, 3)
-    origin = np.array([p.heatmap.origin for p in people], dtype=np.float32).reshape(n, 2)
+    origin = np.array([p.heatmap.origin for p in people], dtype=np.float32).reshape(n, 2 * J)
     stride = np.array([p.heatmap.stride for p in people], dtype=np.float32)
     _check_people(keypoints, origin, stride, label)
     h, w = np.max([m.shape[1:] for m in maps], axis=0) if maps else (0, 0)
@@ -127,7 +127,7 @@ def _people_from_records(records: np.ndarray) -> list[Person2D]:
     h, w = (int(x) for x in records['grid'][0])
     maps = records['heatmap'].reshape(n, J, h, w).astype(np.float32) / np.float32(255)
     keypoints = keypoints.astype(np.float64)
-    origin = records['origin'].astype(np.float64)
+    origin = records['origin'].astype(np.float64).reshape(n, J, 2)
     return [Person2D(keypoints=keypoints[p],
                      heatmap=PersonHeatmap(maps=maps[p], origin=origin[p],
                                            stride=float(records['stride'][p])))

@@ -6,21 +6,26 @@ import pytest
 
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
 
-BOX = np.array([100.0, 50.0, 300.0, 400.0])
 STRIDE, SIGMA = 4.0, 6.0
 
 
 def _single(u: float, v: float, weight: float = 1.0, sigma: float = SIGMA) -> PersonHeatmap:
-    return render_heatmap([np.array([[u, v, weight]])], BOX, STRIDE, sigma)
+    return render_heatmap([np.array([[u, v, weight]])], STRIDE, sigma)
 
 
-def test_grid_covers_box_plus_margin():
-    hm = _single(200, 200)
+def test_each_map_covers_its_own_centres_plus_margin():
+    centres = [np.array([[200.0, 200.0, 1.0]]), np.array([[120.0, 390.0, 0.5], [150.0, 330.0, 0.5]])]
+    hm = render_heatmap(centres, STRIDE, SIGMA)
     margin = MARGIN_SIGMAS * SIGMA
-    np.testing.assert_allclose(hm.origin, BOX[:2] - margin)
+    # on the image's lattice of STRIDE px, at most one cell before centre - margin
+    low = np.array([[200.0, 200.0], [120.0, 330.0]]) - margin
+    assert np.all(hm.origin <= low) and np.all(hm.origin > low - STRIDE)
+    np.testing.assert_array_equal(hm.origin % STRIDE, 0.0)
     _, h, w = hm.maps.shape
-    last = hm.origin + STRIDE * np.array([w - 1, h - 1])
-    assert np.all(last >= BOX[2:] + margin) and np.all(last < BOX[2:] + margin + STRIDE)
+    # the grid (common to both maps) is just big enough for the larger spread, map 1's
+    last = hm.origin[1] + STRIDE * np.array([w - 1, h - 1])
+    assert np.all(last >= np.array([150.0, 390.0]) + margin)
+    assert np.all(last < np.array([150.0, 390.0]) + margin + STRIDE)
     assert hm.maps.dtype == np.float32
     assert hm.maps.min() >= 0 and hm.maps.max() <= 1
 
@@ -36,25 +41,31 @@ def test_sharp_peak_is_found(u, v):
 
 def test_lookup_at_centre_and_outside():
     centres = [np.array([[200.0, 200.0, 0.8]]), np.array([[151.3, 333.7, 0.6]])]
-    hm = render_heatmap(centres, BOX, STRIDE, SIGMA)
+    hm = render_heatmap(centres, STRIDE, SIGMA)
     at = hm.lookup(np.array([[[200.0, 200.0]], [[151.3, 333.7]]]))
     np.testing.assert_allclose(at[:, 0], [0.8, 0.6], rtol=0.1)
-    # beyond the grid (box + margin) and NaN pixels read 0; far inside the box too
-    probe = np.array([[[50.0, 200.0], [200.0, 500.0], [np.nan, 200.0], [280.0, 60.0]]] * 2)
+    # beyond a map's grid, NaN pixels, and the other joint's evidence read 0
+    probe = np.array([[[50.0, 200.0], [200.0, 500.0], [np.nan, 200.0], [151.3, 333.7]],
+                      [[50.0, 200.0], [200.0, 500.0], [np.nan, 200.0], [200.0, 200.0]]])
     np.testing.assert_array_equal(hm.lookup(probe), 0.0)
-    # bilinear: exact at cell centres
-    r, c = 40, 20
-    cell = hm.origin + STRIDE * np.array([c, r])
-    np.testing.assert_allclose(hm.lookup(np.broadcast_to(cell, (2, 1, 2)))[:, 0],
-                               hm.maps[:, r, c], rtol=1e-6)
+    # bilinear: exact at cell centres, each map on its own grid
+    r, c = 3, 5
+    cell = hm.origin + STRIDE * np.array([c, r])  # (2, 2)
+    np.testing.assert_allclose(hm.lookup(cell[:, None])[:, 0], hm.maps[:, r, c], rtol=1e-6)
 
 
 def test_max_combination_keeps_each_weight():
-    # centres on cell centres (origin is BOX[:2] - 18 px), where the map is exact
-    hm = render_heatmap([np.array([[202.0, 200.0, 0.5], [202.0, 200.0, 0.3],
-                                   [202.0, 260.0, 1.7]])], BOX, STRIDE, SIGMA)
-    got = hm.lookup(np.array([[[202.0, 200.0], [202.0, 260.0]]]))[0]
-    np.testing.assert_allclose(got, [0.5, 1.0], rtol=1e-4)  # max, not sum; weights clipped to 1
+    rows = np.array([[202.0, 200.0, 0.5], [202.0, 200.0, 0.3], [202.0, 260.0, 1.7]])
+    hm = render_heatmap([rows], STRIDE, SIGMA)
+    # at cell centres the map is exactly the largest weighted Gaussian (weights clipped to 1)
+    r, c = np.mgrid[:hm.maps.shape[1], :hm.maps.shape[2]]
+    cells = hm.origin[0] + STRIDE * np.stack([c, r], axis=-1).reshape(-1, 2)
+    d2 = ((cells[:, None] - rows[:, :2]) ** 2).sum(-1)
+    inside = (np.abs(cells[:, None] - rows[:, :2]) <= MARGIN_SIGMAS * SIGMA).all(-1)
+    expected = np.max(np.where(inside, np.minimum(rows[:, 2], 1) * np.exp(-d2 / (2 * SIGMA ** 2)), 0), axis=1)
+    np.testing.assert_allclose(hm.lookup(cells[None])[0], expected, rtol=1e-5, atol=1e-7)
+    assert 0.45 < hm.lookup(np.array([[[202.0, 200.0]]]))[0, 0] <= 0.5  # max, not sum
+    assert 0.9 < hm.lookup(np.array([[[202.0, 260.0]]]))[0, 0] <= 1.0  # 2 px off the cell centre
 
 
 def test_sample_single_gaussian_moments():
@@ -70,7 +81,7 @@ def test_sample_single_gaussian_moments():
 
 def test_sample_empty_joints_are_nan():
     hm = render_heatmap([np.zeros((0, 3)), np.array([[200.0, 200.0, 1.0]]),
-                         np.array([[200.0, 200.0, 0.0]])], BOX, STRIDE, SIGMA)
+                         np.array([[200.0, 200.0, 0.0]])], STRIDE, SIGMA)
     xy = hm.sample(np.random.default_rng(1), 100)
     assert np.all(np.isnan(xy[0])) and np.all(np.isnan(xy[2]))
     assert np.all(np.isfinite(xy[1]))
@@ -81,7 +92,7 @@ def test_sample_empty_joints_are_nan():
 def test_sample_counts_follow_weights():
     weights = np.array([0.9, 0.3])
     centres = np.array([[150.0, 100.0], [250.0, 350.0]])
-    hm = render_heatmap([np.c_[centres, weights]] * 3, BOX, STRIDE, SIGMA)
+    hm = render_heatmap([np.c_[centres, weights]] * 3, STRIDE, SIGMA)
     n = 20000
     xy = hm.sample(np.random.default_rng(2), n)
     assert xy.shape == (3, n, 2)

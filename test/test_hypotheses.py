@@ -37,9 +37,7 @@ def _render(rig, points: np.ndarray, sigma: float = SIGMA, stride: float = STRID
     for cam in rig:
         uv = cam.project(points)
         assert np.all((uv >= 0) & (uv < (cam.width, cam.height)))
-        box = np.concatenate([uv.min(axis=0), uv.max(axis=0)])
-        views.append((cam, render_heatmap([np.array([[u, v, 1.0]]) for u, v in uv], box,
-                                          stride, sigma)))
+        views.append((cam, render_heatmap([np.array([[u, v, 1.0]]) for u, v in uv], stride, sigma)))
     return views
 
 

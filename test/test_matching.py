@@ -51,8 +51,7 @@ def _skeleton(cam: Camera, pose: np.ndarray, rng: np.random.Generator) -> Person
     inside = np.all((uv >= 0) & (uv < (cam.width, cam.height)), axis=1)
     kp = np.column_stack([uv, np.where(inside, 0.9, 0.0)])
     kp[~inside, :2] = np.nan
-    box = np.concatenate([np.nanmin(kp[:, :2], axis=0), np.nanmax(kp[:, :2], axis=0)])
-    heatmap = render_heatmap([kp[j:j + 1] for j in range(NUM_INFERENCE_JOINTS)], box, 4.0, 5.0)
+    heatmap = render_heatmap([kp[j:j + 1] for j in range(NUM_INFERENCE_JOINTS)], 4.0, 5.0)
     return Person2D(kp, heatmap)
 
 

@@ -166,7 +166,7 @@ def test_people_decoder_on_plausible_records(data):
     values = st.one_of(special, floats32)
     kp = data.draw(hnp.arrays(np.float32, (n, 16, 3), elements=st.one_of(special, special, floats32)))
     records['keypoints'] = kp.reshape(n, 48)
-    records['origin'] = data.draw(hnp.arrays(np.float32, (n, 2), elements=values))
+    records['origin'] = data.draw(hnp.arrays(np.float32, (n, 32), elements=values))
     records['stride'] = data.draw(hnp.arrays(np.float32, n, elements=values))
     records['heatmap'] = data.draw(hnp.arrays(np.uint8, records['heatmap'].shape))
     people = _decodes_or_value_error(msg_to_people, to_cloud(records, HEADER))
@@ -194,7 +194,7 @@ def people(draw, max_people: int = 3):
         kp = draw(hnp.arrays(np.float64, (16, 3), elements=st.floats(0, 2000, width=32)))
         kp[draw(hnp.arrays(bool, 16)), :] = (np.nan, np.nan, 0.0)
         maps = draw(hnp.arrays(np.float32, (16, h, w), elements=st.floats(-1, 2, width=32)))
-        origin = draw(hnp.arrays(np.float64, 2, elements=st.floats(-1e3, 1e3, width=32)))
+        origin = draw(hnp.arrays(np.float64, (16, 2), elements=st.floats(-1e3, 1e3, width=32)))
         stride = draw(st.floats(0.5, 16, width=32))
         out.append(Person2D(kp, PersonHeatmap(maps, origin, stride)))
     return out

@@ -25,7 +25,7 @@ def _person(seed: int, h: int, w: int) -> Person2D:
     kp = np.column_stack([rng.uniform(0, 1000, (16, 2)), rng.uniform(0.05, 1, 16)])
     kp[rng.random(16) < 0.3] = (np.nan, np.nan, 0.0)
     maps = rng.uniform(-0.2, 1.2, (16, h, w)).astype(np.float32)  # out of [0, 1]: clipped
-    return Person2D(kp, PersonHeatmap(maps, rng.uniform(-50, 900, 2), float(rng.uniform(2, 8))))
+    return Person2D(kp, PersonHeatmap(maps, rng.uniform(-50, 900, (16, 2)), float(rng.uniform(2, 8))))
 
 
 def _assert_person(person: Person2D, back: Person2D, grid: tuple[int, int]):
@@ -55,8 +55,8 @@ def test_people_round_trip(n):
     grid = (30, 41) if n > 1 else (30, 20) if n else (0, 0)
     assert msg.width == n and msg.header.frame_id == 'cam1'
     assert [f.name for f in msg.fields] == ['keypoints', 'origin', 'stride', 'grid', 'heatmap']
-    assert [f.count for f in msg.fields] == [48, 2, 1, 2, 16 * grid[0] * grid[1]]
-    assert msg.point_step == 4 * 48 + 8 + 4 + 4 + 16 * grid[0] * grid[1]
+    assert [f.count for f in msg.fields] == [48, 32, 1, 2, 16 * grid[0] * grid[1]]
+    assert msg.point_step == 4 * 48 + 4 * 32 + 4 + 4 + 16 * grid[0] * grid[1]
     back = msg_to_people(deserialize_message(serialize_message(msg), PointCloud2))
     assert len(back) == n
     for person, b in zip(people, back):

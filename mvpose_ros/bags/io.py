@@ -39,7 +39,7 @@ OFFERED_QOS = Qos(QosHistory.KEEP_LAST, QOS_DEPTH, QosReliability.RELIABLE, QosD
 
 # Damage inside a bag surfaces from rosbags' parsers, sqlite and the decompressors under many types.
 _DAMAGE = (ReaderError, ZstdError, EOFError, ValueError, KeyError, IndexError, TypeError,
-           struct.error, sqlite3.Error, OSError, RuntimeError)
+           struct.error, sqlite3.Error, OSError, RuntimeError, OverflowError, MemoryError)
 
 
 @dataclass(frozen=True)

@@ -36,19 +36,27 @@ class PersonObservation:
     centre: np.ndarray
 
 
-def rough_centre(cameras: Sequence[Camera], views: dict[int, Person2D], min_score: float) -> np.ndarray:
-    """Mean of the joints triangulated from the keypoints of every view (3,), metres."""
-    cams = list(views)
-    kp = np.stack([views[c].keypoints for c in cams])  # (V, J, 3)
-    rays = [cameras[c].rays(views[c].keypoints[:, :2]) for c in cams]
-    origins = np.stack([r[0] for r in rays], axis=1)  # (J, V, 3)
-    dirs = np.stack([r[1] for r in rays], axis=1)
-    seen = (kp[..., 2] > min_score).T  # (J, V)
-    twice = seen.sum(axis=1) >= 2
-    if not twice.any():
-        return np.full(3, np.nan)
-    points = closest_point_to_rays(origins[twice], dirs[twice], seen[twice])
-    return np.nanmean(points, axis=0)
+def rough_centres(cameras: Sequence[Camera], people: Sequence[dict[int, Person2D]], min_score: float) -> np.ndarray:
+    """(P, 3) per person (camera index -> skeleton): the mean of the joints triangulated from the
+    keypoints of every view, metres; NaN where no joint is seen twice. All people in one call."""
+    width = max((len(v) for v in people), default=0)
+    if width == 0:
+        return np.full((len(people), 3), np.nan)
+    n_j = len(next(iter(people[0].values())).keypoints)
+    origins = np.zeros((len(people), n_j, width, 3))
+    dirs = np.zeros((len(people), n_j, width, 3))
+    seen = np.zeros((len(people), n_j, width), dtype=bool)
+    for p, views in enumerate(people):
+        for k, (c, person) in enumerate(views.items()):
+            origins[p, :, k] = cameras[c].centre
+            dirs[p, :, k] = cameras[c].rays(person.keypoints[:, :2])[1]
+            seen[p, :, k] = person.keypoints[:, 2] > min_score
+    twice = seen.sum(axis=-1) >= 2  # (P, J)
+    points = closest_point_to_rays(origins, dirs, seen)  # (P, J, 3)
+    points[~twice] = np.nan
+    with np.errstate(invalid='ignore'):
+        total = np.where(twice[..., None], points, 0.0).sum(axis=1)
+        return total / np.where(twice.any(axis=1), twice.sum(axis=1), np.nan)[:, None]
 
 
 class Associator:
@@ -68,7 +76,7 @@ class Associator:
                 tracker.update(skeletons)
         clusters = cluster_views(self.cameras, present, self.config.matching)
         views = [{c: present[c][i] for c, i in cl.items()} for cl in clusters]
-        centres = np.array([rough_centre(self.cameras, v, self.config.matching.min_score) for v in views])
+        centres = rough_centres(self.cameras, views, self.config.matching.min_score)
         keep = [i for i in range(len(views)) if np.all(np.isfinite(centres[i]))]
         views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)
         members = [{(c, p.track_id) for c, p in v.items()} for v in views]

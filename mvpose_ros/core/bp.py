@@ -48,16 +48,14 @@ class Messages:
         start uniform."""
 
         def move(a: np.ndarray, axis: int) -> np.ndarray:
-            kept = np.delete(a, np.s_[:drop], axis=axis)
-            pad = [(0, 0)] * a.ndim
-            pad[axis] = (0, add)
-            return np.pad(kept, pad)
+            kept = a[(slice(None),) * axis + (slice(drop, None),)]
+            if not add:
+                return kept
+            shape = list(a.shape)
+            shape[axis] = add
+            return np.concatenate([kept, np.zeros(shape, dtype=a.dtype)], axis=axis)
 
         return Messages(move(self.temporal, 1), [move(p, 0) for p in self.pairwise])
-
-
-def _log_normalise(x: np.ndarray) -> np.ndarray:
-    return x - np.logaddexp.reduce(x, axis=-1, keepdims=True)
 
 
 def _softmax(x: np.ndarray) -> np.ndarray:
@@ -66,7 +64,10 @@ def _softmax(x: np.ndarray) -> np.ndarray:
 
 
 def _log_message(m: np.ndarray) -> np.ndarray:
-    return _log_normalise(np.log(np.maximum(m, np.finfo(np.float64).tiny)))
+    """Log of a non-negative message normalised to sum to one (in the linear domain: messages
+    are products of normalised beliefs and tables, so the sum neither over- nor underflows)."""
+    tiny = np.finfo(np.float64).tiny
+    return np.log(np.maximum(m / np.maximum(m.sum(axis=-1, keepdims=True), tiny), tiny))
 
 
 @dataclass
@@ -170,9 +171,10 @@ def _log(data: np.ndarray) -> np.ndarray:
 def _update_temporal(t: int, table: np.ndarray, total: np.ndarray, tm: np.ndarray) -> None:
     """Recompute the three outgoing messages of the temporal factor centred at frame t."""
     j, ma, mc, mb = table.shape
-    n_prev = _softmax(total[t - 1] - tm[0, t])
-    n_cur = _softmax(total[t] - tm[1, t])
-    n_next = _softmax(total[t + 1] - tm[2, t])
+    # beliefs in the table's precision (float32): mixing would convert the M^3 table every call
+    n_prev = _softmax(total[t - 1] - tm[0, t]).astype(table.dtype)
+    n_cur = _softmax(total[t] - tm[1, t]).astype(table.dtype)
+    n_next = _softmax(total[t + 1] - tm[2, t]).astype(table.dtype)
     flat = table.reshape(j, ma * mc, mb)
     pair = (n_prev[:, :, None] * n_next[:, None, :]).reshape(j, 1, ma * mc)
     to_cur = (pair @ flat)[:, 0]
@@ -188,8 +190,8 @@ def _update_temporal(t: int, table: np.ndarray, total: np.ndarray, tm: np.ndarra
 def _update_pairwise(group: PairwiseGroup, total: np.ndarray, pm: np.ndarray) -> None:
     """Flooding update of every factor of one pairwise type, all frames at once."""
     i, k = group.edges[:, 0], group.edges[:, 1]
-    n_i = _softmax(total[:, i] - pm[:, :, 0])
-    n_k = _softmax(total[:, k] - pm[:, :, 1])
+    n_i = _softmax(total[:, i] - pm[:, :, 0]).astype(group.tables.dtype)
+    n_k = _softmax(total[:, k] - pm[:, :, 1]).astype(group.tables.dtype)
     to_i = _log_message((group.tables @ n_k[..., None])[..., 0])
     to_k = _log_message((n_i[..., None, :] @ group.tables)[..., 0, :])
     for e, (a, b) in enumerate(group.edges):

@@ -44,6 +44,12 @@ class Camera:
             object.__setattr__(self, field, value)
         object.__setattr__(self, 'width', int(self.width))
         object.__setattr__(self, 'height', int(self.height))
+        # derived once: rays() and project() run for every skeleton of every frame
+        object.__setattr__(self, '_k_inv', np.linalg.inv(self.K[:2, :2]).T)
+        object.__setattr__(self, '_distorted', bool(np.any(self.dist != 0)))
+        centre = -self.R.T @ self.t
+        centre.flags.writeable = False
+        object.__setattr__(self, '_centre', centre)
 
     @classmethod
     def from_projection(cls, name: str, P: np.ndarray, width: int, height: int) -> Camera:
@@ -67,12 +73,12 @@ class Camera:
     @property
     def centre(self) -> np.ndarray:
         """(3,) world position of the optical centre."""
-        return -self.R.T @ self.t
+        return self._centre
 
     @property
     def has_distortion(self) -> bool:
         """Any non-zero distortion coefficient (most rigs have none)."""
-        return bool(np.any(self.dist != 0))
+        return self._distorted
 
     def project(self, X: np.ndarray) -> np.ndarray:
         """(..., 3) world points -> (..., 2) pixels; NaN for points at or behind the camera."""
@@ -87,7 +93,7 @@ class Camera:
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 2) pixels -> world rays: origins (..., 3) (the centre), unit dirs (..., 3)."""
         uv = np.asarray(uv, dtype=float)
-        xy = (uv - self.K[:2, 2]) @ np.linalg.inv(self.K[:2, :2]).T
+        xy = (uv - self.K[:2, 2]) @ self._k_inv
         if self.has_distortion:
             xy = self._undistort(xy)
         d_cam = np.concatenate([xy, np.ones_like(xy[..., :1])], axis=-1)
@@ -203,20 +209,31 @@ def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.nda
     o = np.asarray(origins, dtype=float)
     d = np.asarray(dirs, dtype=float)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    # Each line contributes the projector onto its normal plane: A = sum(I - d d^T), b = sum(.. o).
-    proj = np.eye(3) - d[..., :, None] * d[..., None, :]
-    if weights is not None:
-        keep = np.asarray(weights, dtype=float)[..., None, None]
-        proj = np.where(keep > 0, proj * keep, 0.0)  # padded lines may hold NaN
-        o = np.where(keep[..., 0] > 0, o, 0.0)
-    A = proj.sum(axis=-3)
-    b = (proj @ o[..., None]).sum(axis=-3)
+    w = np.ones(d.shape[:-1]) if weights is None else np.broadcast_to(np.asarray(weights, dtype=float), d.shape[:-1])
+    keep = w > 0
+    w = np.where(keep, w, 0.0)[..., None]
+    d = np.where(keep[..., None], d, 0.0)  # padded lines may hold NaN
+    o = np.where(keep[..., None], o, 0.0)
+    # Each line contributes the projector onto its normal plane: A = sum w (I - d d^T),
+    # b = sum w (o - d (d . o)). A is symmetric: its six entries, then Cramer's rule.
+    wd = w * d
+    w_sum = w[..., 0].sum(axis=-1)
+    dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
+    wx, wy, wz = wd[..., 0], wd[..., 1], wd[..., 2]
+    a00, a11, a22 = w_sum - (wx * dx).sum(-1), w_sum - (wy * dy).sum(-1), w_sum - (wz * dz).sum(-1)
+    a01, a02, a12 = -(wx * dy).sum(-1), -(wx * dz).sum(-1), -(wy * dz).sum(-1)
+    along = (d * o).sum(axis=-1)[..., None]  # (..., K, 1)
+    b = (w * o - wd * along).sum(axis=-2)
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
     n_lines = d.shape[-2]
-    ok = np.isfinite(A).all(axis=(-2, -1)) & np.isfinite(b).all(axis=(-2, -1))
-    ok &= np.abs(np.linalg.det(np.where(ok[..., None, None], A, 0.0))) > 1e-12 * n_lines ** 3
-    X = np.linalg.solve(np.where(ok[..., None, None], A, np.eye(3)),
-                        np.where(ok[..., None, None], b, 0.0))[..., 0]
-    return np.where(ok[..., None], X, np.nan)
+    ok = np.isfinite(det) & np.isfinite(b).all(axis=-1) & (np.abs(det) > 1e-12 * n_lines ** 3)
+    det = np.where(ok, det, 1.0)
+    x = np.stack([c00 * b[..., 0] + c01 * b[..., 1] + c02 * b[..., 2],
+                  c01 * b[..., 0] + c11 * b[..., 1] + c12 * b[..., 2],
+                  c02 * b[..., 0] + c12 * b[..., 1] + c22 * b[..., 2]], axis=-1) / det[..., None]
+    return np.where(ok[..., None], x, np.nan)
 
 
 def ray_ray_distance(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.camera import Camera
-from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 TEMPORAL_FORMS = ('laplace', 'gauss')
 
@@ -50,17 +50,31 @@ def data_term(hypotheses: np.ndarray, views: Sequence[tuple[Camera, PersonHeatma
 
     hypotheses: (J, M, 3) world points. views: the cameras that see this person, each with the
     person's heatmaps in that camera. Returns (J, M), each row summing to one (uniform where no
-    view has any evidence).
+    view has any evidence). data_terms for one person.
     """
-    total = np.zeros(hypotheses.shape[:2], dtype=np.float64)
-    for camera, heatmap in views:
-        uv = camera.project(hypotheses)
-        values = heatmap.lookup(np.nan_to_num(uv, nan=-1e9))
-        total += np.where(np.isfinite(uv[..., 0]), values, 0.0)
-    total /= max(len(views), 1)
-    rows = total.sum(axis=1, keepdims=True)
-    uniform = np.full_like(total, 1.0 / total.shape[1])
-    return np.where(rows > 0, total / np.where(rows > 0, rows, 1.0), uniform)
+    return data_terms([hypotheses], [views], HeatmapStack.of([hm for _, hm in views]))[0]
+
+
+def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple[Camera, PersonHeatmap]]],
+               stack: HeatmapStack) -> list[np.ndarray]:
+    """data_term of every person of a frame, batched: hypotheses[p] (J, M, 3) of person p seen by
+    views people[p]; stack: every view's heatmap, person after person (as for sampling)."""
+    if not people:
+        return []
+    cameras = [cam for views in people for cam, _ in views]
+    owner = np.repeat(np.arange(len(people)), [len(v) for v in people])
+    uv = np.empty(stack.start.shape + (hypotheses[0].shape[1], 2))  # (V, J, M, 2)
+    for cam in {id(c): c for c in cameras}.values():
+        idx = [v for v, c in enumerate(cameras) if c is cam]
+        uv[idx] = cam.project(np.stack([hypotheses[p] for p in owner[idx]]))
+    values = stack.lookup(uv)  # (V, J, M); NaN projections (behind a camera) give 0
+    total = np.zeros((len(people),) + values.shape[1:])
+    np.add.at(total, owner, values)
+    total /= np.maximum(np.bincount(owner, minlength=len(people)), 1)[:, None, None]
+    rows = total.sum(axis=-1, keepdims=True)
+    uniform = np.full_like(total, 1.0 / total.shape[-1])
+    out = np.where(rows > 0, total / np.where(rows > 0, rows, 1.0), uniform)
+    return list(out)
 
 
 def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: FactorConfig) -> np.ndarray:

@@ -1,115 +1,189 @@
-"""Per-person joint heatmaps H_{c,i}: a grid of cells over one person's image region, with
-bilinear look-up (the CRF's data term) and sampling as a pmf (the 3D hypotheses)."""
+"""Per-person joint heatmaps H_{c,i}: per joint a grid of cells over the image region holding
+that joint's evidence, with bilinear look-up (the CRF's data term) and sampling as a pmf (the
+3D hypotheses)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
-MARGIN_SIGMAS = 3.0  # the rendered grid extends this many sigmas beyond the box
+MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
 @dataclass
 class PersonHeatmap:
-    """J heatmaps on a common grid: cell [r, c] is centred at pixel origin + stride * (c, r)."""
+    """J heatmaps of h x w cells each: cell [r, c] of map j is centred at pixel
+    origin[j] + stride * (c, r). Each map has its own origin, so that it covers only the region
+    of its joint (a person-sized grid per joint is ~99% zeros, and every step downstream, the
+    wire included, pays for its size)."""
 
     maps: np.ndarray  # (J, h, w) float32 in [0, 1]
-    origin: np.ndarray  # (2,) pixel (u, v) of the centre of cell [0, 0]
+    origin: np.ndarray  # (J, 2) pixel (u, v) of the centre of cell [0, 0] of each map; (2,) = shared
     stride: float  # pixels per cell
 
-    def _cells(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fractional (column, row) grid coordinates of pixels uv (..., 2)."""
-        cr = (np.asarray(uv, dtype=np.float64) - self.origin) / self.stride
-        return cr[..., 0], cr[..., 1]
+    def __post_init__(self) -> None:
+        self.origin = np.broadcast_to(np.asarray(self.origin, dtype=np.float64), (len(self.maps), 2))
 
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Bilinear value (J, N) of joint j's map at pixel uv[j, n] (uv: (J, N, 2)); 0 outside
         the grid of cell centres and for NaN pixels."""
-        n_j, h, w = self.maps.shape
-        c, r = self._cells(uv)
-        inside = (c >= 0) & (c <= w - 1) & (r >= 0) & (r <= h - 1)  # False for NaN
-        c = np.where(inside, c, 0.0)
-        r = np.where(inside, r, 0.0)
-        c0 = np.minimum(np.floor(c).astype(np.intp), max(w - 2, 0))
-        r0 = np.minimum(np.floor(r).astype(np.intp), max(h - 2, 0))
-        c1 = np.minimum(c0 + 1, w - 1)
-        r1 = np.minimum(r0 + 1, h - 1)
-        fc, fr = c - c0, r - r0
-        j = np.arange(n_j)[:, None]
-        m = self.maps
-        top = m[j, r0, c0] * (1 - fc) + m[j, r0, c1] * fc
-        bottom = m[j, r1, c0] * (1 - fc) + m[j, r1, c1] * fc
-        return np.where(inside, top * (1 - fr) + bottom * fr, 0.0)
+        return HeatmapStack.of([self]).lookup(np.asarray(uv)[None])[0]
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """Draw n pixels per joint (J, n, 2) with each map as a pmf over its cells (probability
         proportional to the value), jittered uniformly within the cell; NaN rows for empty maps."""
-        n_j, h, w = self.maps.shape
-        flat = self.maps.reshape(n_j, -1)
-        # Only non-zero cells can be drawn, and maps are mostly zero: one CDF over the non-zero
-        # cells of every joint (in joint order), each joint drawing inside its own stretch.
-        joint, cell = np.nonzero(flat)
-        if len(cell) == 0:
-            return np.full((n_j, n, 2), np.nan)
-        cum = np.cumsum(flat[joint, cell], dtype=np.float64)
-        first = np.searchsorted(joint, np.arange(n_j))
-        end = np.searchsorted(joint, np.arange(n_j), side='right')
-        before = np.concatenate([[0.0], cum])[first]  # (J,) mass of the joints before j
-        total = np.concatenate([[0.0], cum])[end] - before
-        q = before[:, None] + rng.random((n_j, n)) * total[:, None]
-        idx = np.searchsorted(cum, q, side='right')
-        empty = end == first
-        # rounding can step past a joint's stretch; empty joints point anywhere (NaN below)
-        idx = np.minimum(np.clip(idx, first[:, None], np.maximum(end - 1, first)[:, None]), len(cell) - 1)
-        row, col = np.divmod(cell[idx], w)
-        jitter = rng.random((n_j, n, 2)) - 0.5
-        uv = self.origin + self.stride * (np.stack([col, row], axis=-1) + jitter)
-        uv[empty] = np.nan
-        return uv
+        n_j = len(self.maps)
+        u = rng.random((1, n_j, n))
+        return HeatmapStack.of([self]).sample(u, rng.random((1, n_j, n, 2)))[0]
 
     def peak(self) -> np.ndarray:
         """(J, 3): pixel u, v of the centre of each map's maximal cell and the maximum; an empty
         map gives (NaN, NaN, 0), the keypoint convention for a missing joint."""
-        n_j, h, w = self.maps.shape
-        flat = self.maps.reshape(n_j, -1)
-        best = np.argmax(flat, axis=1)
-        row, col = np.divmod(best, w)
-        value = flat[np.arange(n_j), best].astype(np.float64)
-        uv = self.origin + self.stride * np.stack([col, row], axis=-1)
-        uv[value <= 0] = np.nan
-        return np.concatenate([uv, value[:, None]], axis=1)
+        return HeatmapStack.of([self]).peak()[0]
 
 
-def render_heatmap(centres: list[np.ndarray], box: np.ndarray, stride: float,
-                   sigma: float) -> PersonHeatmap:
-    """Render J maps: map j is the pointwise max of isotropic Gaussians (std sigma px) with peak
-    weight (clipped to 1) at each row [u, v, weight] of centres[j] ((n_j, 3), n_j may be 0; rows
-    with NaN or weight <= 0 are ignored). Each Gaussian is cut to 0 beyond MARGIN_SIGMAS * sigma
-    along u or v, so a map is exactly 0 away from its evidence; the grid covers box (4,) u0, v0,
-    u1, v1 plus that margin on each side (a Gaussian centred in the box fits whole), in cells of
-    stride px.
+@dataclass
+class HeatmapStack:
+    """N person heatmaps of J maps each (every person in every view of a frame), their cells
+    flattened into one array, so that sampling, peaks and look-ups for all of them take a fixed
+    number of numpy calls instead of a few per heatmap. Grids may differ in size."""
+
+    values: np.ndarray  # (S,) every cell, map after map, row-major within a map
+    start: np.ndarray  # (N, J) index in values of cell [0, 0] of each map
+    shape: np.ndarray  # (N, 2) rows h, columns w of each heatmap's grid
+    origin: np.ndarray  # (N, J, 2)
+    stride: np.ndarray  # (N,)
+
+    @classmethod
+    def of(cls, heatmaps: Sequence[PersonHeatmap]) -> HeatmapStack:
+        n_j = len(heatmaps[0].maps) if heatmaps else 0
+        if any(len(hm.maps) != n_j for hm in heatmaps):
+            raise ValueError('heatmaps of a stack must have the same number of joints')
+        shape = np.array([hm.maps.shape[1:] for hm in heatmaps], dtype=np.intp).reshape(-1, 2)
+        size = shape[:, 0] * shape[:, 1]
+        first = np.concatenate([[0], np.cumsum(size * n_j)[:-1]]).astype(np.intp)
+        return cls(values=np.concatenate([hm.maps.ravel() for hm in heatmaps]) if heatmaps else np.zeros(0, np.float32),
+                   start=first[:, None] + size[:, None] * np.arange(n_j),
+                   shape=shape,
+                   origin=np.array([hm.origin for hm in heatmaps], dtype=np.float64).reshape(-1, n_j, 2),
+                   stride=np.array([hm.stride for hm in heatmaps], dtype=np.float64))
+
+    def _size(self) -> np.ndarray:
+        return np.broadcast_to((self.shape[:, 0] * self.shape[:, 1])[:, None], self.start.shape)
+
+    def _pixels(self, cell: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        """Pixels (N, J, K, 2) of cells (N, J, K) (index within their map), plus offset (..., 2)
+        in cells."""
+        row, col = np.divmod(cell, self.shape[:, 1, None, None])
+        cr = np.stack([col, row], axis=-1) + offset
+        return self.origin[:, :, None] + self.stride[:, None, None, None] * cr
+
+    def sample(self, u: np.ndarray, jitter: np.ndarray) -> np.ndarray:
+        """Pixels (N, J, K, 2) drawn from each map as a pmf over its cells, from uniform numbers
+        u (N, J, K) in [0, 1) and jitter (N, J, K, 2) in [0, 1) (the position within the drawn
+        cell); NaN for empty maps."""
+        # Only non-zero cells can be drawn, and maps are mostly zero: one CDF over the non-zero
+        # cells of every map, each map drawing inside its own stretch.
+        nz = np.flatnonzero(self.values)
+        cum = np.concatenate([[0.0], np.cumsum(self.values[nz], dtype=np.float64)])
+        first = np.searchsorted(nz, self.start)
+        end = np.searchsorted(nz, self.start + self._size())
+        before = cum[first]
+        q = before[..., None] + u * (cum[end] - before)[..., None]
+        idx = np.searchsorted(cum, q, side='right') - 1
+        # rounding can step past a map's stretch; empty maps point anywhere (NaN below)
+        idx = np.clip(idx, first[..., None], np.maximum(end - 1, first)[..., None])
+        idx = np.minimum(idx, max(len(nz) - 1, 0))
+        cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - self.start[..., None]
+        uv = self._pixels(cell, jitter - 0.5)
+        uv[end == first] = np.nan
+        return uv
+
+    def peak(self) -> np.ndarray:
+        """(N, J, 3): pixel u, v of the centre of each map's maximal cell (the first, on ties)
+        and the maximum; an empty map gives (NaN, NaN, 0)."""
+        n, n_j = self.start.shape
+        out = np.full((n, n_j, 3), np.nan)
+        out[..., 2] = 0.0
+        if n == 0:
+            return out
+        flat_start = self.start.ravel()
+        best = np.maximum.reduceat(self.values, flat_start)  # every map has >= 1 cell
+        at_max = np.flatnonzero(self.values == np.repeat(best, self._size().ravel()))
+        cell = at_max[np.searchsorted(at_max, flat_start)] - flat_start  # first maximal cell of each map
+        uv = self._pixels(cell.reshape(n, n_j, 1), np.zeros(2))[:, :, 0]
+        has = best.reshape(n, n_j) > 0
+        out[has, :2] = uv[has]
+        out[..., 2] = np.maximum(best.reshape(n, n_j), 0.0)
+        return out
+
+    def lookup(self, uv: np.ndarray) -> np.ndarray:
+        """Bilinear values (N, J, K) of each map at pixels uv (N, J, K, 2); 0 outside the grid
+        of cell centres and for NaN pixels."""
+        uv = np.asarray(uv, dtype=np.float64)
+        cr = (uv - self.origin[:, :, None]) / self.stride[:, None, None, None]
+        c, r = cr[..., 0], cr[..., 1]
+        h = self.shape[:, 0, None, None]
+        w = self.shape[:, 1, None, None]
+        inside = (c >= 0) & (c <= w - 1) & (r >= 0) & (r <= h - 1)  # False for NaN
+        c = np.where(inside, c, 0.0)
+        r = np.where(inside, r, 0.0)
+        c0 = np.minimum(c.astype(np.intp), np.maximum(w - 2, 0))
+        r0 = np.minimum(r.astype(np.intp), np.maximum(h - 2, 0))
+        fc, fr = c - c0, r - r0
+        base = self.start[..., None] + r0 * w + c0
+        right = np.minimum(c0 + 1, w - 1) - c0
+        down = (np.minimum(r0 + 1, h - 1) - r0) * w
+        v = self.values
+        top = v[base] * (1 - fc) + v[base + right] * fc
+        bottom = v[base + down] * (1 - fc) + v[base + down + right] * fc
+        return np.where(inside, top * (1 - fr) + bottom * fr, 0.0)
+
+
+def render_heatmap(centres: list[np.ndarray], stride: float, sigma: float) -> PersonHeatmap:
+    """One person's J maps from centres[j] ((n_j, 3) rows [u, v, weight], n_j may be 0): see
+    render_heatmaps."""
+    padded = np.zeros((1, len(centres), max([len(c) for c in centres] + [1]), 3))
+    for j, cj in enumerate(centres):
+        padded[0, j, :len(cj)] = cj
+    return render_heatmaps(padded, stride, sigma)[0]
+
+
+def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[PersonHeatmap]:
+    """Render the J maps of P people at once: map j of person p is the pointwise max of
+    isotropic Gaussians (std sigma px) with peak weight (clipped to 1) at each row [u, v, weight]
+    of centres[p, j] ((P, J, n, 3); rows with NaN or weight <= 0 are ignored, so padding is
+    weight 0). Each Gaussian is cut to 0 beyond MARGIN_SIGMAS * sigma along u or v, so a map is
+    exactly 0 away from its evidence; a map's grid covers its centres plus that margin, in
+    cells of stride px centred on multiples of stride, all maps padded to the largest grid.
 
     Max (not sum) so that a map's value at a candidate is that candidate's own weight:
     overlapping evidence does not inflate the data term and values stay in [0, 1]."""
-    box = np.asarray(box, dtype=np.float64)
+    centres = np.array(centres, dtype=np.float64)
+    if len(centres) == 0:
+        return []
     margin = MARGIN_SIGMAS * sigma
-    origin = box[:2] - margin
-    w, h = np.ceil((box[2:] - box[:2] + 2 * margin) / stride).astype(int) + 1
-    # all joints at once: centres padded to a common count with weight 0
-    n_max = max([len(c) for c in centres] + [1])
-    padded = np.zeros((len(centres), n_max, 3))
-    for j, cj in enumerate(centres):
-        padded[j, :len(cj)] = cj
-    valid = np.isfinite(padded).all(axis=-1) & (padded[..., 2] > 0)
-    padded[~valid] = 0.0
-    rel = (padded[..., :2] - origin).astype(np.float32)  # (J, n, 2) pixels from cell [0, 0]
+    valid = np.isfinite(centres).all(axis=-1) & (centres[..., 2] > 0)
+    centres[~valid] = 0.0
+    has = valid.any(axis=-1)  # (P, J)
+    lo = np.where(valid[..., None], centres[..., :2], np.inf).min(axis=-2) - margin  # (P, J, 2)
+    hi = np.where(valid[..., None], centres[..., :2], -np.inf).max(axis=-2) + margin
+    # a map without evidence sits at its person's first evidence (it is all zeros anyway)
+    anchor = np.where(has[..., None], lo, np.inf).min(axis=1, keepdims=True)
+    anchor = np.where(np.isfinite(anchor), anchor, 0.0)
+    lo = np.where(has[..., None], lo, anchor)
+    hi = np.where(has[..., None], hi, anchor)
+    lo = np.floor(lo / stride) * stride  # cells on the image's lattice of stride px, as a network's output
+    w, h = np.ceil((hi - lo) / stride).astype(int).reshape(-1, 2).max(axis=0) + 1
+    rel = (centres[..., :2] - lo[..., None, :]).astype(np.float32)  # (P, J, n, 2) pixels from cell [0, 0]
     us = np.float32(stride) * np.arange(w, dtype=np.float32)
     vs = np.float32(stride) * np.arange(h, dtype=np.float32)
     inv = np.float32(-0.5 / sigma ** 2)
-    cut = np.float32(MARGIN_SIGMAS * sigma)
+    cut = np.float32(margin)
     du, dv = us - rel[..., :1], vs - rel[..., 1:]
-    gu = np.where(np.abs(du) <= cut, np.exp(inv * du ** 2), 0)  # (J, n, w)
-    weight = np.minimum(padded[..., 2:], 1.0).astype(np.float32)
-    gv = weight * np.where(np.abs(dv) <= cut, np.exp(inv * dv ** 2), 0)  # (J, n, h)
-    maps = np.max(gv[..., :, None] * gu[..., None, :], axis=1)  # outer products (J, n, h, w)
-    return PersonHeatmap(maps=maps, origin=origin, stride=float(stride))
+    gu = np.where(np.abs(du) <= cut, np.exp(inv * du ** 2), 0)  # (P, J, n, w)
+    weight = np.minimum(centres[..., 2:], 1.0).astype(np.float32)
+    gv = weight * np.where(np.abs(dv) <= cut, np.exp(inv * dv ** 2), 0)  # (P, J, n, h)
+    maps = np.max(gv[..., :, None] * gu[..., None, :], axis=2)  # outer products (P, J, h, w)
+    return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]

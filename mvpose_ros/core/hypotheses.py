@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.camera import Camera, closest_point_to_rays
-from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
 @dataclass(frozen=True)
@@ -43,56 +43,97 @@ def split_draws(total: int, n_subsets: int) -> np.ndarray:
     return counts
 
 
-def sample_hypotheses(
-    views: Sequence[tuple[Camera, PersonHeatmap]],
-    rng: np.random.Generator,
-    config: SamplingConfig,
-) -> np.ndarray | None:
-    """Hypotheses (J, M, 3) in metres for one person, or None when no joint is seen twice.
+View = tuple[Camera, PersonHeatmap]
+
+
+def sample_hypotheses(views: Sequence[View], rng: np.random.Generator, config: SamplingConfig) -> np.ndarray | None:
+    """Hypotheses (J, M, 3) in metres for one person, or None when no joint is seen twice
+    (sample_people for one person)."""
+    return sample_people([views], HeatmapStack.of([hm for _, hm in views]), [rng], config)[0]
+
+
+def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
+                  rngs: Sequence[np.random.Generator], config: SamplingConfig) -> list[np.ndarray | None]:
+    """Hypotheses (J, M, 3) in metres of each person of a frame (None when no joint of theirs is
+    seen twice), all people batched. people[p]: person p's views (camera, heatmap); stack: every
+    view's heatmap, person after person; rngs[p]: person p's generator (draws per view in order,
+    so a person's hypotheses do not depend on who else is in the frame).
 
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
     closest to the person's centre (so it stays near the body instead of being dropped); a joint
     seen by none gets the centre itself.
     """
     m = config.hypotheses
-    peaks = np.stack([hm.peak() for _, hm in views])  # (C, J, 3)
-    n_joints = peaks.shape[1]
-    seen = peaks[..., 2] > 0  # (C, J)
-    out = np.full((n_joints, m, 3), np.nan)
-    patterns: dict[tuple[int, ...], list[int]] = {}
-    for j in range(n_joints):
-        patterns.setdefault(tuple(np.flatnonzero(seen[:, j])), []).append(j)
+    n_views, n_joints = stack.start.shape
+    first_view = np.concatenate([[0], np.cumsum([len(v) for v in people])]).astype(np.intp)
+    draws = [(rng.random((n_joints, m)), rng.random((n_joints, m, 2))) for rng, views in zip(rngs, people) for _ in views]
+    if not draws:
+        return []
+    peaks = stack.peak()  # (V, J, 3)
+    # every view's m sampled pixels per joint plus its peak as draw m: one back-projection per camera
+    pixels = np.concatenate([stack.sample(np.stack([u for u, _ in draws]), np.stack([j for _, j in draws])),
+                             peaks[:, :, None, :2]], axis=2)  # (V, J, m + 1, 2)
+    dirs = np.empty(pixels.shape[:-1] + (3,))
+    centres = np.empty((n_views, 3))
+    cameras = [cam for views in people for cam, _ in views]
+    for cam in {id(c): c for c in cameras}.values():
+        idx = [v for v, c in enumerate(cameras) if c is cam]
+        dirs[idx] = cam.rays(pixels[idx])[1]
+        centres[idx] = cam.centre
 
-    # every camera's m sampled pixels per joint plus its peak as draw m: one back-projection each
-    pixels = [np.concatenate([hm.sample(rng, m), p[:, None, :2]], axis=1) for (_, hm), p in zip(views, peaks)]
-    rays = [cam.rays(px) for (cam, _), px in zip(views, pixels)]
-    origins = np.stack([r[0] for r in rays])  # (C, J, m + 1, 3)
-    dirs = np.stack([r[1] for r in rays])
-
-    for cams, joints in patterns.items():
+    # every (person, joint) seen by >= 2 cameras: its m rays per hypothesis, padded to K cameras
+    seen = peaks[..., 2] > 0  # (V, J)
+    groups: list[tuple[int, np.ndarray, np.ndarray]] = []  # (person, its views seeing the joints, joints)
+    for p in range(len(people)):
+        mine = seen[first_view[p]:first_view[p + 1]]
+        key = (mine << np.arange(len(mine))[:, None]).sum(axis=0)  # (J,) bit c: view c sees the joint
+        for pattern in np.unique(key):
+            groups.append((p, first_view[p] + np.flatnonzero(mine[:, key == pattern][:, 0]),
+                           np.flatnonzero(key == pattern)))
+    width = max((len(cams) for _, cams, _ in groups), default=0)
+    view_idx, draw_idx, weights, joint_idx, rows = [], [], [], [], []
+    for p, cams, joints in groups:
         if len(cams) >= 2:
-            cam_of, draw, weight = _plan(len(cams), m, config.peak_hypotheses)  # (m, K) each
-            view = np.asarray(cams)[cam_of][None]
-            jj = np.asarray(joints)[:, None, None]
-            out[joints] = closest_point_to_rays(origins[view, jj, draw[None]], dirs[view, jj, draw[None]], weight)
-    if np.all(np.isnan(out)):
-        return None
-    centre = np.nanmean(out.reshape(-1, 3), axis=0)
-    for cams, joints in patterns.items():
-        if len(cams) == 1:
-            origin, direction = origins[cams[0], joints, :m], dirs[cams[0], joints, :m]
-            depth = np.einsum('jmd,jmd->jm', centre - origin, direction)
-            out[joints] = origin + depth[..., None] * direction
-        elif not cams:
-            out[joints] = centre
-    return out
+            cam_of, draw, weight = _plan(len(cams), m, config.peak_hypotheses, width)  # (m, K) each
+            shape = (len(joints), m, width)
+            view_idx.append(np.broadcast_to(cams[cam_of], shape))
+            draw_idx.append(np.broadcast_to(draw, shape))
+            weights.append(np.broadcast_to(weight, shape))
+            joint_idx.append(joints)
+            rows.append(np.stack([np.full(len(joints), p), joints], axis=1))
+    out = np.full((len(people), n_joints, m, 3), np.nan)
+    if rows:
+        v, d = np.concatenate(view_idx), np.concatenate(draw_idx)
+        jj = np.concatenate(joint_idx)[:, None, None]
+        points = closest_point_to_rays(centres[v], dirs[v, jj, d], np.concatenate(weights))  # (Q, m, 3)
+        pp, pj = np.concatenate(rows).T
+        out[pp, pj] = points
+
+    results: list[np.ndarray | None] = []
+    for p in range(len(people)):
+        hyp = out[p]
+        if np.all(np.isnan(hyp)):
+            results.append(None)
+            continue
+        centre = np.nanmean(hyp.reshape(-1, 3), axis=0)
+        for q, cams, joints in groups:
+            if q != p:
+                continue
+            if len(cams) == 1:
+                origin, direction = centres[cams[0]], dirs[cams[0], joints, :m]
+                depth = direction @ (centre - origin)
+                hyp[joints] = origin + depth[..., None] * direction
+            elif len(cams) == 0:
+                hyp[joints] = centre
+        results.append(hyp)
+    return results
 
 
-@functools.lru_cache(maxsize=64)
-def _plan(n_cams: int, m: int, with_peaks: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=256)
+def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which rays make each of the m hypotheses of a joint seen by cameras 0..n_cams-1: camera
     (m, K) and draw (m, K) indices (draw m is the peak's ray) and weights (m, K), 0 where a
-    subset smaller than K = n_cams is padded. First one peak triangulation per subset (when they
+    subset smaller than K = width (>= n_cams) is padded. First one peak triangulation per subset (when they
     fit in m), then the m - peaks draws shared evenly over the subsets, each camera's draws used
     once."""
     subsets = camera_subsets(range(n_cams))
@@ -103,9 +144,9 @@ def _plan(n_cams: int, m: int, with_peaks: bool) -> tuple[np.ndarray, np.ndarray
         rows += [(subset, [used[c] + k for c in subset]) for k in range(n)]
         for c in subset:
             used[c] += n
-    cam_of = np.zeros((m, n_cams), dtype=np.intp)
-    draw = np.zeros((m, n_cams), dtype=np.intp)
-    weight = np.zeros((m, n_cams))
+    cam_of = np.zeros((m, width), dtype=np.intp)
+    draw = np.zeros((m, width), dtype=np.intp)
+    weight = np.zeros((m, width))
     for i, (subset, draws) in enumerate(rows):
         cam_of[i, :len(subset)] = subset
         draw[i, :len(subset)] = draws

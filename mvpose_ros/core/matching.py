@@ -28,17 +28,29 @@ class MatchingConfig:
 def view_distance(cam_a: Camera, people_a: Sequence[Person2D], cam_b: Camera, people_b: Sequence[Person2D],
                   config: MatchingConfig) -> np.ndarray:
     """Mean ray-to-ray distance (Na, Nb) between every skeleton pair; inf when too few shared joints."""
-    if not people_a or not people_b:
-        return np.full((len(people_a), len(people_b)), np.inf)
-    kp_a = np.stack([p.keypoints for p in people_a])  # (Na, J, 3)
-    kp_b = np.stack([p.keypoints for p in people_b])
-    o_a, d_a = cam_a.rays(kp_a[..., :2])
-    o_b, d_b = cam_b.rays(kp_b[..., :2])
-    dist = ray_ray_distance(o_a[:, None], d_a[:, None], o_b[None], d_b[None])  # (Na, Nb, J)
-    shared = (kp_a[:, None, :, 2] > config.min_score) & (kp_b[None, :, :, 2] > config.min_score)
+    return all_view_distances([cam_a, cam_b], [people_a, people_b], config)[:len(people_a), len(people_a):]
+
+
+def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
+                       config: MatchingConfig) -> np.ndarray:
+    """view_distance between every two skeletons of all cameras at once (N, N), N = all
+    skeletons in camera order; inf within a camera and where too few joints are shared."""
+    owner = np.repeat(np.arange(len(cameras)), [len(p) for p in people])
+    if len(owner) == 0:
+        return np.zeros((0, 0))
+    kp = np.stack([p.keypoints for ps in people for p in ps])  # (N, J, 3)
+    dirs = np.empty(kp.shape)
+    origins = np.empty((len(kp), 3))
+    for c, cam in enumerate(cameras):
+        if people[c]:
+            dirs[owner == c] = cam.rays(kp[owner == c, :, :2])[1]
+            origins[owner == c] = cam.centre
+    dist = ray_ray_distance(origins[:, None, None], dirs[:, None], origins[None, :, None], dirs[None])  # (N, N, J)
+    seen = kp[..., 2] > config.min_score
+    shared = seen[:, None] & seen[None]
     n = shared.sum(-1)
     mean = np.where(shared, dist, 0.0).sum(-1) / np.maximum(n, 1)
-    return np.where(n >= config.min_shared, mean, np.inf)
+    return np.where((n >= config.min_shared) & (owner[:, None] != owner[None]), mean, np.inf)
 
 
 def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
@@ -47,13 +59,11 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
 
     people[c] are camera c's skeletons. Returns one {camera index: skeleton index} per person.
     """
-    edges = []
-    for a in range(len(cameras)):
-        for b in range(a + 1, len(cameras)):
-            dist = view_distance(cameras[a], people[a], cameras[b], people[b], config)
-            for i, k in zip(*np.nonzero(dist <= config.max_distance)):
-                edges.append((dist[i, k], (a, int(i)), (b, int(k))))
-    edges.sort(key=lambda e: e[0])
+    dist = all_view_distances(cameras, people, config)
+    view = [(c, i) for c, ps in enumerate(people) for i in range(len(ps))]
+    a, b = np.nonzero(np.triu(dist <= config.max_distance, 1))
+    order = np.argsort(dist[a, b], kind='stable')
+    edges = [(dist[a[e], b[e]], view[a[e]], view[b[e]]) for e in order]
     owner: dict[tuple[int, int], int] = {}
     clusters: list[dict[int, int]] = []
     for _, u, v in edges:

@@ -18,7 +18,7 @@ from mvpose_ros.core.datasets import SHELF_TEST_FRAMES, dataset_dir
 from mvpose_ros.core.openpose import read_body25
 from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.pipeline import StageConfig, StageTimer, person_frame
+from mvpose_ros.core.pipeline import StageConfig, StageTimer, person_frames
 from mvpose_ros.core.association import Associator
 from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
@@ -64,8 +64,8 @@ def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
         t0 = time.perf_counter()
         observations = associator.update(frame, people)
         timer.add('association', t0)
-        out.append([pf for obs in observations
-                    if (pf := person_frame(seq.cameras, obs.person_id, obs.views, frame, config, timer)) is not None])
+        out.append(person_frames(seq.cameras, [(obs.person_id, obs.views) for obs in observations], frame,
+                                 config, timer))
     return Prepared(list(seq.frames), out, timer)
 
 

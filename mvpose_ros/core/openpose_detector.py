@@ -8,12 +8,9 @@ import numpy as np
 
 from mvpose_ros.core.body import BODY25_INFERENCE_JOINTS, INFERENCE_MIRROR, to_inference
 from mvpose_ros.core.grouping import group_body25
-from mvpose_ros.core.heatmap import render_heatmap
+from mvpose_ros.core.heatmap import render_heatmaps
 from mvpose_ros.core.openpose import OpenPoseFrame
 from mvpose_ros.core.person2d import Person2D
-
-BOX_GROWTH = 0.10  # the rendered box is the keypoint bbox grown by this fraction of its size
-
 
 @dataclass
 class OpenPoseDetectorConfig:
@@ -49,45 +46,44 @@ def grouped_keypoints(frame: OpenPoseFrame, groups: np.ndarray) -> np.ndarray:
     return out
 
 
-def _centres(frame: OpenPoseFrame, group: np.ndarray, diag: float,
-             config: OpenPoseDetectorConfig) -> list[np.ndarray]:
-    """Heatmap centres [u, v, weight] for one person's 16 inference joints (group: (25,))."""
-    radius = config.secondary_radius * diag
-    centres = []
-    for j, b in enumerate(BODY25_INFERENCE_JOINTS):
-        parts = []
-        own = group[b]
-        if own >= 0:
-            cand = frame.candidates[b]
-            near = np.linalg.norm(cand[:, :2] - cand[own, :2], axis=1) <= radius
-            near[own] = False
-            parts.append(cand[own][None])
-            parts.append(cand[near] * (1.0, 1.0, config.secondary_weight))
-        mb = BODY25_INFERENCE_JOINTS[INFERENCE_MIRROR[j]]
-        if mb != b and group[mb] >= 0 and config.mirror_weight > 0:
-            parts.append(frame.candidates[mb][group[mb]][None] * (1.0, 1.0, config.mirror_weight))
-        centres.append(np.concatenate(parts) if parts else np.zeros((0, 3)))
-    return centres
+def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,
+             config: OpenPoseDetectorConfig) -> np.ndarray:
+    """Heatmap centres (P, 16, n, 3) [u, v, weight] of each person's 16 inference joints
+    (groups: (P, 25) candidate indices; keypoints: (P, 16, 3) inference keypoints); rows of
+    weight 0 are padding. Per joint: its own candidate, the other candidates of its BODY25 type
+    within secondary_radius of the person's keypoint-box diagonal, and with mirror_weight > 0
+    its left/right counterpart's own candidate."""
+    n_p = len(groups)
+    types = BODY25_INFERENCE_JOINTS
+    n_cand = max([len(frame.candidates[b]) for b in types] + [1])
+    cand = np.zeros((len(types), n_cand, 3))  # (16, C, 3) every candidate of each joint's type
+    for j, b in enumerate(types):
+        cand[j, :len(frame.candidates[b])] = frame.candidates[b]
+    own = groups[:, types]  # (P, 16)
+    has = own >= 0
+    own_rows = np.where(has[..., None], cand[np.arange(len(types)), np.maximum(own, 0)], 0.0)  # (P, 16, 3)
+    with np.errstate(invalid='ignore'):  # people without keypoints never reach here
+        span = np.nanmax(keypoints[..., :2], axis=1) - np.nanmin(keypoints[..., :2], axis=1)
+    radius = config.secondary_radius * np.hypot(span[:, 0], span[:, 1])  # (P,)
+    near = np.linalg.norm(cand[None, :, :, :2] - own_rows[:, :, None, :2], axis=-1) <= radius[:, None, None]
+    near &= has[..., None] & (np.arange(n_cand) != own[..., None])
+    secondary = np.where(near[..., None], cand[None] * (1.0, 1.0, config.secondary_weight), 0.0)
+    parts = [own_rows[:, :, None], secondary]
+    if config.mirror_weight > 0:
+        mirror = own_rows[:, INFERENCE_MIRROR] * (1.0, 1.0, config.mirror_weight)
+        mirror[:, types[INFERENCE_MIRROR] == types] = 0.0  # joints that are their own counterpart
+        parts.append(mirror[:, :, None])
+    return np.concatenate(parts, axis=2) if n_p else np.zeros((0, len(types), 1, 3))
 
 
 def detect_people(frame: OpenPoseFrame, config: OpenPoseDetectorConfig) -> list[Person2D]:
     """Group one camera frame's candidates into people and build each one's 16 keypoints and
-    heatmaps (16 of each). The heatmap box is the keypoint bbox grown by BOX_GROWTH, widened to hold every
-    centre (secondary and mirror candidates may lie outside the bbox)."""
+    heatmaps (16 of each); each map covers its own candidates (heatmap.render_heatmaps)."""
     groups = group_body25(frame, paf_power=config.paf_power, min_paf=config.min_paf,
                           min_joints=config.min_joints, min_mean_score=config.min_mean_score)
     keypoints = to_inference(grouped_keypoints(frame, groups), 'body25')
-    people = []
-    for group, kp in zip(groups, keypoints):
-        detected = kp[kp[:, 2] > 0, :2]
-        if len(detected) == 0:
-            continue  # none of the 16 joints (e.g. a feet-only fragment)
-        lo, hi = detected.min(axis=0), detected.max(axis=0)
-        grow = 0.5 * BOX_GROWTH * (hi - lo)
-        centres = _centres(frame, group, float(np.hypot(*(hi - lo))), config)
-        pts = np.concatenate([c[:, :2] for c in centres])
-        box = np.concatenate([np.minimum(lo - grow, pts.min(axis=0)),
-                              np.maximum(hi + grow, pts.max(axis=0))])
-        people.append(Person2D(keypoints=kp, heatmap=render_heatmap(
-            centres, box, config.stride, config.sigma)))
-    return people
+    # none of the 16 joints (e.g. a feet-only fragment): not a person for the 3D stage
+    keep = (keypoints[..., 2] > 0).any(axis=1)
+    groups, keypoints = groups[keep], keypoints[keep]
+    heatmaps = render_heatmaps(_centres(frame, groups, keypoints, config), config.stride, config.sigma)
+    return [Person2D(keypoints=kp, heatmap=hm) for kp, hm in zip(keypoints, heatmaps)]

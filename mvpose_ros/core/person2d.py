@@ -34,7 +34,5 @@ class Person2D:
         seen = keypoints[:, 2] > 0
         if not seen.any():
             raise ValueError('a person needs at least one detected keypoint')
-        pts = keypoints[seen, :2]
-        box = np.concatenate([pts.min(axis=0), pts.max(axis=0)])
         centres = [keypoints[j][None] if seen[j] else np.zeros((0, 3)) for j in range(len(keypoints))]
-        return cls(keypoints, render_heatmap(centres, box, stride, sigma))
+        return cls(keypoints, render_heatmap(centres, stride, sigma))

@@ -1,7 +1,7 @@
 """The solver half of the 3D stage: from associated people (an id and its views) to decoded
 3D skeletons: hypothesis sampling with the data term, sliding-window BP and the head model, with
 the time each step takes. The bp_solver node runs it; the offline evaluator calls the same
-person_frame and window (core.offline), after core.association.
+person_frames and window (core.offline), after core.association.
 """
 from __future__ import annotations
 
@@ -15,8 +15,9 @@ import numpy as np
 from mvpose_ros.core.association import AssociationConfig
 from mvpose_ros.core.body import BONES, SYMMETRIC_PAIRS, finalize_head
 from mvpose_ros.core.camera import Camera
-from mvpose_ros.core.factors import data_term
-from mvpose_ros.core.hypotheses import SamplingConfig, sample_hypotheses
+from mvpose_ros.core.factors import data_terms
+from mvpose_ros.core.heatmap import HeatmapStack
+from mvpose_ros.core.hypotheses import SamplingConfig, sample_people
 from mvpose_ros.core.person2d import Person2D
 from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
@@ -44,26 +45,28 @@ class StageTimer:
         return now
 
 
-def person_frame(cameras: Sequence[Camera], person_id: int, views: dict[int, Person2D], frame: int,
-                 config: StageConfig, timer: StageTimer | None = None) -> PersonFrame | None:
-    """Hypotheses and data term of one person seen by `views` (camera index -> 2D person); None
-    when no joint is seen twice.
+def person_frames(cameras: Sequence[Camera], people: Sequence[tuple[int, dict[int, Person2D]]], frame: int,
+                  config: StageConfig, timer: StageTimer | None = None) -> list[PersonFrame]:
+    """Hypotheses and data term of each person of a frame (person id, camera index -> 2D
+    person), all people batched; a person none of whose joints is seen twice is left out.
 
-    The generator is seeded by (seed, frame, person id), so the same frame gives the same
-    hypotheses whatever the window, the order of processing or the process doing it.
+    Each person's generator is seeded by (seed, frame, person id), so the same frame gives the
+    same hypotheses whatever the window, the order of processing, the other people or the
+    process doing it.
     """
     t0 = time.perf_counter()
-    pairs = [(cameras[c], p.heatmap) for c, p in sorted(views.items())]
-    rng = np.random.default_rng([config.seed, frame, person_id])
-    hyp = sample_hypotheses(pairs, rng, config.sampling)
+    views = [[(cameras[c], p.heatmap) for c, p in sorted(v.items())] for _, v in people]
+    stack = HeatmapStack.of([hm for person in views for _, hm in person])
+    rngs = [np.random.default_rng([config.seed, frame, pid]) for pid, _ in people]
+    hyps = sample_people(views, stack, rngs, config.sampling)
     if timer:
         t0 = timer.add('sampling', t0)
-    if hyp is None:
-        return None
-    data = data_term(hyp, pairs)
+    kept = [p for p, h in enumerate(hyps) if h is not None]
+    data = data_terms([hyps[p] for p in kept], [views[p] for p in kept],
+                      HeatmapStack.of([hm for p in kept for _, hm in views[p]]) if len(kept) < len(people) else stack)
     if timer:
         timer.add('data term', t0)
-    return PersonFrame(person_id, hyp, data)
+    return [PersonFrame(people[p][0], hyps[p], d) for p, d in zip(kept, data)]
 
 
 class Inference3D:
@@ -78,8 +81,7 @@ class Inference3D:
 
     def push(self, frame: int, people: Sequence[tuple[int, dict[int, Person2D]]]) -> list[FrameResult]:
         """people: (person id, camera index -> 2D person) of this frame; returns the frames due."""
-        frames = [pf for pid, views in people
-                  if (pf := person_frame(self.cameras, pid, views, frame, self.config, self.timer)) is not None]
+        frames = person_frames(self.cameras, people, frame, self.config, self.timer)
         t0 = time.perf_counter()
         out = self.window.push(frame, frames)
         self.timer.add('bp', t0)
