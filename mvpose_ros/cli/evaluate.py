@@ -26,6 +26,7 @@ from mvpose_ros.core.matching import MatchingConfig
 from mvpose_ros.core.offline import Prepared, Sequence2D, as_predictions, infer, prepare, shelf_openpose
 from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
 from mvpose_ros.core.pipeline import StageConfig
+from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.predictions import read_predictions, write_predictions
 from mvpose_ros.core.window import TERMS, InferenceConfig
 
@@ -114,7 +115,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
         config = replace(config, head_model=head_model)
     prepared = prepare(seq, config)
-    results, bp_seconds = infer(prepared, config.inference, config.head_model)
+    bp_timer = StageTimer()
+    results = infer(prepared, config.inference, config.head_model, bp_timer)
     ev = evaluate(as_predictions(results), gt, actors)
     mode = f'window {args.window}, lag {args.lag}' if args.window else 'whole clip'
     print(f'{args.dataset}: {len(seq.frames)} frames, {len(seq.cameras)} cameras, terms {",".join(args.terms)}, '
@@ -123,7 +125,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     print(_summary(ev), file=out)
     if args.dataset == 'campus':
         print(f'paper: Campus average {PAPER_CAMPUS_AVERAGE}', file=out)
-    _print_speed(seq, prepared, bp_seconds, out)
+    _print_speed(seq, prepared, bp_timer, out)
     if args.predictions:
         args.predictions.parent.mkdir(parents=True, exist_ok=True)
         with open(args.predictions, 'w', encoding='utf-8') as f:
@@ -135,8 +137,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     return 0
 
 
-def _print_speed(seq: Sequence2D, prepared: Prepared, bp_seconds: float, out) -> None:
-    stages = {**seq.seconds, **prepared.timer.seconds, 'bp (window + decoding)': bp_seconds}
+def _print_speed(seq: Sequence2D, prepared: Prepared, bp_timer: StageTimer, out) -> None:
+    stages = {**seq.seconds, **prepared.timer.seconds, **bp_timer.seconds}
     n = len(seq.frames)
     total = sum(stages.values())
     print('3D stage time per frame (all cameras):', file=out)
@@ -150,7 +152,7 @@ def _print_ablation(prepared: Prepared, config: StageConfig, gt, actors: Sequenc
     header = f'{"terms":22s} ' + ' '.join(f'A{a + 1:d} str  A{a + 1:d} len' for a in actors)
     print(header + '   avg-fw str/len   avg-act str/len' + ('   paper A1/A2/A3' if paper else ''), file=out)
     for name, terms in ABLATION:
-        results, _ = infer(prepared, replace(config.inference, terms=terms), config.head_model)
+        results = infer(prepared, replace(config.inference, terms=terms), config.head_model)
         ev = evaluate(as_predictions(results), gt, actors)
         cells = ' '.join(f'{ev.pcp("strict", a):6.2f} {ev.pcp("lenient", a):6.2f}' for a in actors)
         row = (f'{name:22s} {cells}   {ev.frame_weighted("strict"):6.2f}/{ev.frame_weighted("lenient"):6.2f}'

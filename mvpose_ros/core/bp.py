@@ -171,20 +171,17 @@ def _log(data: np.ndarray) -> np.ndarray:
 def _update_temporal(t: int, table: np.ndarray, total: np.ndarray, tm: np.ndarray) -> None:
     """Recompute the three outgoing messages of the temporal factor centred at frame t."""
     j, ma, mc, mb = table.shape
-    # beliefs in the table's precision (float32): mixing would convert the M^3 table every call
-    n_prev = _softmax(total[t - 1] - tm[0, t]).astype(table.dtype)
-    n_cur = _softmax(total[t] - tm[1, t]).astype(table.dtype)
-    n_next = _softmax(total[t + 1] - tm[2, t]).astype(table.dtype)
+    # the beliefs of y[t-1], y[t], y[t+1] without this factor's own messages, at once, in the
+    # table's precision (float32): mixing would convert the M^3 table every call
+    n_prev, n_cur, n_next = _softmax(total[t - 1:t + 2] - tm[:, t]).astype(table.dtype)
     flat = table.reshape(j, ma * mc, mb)
     pair = (n_prev[:, :, None] * n_next[:, None, :]).reshape(j, 1, ma * mc)
-    to_cur = (pair @ flat)[:, 0]
     over_cur = (flat @ n_cur[:, :, None]).reshape(j, ma, mc)
-    to_prev = (over_cur @ n_next[:, :, None])[..., 0]
-    to_next = (n_prev[:, None, :] @ over_cur)[:, 0]
-    for slot, frame, new in ((0, t - 1, to_prev), (1, t, to_cur), (2, t + 1, to_next)):
-        new = _log_message(new)
-        total[frame] += new - tm[slot, t]
-        tm[slot, t] = new
+    new = _log_message(np.stack([(over_cur @ n_next[:, :, None])[..., 0],  # to y[t-1]
+                                 (pair @ flat)[:, 0],  # to y[t]
+                                 (n_prev[:, None, :] @ over_cur)[:, 0]]))  # to y[t+1]
+    total[t - 1:t + 2] += new - tm[:, t]
+    tm[:, t] = new
 
 
 def _update_pairwise(group: PairwiseGroup, total: np.ndarray, pm: np.ndarray) -> None:

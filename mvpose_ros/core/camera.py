@@ -199,6 +199,36 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
     raise FileNotFoundError(f'{path}: no calibration_*.json or P<i>.txt files')
 
 
+def line_terms(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """(..., 3) lines with unit directions -> (9, ...) each line's share of the least-squares
+    system A x = b of the point closest to several lines: A = I - d d^T as its six entries
+    (xx, xy, xz, yy, yz, zz), then b = o - d (d . o). Summing the terms of some lines and
+    solving (solve_line_terms) gives their closest point, so a set of lines used by many
+    solves is prepared once. Component-major, so every step runs on contiguous arrays."""
+    o = np.moveaxis(np.asarray(origins, dtype=float), -1, 0)
+    dx, dy, dz = np.ascontiguousarray(np.moveaxis(np.asarray(dirs, dtype=float), -1, 0))
+    along = dx * o[0] + dy * o[1] + dz * o[2]
+    return np.stack([1 - dx * dx, -dx * dy, -dx * dz, 1 - dy * dy, -dy * dz, 1 - dz * dz,
+                     o[0] - dx * along, o[1] - dy * along, o[2] - dz * along])
+
+
+def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:
+    """(9, ...) summed line_terms -> (..., 3) the closest point, by Cramer's rule on the
+    symmetric 3x3 system; NaN where it is degenerate (fewer than two non-parallel lines, or not
+    finite). n_lines: the most lines in any sum (scales the singularity threshold)."""
+    a00, a01, a02, a11, a12, a22, b0, b1, b2 = terms
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    with np.errstate(invalid='ignore'):
+        ok = np.isfinite(det) & np.isfinite(b0 + b1 + b2) & (np.abs(det) > 1e-12 * n_lines ** 3)
+    inv = 1.0 / np.where(ok, det, 1.0)
+    x = np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
+                  (c01 * b0 + c11 * b1 + c12 * b2) * inv,
+                  (c02 * b0 + c12 * b1 + c22 * b2) * inv], axis=-1)
+    return np.where(ok[..., None], x, np.nan)
+
+
 def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """(..., K, 3) lines (K >= 2) -> (..., 3) point minimising the sum of squared distances.
 
@@ -206,34 +236,13 @@ def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.nda
     different sizes can share one padded call. Degenerate sets (fewer than two non-parallel
     lines, or non-finite input) give NaN.
     """
-    o = np.asarray(origins, dtype=float)
     d = np.asarray(dirs, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    with np.errstate(invalid='ignore', divide='ignore'):  # zero or NaN directions of left-out lines
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     w = np.ones(d.shape[:-1]) if weights is None else np.broadcast_to(np.asarray(weights, dtype=float), d.shape[:-1])
-    keep = w > 0
-    w = np.where(keep, w, 0.0)[..., None]
-    d = np.where(keep[..., None], d, 0.0)  # padded lines may hold NaN
-    o = np.where(keep[..., None], o, 0.0)
-    # Each line contributes the projector onto its normal plane: A = sum w (I - d d^T),
-    # b = sum w (o - d (d . o)). A is symmetric: its six entries, then Cramer's rule.
-    wd = w * d
-    w_sum = w[..., 0].sum(axis=-1)
-    dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
-    wx, wy, wz = wd[..., 0], wd[..., 1], wd[..., 2]
-    a00, a11, a22 = w_sum - (wx * dx).sum(-1), w_sum - (wy * dy).sum(-1), w_sum - (wz * dz).sum(-1)
-    a01, a02, a12 = -(wx * dy).sum(-1), -(wx * dz).sum(-1), -(wy * dz).sum(-1)
-    along = (d * o).sum(axis=-1)[..., None]  # (..., K, 1)
-    b = (w * o - wd * along).sum(axis=-2)
-    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    n_lines = d.shape[-2]
-    ok = np.isfinite(det) & np.isfinite(b).all(axis=-1) & (np.abs(det) > 1e-12 * n_lines ** 3)
-    det = np.where(ok, det, 1.0)
-    x = np.stack([c00 * b[..., 0] + c01 * b[..., 1] + c02 * b[..., 2],
-                  c01 * b[..., 0] + c11 * b[..., 1] + c12 * b[..., 2],
-                  c02 * b[..., 0] + c12 * b[..., 1] + c22 * b[..., 2]], axis=-1) / det[..., None]
-    return np.where(ok[..., None], x, np.nan)
+    terms = line_terms(np.broadcast_to(origins, d.shape), d)
+    terms = np.where(w > 0, terms * w, 0.0).sum(axis=-1)  # left-out lines may hold NaN
+    return solve_line_terms(terms, d.shape[-2])
 
 
 def ray_ray_distance(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.camera import Camera, closest_point_to_rays
+from mvpose_ros.core.camera import Camera, line_terms, solve_line_terms
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
@@ -103,11 +103,14 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
             rows.append(np.stack([np.full(len(joints), p), joints], axis=1))
     out = np.full((len(people), n_joints, m, 3), np.nan)
     if rows:
-        v, d = np.concatenate(view_idx), np.concatenate(draw_idx)
-        jj = np.concatenate(joint_idx)[:, None, None]
-        points = closest_point_to_rays(centres[v], dirs[v, jj, d], np.concatenate(weights))  # (Q, m, 3)
+        # each ray's share of the normal equations once, then per hypothesis the weighted sum of
+        # its rays' shares: one gather and one solve for the whole frame
+        terms = line_terms(centres[:, None, None], dirs).reshape(9, -1)  # (9, V * J * (m + 1))
+        ray = (np.concatenate(view_idx) * n_joints + np.concatenate(joint_idx)[:, None, None]) * (m + 1) \
+            + np.concatenate(draw_idx)  # (Q, m, K)
+        summed = (terms[:, ray] * np.concatenate(weights)).sum(axis=-1)  # (9, Q, m)
         pp, pj = np.concatenate(rows).T
-        out[pp, pj] = points
+        out[pp, pj] = solve_line_terms(summed, width)  # (Q, m, 3)
 
     results: list[np.ndarray | None] = []
     for p in range(len(people)):

@@ -18,7 +18,8 @@ from mvpose_ros.core.datasets import SHELF_TEST_FRAMES, dataset_dir
 from mvpose_ros.core.openpose import read_body25
 from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.pipeline import StageConfig, StageTimer, person_frames
+from mvpose_ros.core.pipeline import StageConfig, person_frames
+from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.association import Associator
 from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
@@ -69,16 +70,19 @@ def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
     return Prepared(list(seq.frames), out, timer)
 
 
-def infer(prepared: Prepared, inference: InferenceConfig, head_model: str) -> tuple[list[FrameResult], float]:
-    """Decoded frames (one per prepared frame, in order) and the BP seconds spent."""
-    window = SlidingWindow(inference, np.array(SYMMETRIC_PAIRS), np.array(BONES))
-    t0 = time.perf_counter()
+def infer(prepared: Prepared, inference: InferenceConfig, head_model: str,
+          timer: StageTimer | None = None) -> list[FrameResult]:
+    """Decoded frames (one per prepared frame, in order); timer gets 'factors', 'bp' and 'decoding'."""
+    timer = timer or StageTimer()
+    window = SlidingWindow(inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), timer)
     results = []
     for frame, people in zip(prepared.frames, prepared.person_frames):
         results += window.push(frame, people)
     results += window.flush()
-    seconds = time.perf_counter() - t0
-    return [replace(r, joints=finalize_head(r.joints, head_model)) for r in results], seconds
+    t0 = time.perf_counter()
+    out = [replace(r, joints=finalize_head(r.joints, head_model)) for r in results]
+    timer.add('decoding', t0)
+    return out
 
 
 def as_predictions(results: Sequence[FrameResult]) -> dict[int, np.ndarray]:

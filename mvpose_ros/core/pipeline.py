@@ -6,7 +6,6 @@ person_frames and window (core.offline), after core.association.
 from __future__ import annotations
 
 import time
-from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -19,6 +18,7 @@ from mvpose_ros.core.factors import data_terms
 from mvpose_ros.core.heatmap import HeatmapStack
 from mvpose_ros.core.hypotheses import SamplingConfig, sample_people
 from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
 
@@ -31,18 +31,6 @@ class StageConfig:
     inference: InferenceConfig = field(default_factory=InferenceConfig)
     head_model: str = 'anatomical'
     seed: int = 0
-
-
-class StageTimer:
-    """Accumulated wall time per named step, in seconds."""
-
-    def __init__(self) -> None:
-        self.seconds: dict[str, float] = defaultdict(float)
-
-    def add(self, name: str, since: float) -> float:
-        now = time.perf_counter()
-        self.seconds[name] += now - since
-        return now
 
 
 def person_frames(cameras: Sequence[Camera], people: Sequence[tuple[int, dict[int, Person2D]]], frame: int,
@@ -76,22 +64,19 @@ class Inference3D:
     def __init__(self, cameras: Sequence[Camera], config: StageConfig) -> None:
         self.cameras = list(cameras)
         self.config = config
-        self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES))
         self.timer = StageTimer()
+        self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), self.timer)
 
     def push(self, frame: int, people: Sequence[tuple[int, dict[int, Person2D]]]) -> list[FrameResult]:
         """people: (person id, camera index -> 2D person) of this frame; returns the frames due."""
         frames = person_frames(self.cameras, people, frame, self.config, self.timer)
-        t0 = time.perf_counter()
-        out = self.window.push(frame, frames)
-        self.timer.add('bp', t0)
-        return [self._finish(r) for r in out]
+        return [self._finish(r) for r in self.window.push(frame, frames)]
 
     def flush(self) -> list[FrameResult]:
-        t0 = time.perf_counter()
-        out = self.window.flush()
-        self.timer.add('bp', t0)
-        return [self._finish(r) for r in out]
+        return [self._finish(r) for r in self.window.flush()]
 
     def _finish(self, result: FrameResult) -> FrameResult:
-        return FrameResult(result.frame, result.person_ids, finalize_head(result.joints, self.config.head_model))
+        t0 = time.perf_counter()
+        out = FrameResult(result.frame, result.person_ids, finalize_head(result.joints, self.config.head_model))
+        self.timer.add('decoding', t0)
+        return out

@@ -13,6 +13,7 @@ costs a fraction of a solve.
 """
 from __future__ import annotations
 
+import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -21,6 +22,7 @@ import numpy as np
 from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.bp import ChainBP, PairwiseGroup, loopy_bp
 from mvpose_ros.core.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
+from mvpose_ros.core.timing import StageTimer
 
 TERMS = ('data', 'temp', 'col', 'limb')
 
@@ -96,8 +98,11 @@ class _Chain:
 class SlidingWindow:
     """Sliding-window sum-product BP over the CRF of each person."""
 
-    def __init__(self, config: InferenceConfig, symmetric_pairs: np.ndarray, bones: np.ndarray) -> None:
+    def __init__(self, config: InferenceConfig, symmetric_pairs: np.ndarray, bones: np.ndarray,
+                 timer: StageTimer | None = None) -> None:
+        """timer: where the time of 'factors' (tables), 'bp' (messages) and 'decoding' goes."""
         self.config = config
+        self.timer = timer or StageTimer()
         self.symmetric_pairs = np.asarray(symmetric_pairs)
         self.bones = np.asarray(bones)
         self._slots: deque[_Slot] = deque()
@@ -119,7 +124,9 @@ class SlidingWindow:
         self._slots.append(slot)
         self._unsent += 1
         if 'temp' in self.config.terms and len(self._slots) >= 3:
+            t0 = time.perf_counter()
             self._add_temporal(len(self._slots) - 2)
+            self.timer.add('factors', t0)
         if self.config.window is None:
             return []
         if self._warm:
@@ -154,7 +161,9 @@ class SlidingWindow:
                 chain = self._chains[pid] = _Chain(slot.frame)
             chain.hypotheses.append(p.hypotheses)
             chain.best.append(np.take_along_axis(p.hypotheses, p.data.argmax(-1)[:, None, None], axis=1)[:, 0])
+            t0 = time.perf_counter()
             groups = self._groups(pid, i, chain.best)
+            t0 = self.timer.add('factors', t0)
             if chain.bp is None:
                 chain.bp = ChainBP.build(p.data[None], [None], groups)
             else:
@@ -167,6 +176,7 @@ class SlidingWindow:
                     chain.best.popleft()
                 chain.first += excess
             chain.bp.run(self.config.slide_iterations)
+            self.timer.add('bp', t0)
 
     def _groups(self, pid: int, i: int, best: deque[np.ndarray]) -> list[PairwiseGroup]:
         """The pairwise groups of person pid at buffer position i, as one-frame tables; limb
@@ -205,8 +215,10 @@ class SlidingWindow:
         slot = self._slots[i]
         ids = sorted(slot.people)
         if self._warm:
+            t0 = time.perf_counter()
             joints = [self._decode_warm(pid, slot.frame) for pid in ids]
             self._ended = [(q, c) for q, c in self._ended if c.last > slot.frame]
+            self.timer.add('decoding', t0)
         else:
             joints = []
             for pid in ids:
@@ -235,6 +247,7 @@ class SlidingWindow:
 
     def _solve(self, pid: int, run: range) -> np.ndarray:
         """Decoded joints (T, J, 3) of person pid over the buffer positions `run`."""
+        t0 = time.perf_counter()
         frames = [self._slots[i].people[pid] for i in run]
         hyp = np.stack([f.hypotheses for f in frames])  # (T, J, M, 3)
         data = np.stack([f.data for f in frames])
@@ -252,12 +265,16 @@ class SlidingWindow:
             dist = np.stack([self._bone_distances(pid, i) for i in run])  # (T, E, M, M)
             groups.append(PairwiseGroup('limb', self.bones, limb_table_from(dist, hyp, data, self.bones,
                                                                             self.config.factors)))
+        t0 = self.timer.add('factors', t0)
         if not groups and not any(t is not None for t in temporal):
             marginals = data
         else:
             marginals, _ = loopy_bp(data, temporal, groups, self.config.iterations)
+        t0 = self.timer.add('bp', t0)
         best = marginals.argmax(axis=-1)  # (T, J)
-        return np.take_along_axis(hyp, best[..., None, None], axis=2)[:, :, 0]
+        out = np.take_along_axis(hyp, best[..., None, None], axis=2)[:, :, 0]
+        self.timer.add('decoding', t0)
+        return out
 
     def _collision(self, pid: int, i: int) -> np.ndarray:
         slot = self._slots[i]
