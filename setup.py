@@ -30,6 +30,7 @@ setup(
         'console_scripts': [
             'mvpose-eval = mvpose_ros.cli.evaluate:main',
             'mvpose-graph = mvpose_ros.cli.graph:main',
+            'mvpose-images = mvpose_ros.cli.images:main',
             'mvpose-make-bag = mvpose_ros.cli.make_bag:main',
         ],
     },

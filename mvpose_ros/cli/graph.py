@@ -6,10 +6,13 @@
 Starts the detectors, association and bp_solver (with the Fast DDS profile `fastdds.xml` beside
 the parameter file, when there is one), waits until the graph is connected, then plays
 the bag; a recorder node inside this process keeps every /skeletons message and times it from
-the arrival of the same stamp's /cam0/camera_info. It stops when every input stamp has its
-output (or nothing came for `timeout` s), stops every process, writes the predictions file and
-prints counts, latency and the PCP table of `mvpose-eval shelf --score`. Exit code 1 with a
-one-line reason when a node crashes, the graph never connects, or outputs are missing.
+the arrival of the same stamp's /cam0/camera_info. The input frames are the bag's messages on
+the detectors' input topic, which follows their backend (/cam0/openpose for openpose,
+/cam0/image_raw for onnx). It stops when every input stamp has its output (or nothing came for
+`timeout` s), stops every process, writes the predictions file and prints counts, latency and
+the PCP table of those frames against Shelf's ground truth (actors 1-3, as `mvpose-eval shelf
+--score` for the whole test clip). Exit code 1 with a one-line reason when a node crashes, the
+graph never connects, or outputs are missing.
 """
 from __future__ import annotations
 
@@ -34,16 +37,16 @@ from sensor_msgs.msg import CameraInfo, PointCloud2
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.bags.io import read_bag
-from mvpose_ros.cli import evaluate as evaluate_cli
-from mvpose_ros.core.datasets import data_root
-from mvpose_ros.core.predictions import write_predictions
+from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation import PAPER_SHELF_PCP, evaluate, format_table
+from mvpose_ros.core.predictions import read_predictions, write_predictions
 from mvpose_ros.core.window import FrameResult
-from mvpose_ros.graph.config import (GraphSettings, NodeSpec, expected_connections, graph_nodes, graph_settings,
-                                     load_params, node_command, unknown_nodes)
+from mvpose_ros.graph.config import (GraphSettings, NodeSpec, detector_backend, expected_connections, graph_nodes,
+                                     graph_settings, load_params, node_command, unknown_nodes)
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
+from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 
 PROG = 'mvpose-graph'
-INPUT_TOPIC = '/cam0/openpose'
 TIMING_TOPIC = '/cam0/camera_info'
 OUTPUT_TOPIC = '/skeletons'
 PLAYER = 'bag_player'
@@ -133,11 +136,12 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def input_stamps(bag: Path) -> list[int]:
-    """Header stamps (ns) of the frames in the bag: the log times of its /cam0/openpose messages."""
-    stamps = [stamp for _, _, stamp, _ in read_bag(bag, [INPUT_TOPIC])]
+def input_stamps(bag: Path, topic: str) -> list[int]:
+    """Header stamps (ns) of the frames in the bag: the log times of its messages on topic (camera
+    0's detector input)."""
+    stamps = [stamp for _, _, stamp, _ in read_bag(bag, [topic])]
     if not stamps:
-        raise ValueError(f'{bag}: no {INPUT_TOPIC} messages')
+        raise ValueError(f'{bag}: no {topic} messages')
     return stamps
 
 
@@ -149,9 +153,9 @@ def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str] = ()) -> None
 
 
 def _wait_connected(node: RecorderNode, executor: SingleThreadedExecutor, group: ProcessGroup,
-                    settings: GraphSettings) -> None:
+                    settings: GraphSettings, input_topic: str) -> None:
     """Spin until every expected endpoint exists; GraphFailure on a crash or after STARTUP_TIMEOUT_S."""
-    expected = expected_connections(settings.cameras)
+    expected = expected_connections(settings.cameras, input_topic)
     deadline = time.monotonic() + STARTUP_TIMEOUT_S
     while missing := node.missing_links(expected):
         _check_crashes(group)
@@ -184,8 +188,9 @@ def _play(node: RecorderNode, executor: SingleThreadedExecutor, group: ProcessGr
 
 
 def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], stamps: list[int],
-              log_dir: Path, node: RecorderNode, executor: SingleThreadedExecutor) -> Outcome:
-    """Start the nodes, wait for the connections, play, collect; every process is stopped on return."""
+              log_dir: Path, node: RecorderNode, executor: SingleThreadedExecutor, input_topic: str) -> Outcome:
+    """Start the nodes, wait for the connections, play, collect; every process is stopped on return.
+    input_topic: what each detector reads in its camera namespace."""
     outcome = Outcome(stamps)
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
@@ -193,7 +198,7 @@ def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], 
         try:
             for spec in nodes:
                 if spec.executable == PLAYER:
-                    _wait_connected(node, executor, group, settings)
+                    _wait_connected(node, executor, group, settings, input_topic)
                 group.start(spec.name, node_command(spec, config))
             outcome.stalled = _play(node, executor, group, settings, stamps)
         except GraphFailure as failure:
@@ -261,6 +266,19 @@ def save_predictions(outcome: Outcome, node: RecorderNode, frame_rate: float, pa
         return write_predictions(results, f)
 
 
+def score(predictions: Path, frames: Sequence[int], root: str | None, out: TextIO) -> None:
+    """Print the PCP table and summary of the predictions over Shelf frames `frames` (actors 1-3),
+    with the paper's rows when they are the whole test clip."""
+    gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', frames)
+    ev = evaluate(read_predictions(predictions), gt, SHELF_ACTORS)
+    whole = sorted(frames) == list(SHELF_TEST_FRAMES)
+    print(f'{predictions}: Shelf frames {frame_ranges(frames)}', file=out)
+    print(format_table(ev, PAPER_SHELF_PCP if whole else None), file=out)
+    print(f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
+          f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
+          f' | MPJPE {ev.mpjpe_all:5.1f} mm', file=out)
+
+
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
     out, err = out or sys.stdout, err or sys.stderr
     settings = graph_settings(args.config)
@@ -271,9 +289,17 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     bag = Path(settings.bag).resolve()
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
-    stamps = input_stamps(bag)
+    params = load_params(args.config)
+    try:
+        backend = detector_backend(params)
+        if backend not in INPUT_TOPICS:
+            raise ValueError(f'heatmap_detector backend {backend!r} is not one of {", ".join(INPUT_TOPICS)}')
+    except ValueError as exc:
+        raise ValueError(f'{args.config}: {exc}') from None
+    input_topic = INPUT_TOPICS[backend]
+    stamps = input_stamps(bag, f'/cam0/{input_topic}')
     nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root)
-    for section in unknown_nodes(load_params(args.config), nodes):
+    for section in unknown_nodes(params, nodes):
         print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
 
     # Set before the first rclpy context: it and every child read them.
@@ -290,7 +316,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
-        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor)
+        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic)
     except Interrupted as exc:
         print(f'{PROG}: {exc}; every node stopped', file=err)
         return 128 + exc.signum
@@ -307,8 +333,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     n = save_predictions(outcome, node, settings.frame_rate, predictions)
     print(f'wrote {n} frames to {predictions}', file=out)
     if settings.dataset == 'shelf' and n:
-        score = ['shelf', '--score', str(predictions)] + ([] if root is None else ['--data-root', root])
-        evaluate_cli.run(evaluate_cli.build_parser().parse_args(score), out)
+        score(predictions, [_frame(s, settings.frame_rate) for s in stamps], root, out)
     if outcome.stalled:
         problems.insert(0, f'stopped: no {OUTPUT_TOPIC} for {settings.timeout:g} s')
     if problems:

@@ -138,11 +138,23 @@ def node_command(spec: NodeSpec, params_file: str | Path, python: str = sys.exec
     return cmd
 
 
-def expected_connections(cameras: int) -> dict[str, Sequence[str]]:
-    """Topic -> endpoints ('pub', 'sub') that must exist before the player may start."""
+def detector_backend(params: Mapping[str, Mapping[str, object]]) -> str:
+    """The `backend` the file gives the heatmap detectors ('openpose', the node's default, when
+    none does); ValueError when its heatmap_detector sections disagree."""
+    backends = {str(section['backend']) for node, section in params.items()
+                if node.rsplit('/', 1)[-1] == 'heatmap_detector' and 'backend' in section}
+    if len(backends) > 1:
+        raise ValueError(f'heatmap_detector sections give different backends {sorted(backends)}: '
+                         f'the runner needs one input topic for every camera')
+    return backends.pop() if backends else 'openpose'
+
+
+def expected_connections(cameras: int, input_topic: str = 'openpose') -> dict[str, Sequence[str]]:
+    """Topic -> endpoints ('pub', 'sub') that must exist before the player may start; each
+    detector reads /cam<c>/<input_topic>."""
     topics: dict[str, Sequence[str]] = {}
     for c in range(cameras):
-        topics[f'/cam{c}/openpose'] = ('sub',)
+        topics[f'/cam{c}/{input_topic}'] = ('sub',)
         topics[f'/cam{c}/people2d'] = ('pub', 'sub')
     topics['/people/bundles'] = ('pub', 'sub')
     topics['/skeletons'] = ('pub',)

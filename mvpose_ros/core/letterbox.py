@@ -1,0 +1,119 @@
+"""The letterbox transform: an image region scaled into a square network input, centred and
+padded with zeros, as an affine map both ways; and maps on the network's grid resampled onto an
+image-aligned grid of cells.
+
+Coordinates are pixel centres: pixel (0, 0) is at (0.0, 0.0) and covers [-0.5, 0.5]^2, as in
+OpenCV (cv2.resize, cv2.warpAffine). The region is cut at whole image pixels and resized with
+cv2.resize, so the map between its pixel edges and the input's is exact:
+input = scale * image + shift, per axis (the two scales differ only by the rounding of the
+resized size).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Letterbox:
+    """roi: (x0, y0, x1, y1) image pixels cut (end exclusive); content: (x, y, w, h) where the
+    resized roi lies in the size x size input; scale, shift: (2,) u, v then x, y of the map
+    input = scale * image + shift."""
+
+    roi: tuple[int, int, int, int]
+    content: tuple[int, int, int, int]
+    size: int
+    scale: np.ndarray
+    shift: np.ndarray
+
+    def to_input(self, uv: np.ndarray) -> np.ndarray:
+        """Network input pixels (..., 2) of image pixels uv (..., 2)."""
+        return np.asarray(uv, dtype=np.float64) * self.scale + self.shift
+
+    def to_image(self, xy: np.ndarray) -> np.ndarray:
+        """Image pixels (..., 2) of network input pixels xy (..., 2)."""
+        return (np.asarray(xy, dtype=np.float64) - self.shift) / self.scale
+
+    def contains(self, uv: np.ndarray) -> np.ndarray:
+        """(...,) whether image pixels uv (..., 2) lie in the cut region (False for NaN)."""
+        uv = np.asarray(uv, dtype=np.float64)
+        x0, y0, x1, y1 = self.roi
+        return (uv[..., 0] >= x0 - 0.5) & (uv[..., 0] <= x1 - 0.5) & (uv[..., 1] >= y0 - 0.5) & (uv[..., 1] <= y1 - 0.5)
+
+    def apply(self, image: np.ndarray) -> np.ndarray:
+        """The (size, size, C) input of image (H, W, C): the roi resized into the content
+        rectangle (area averaging when shrinking, so small people are not aliased), zeros around."""
+        x0, y0, x1, y1 = self.roi
+        cx, cy, cw, ch = self.content
+        crop = image[y0:y1, x0:x1]
+        shrink = cw < x1 - x0 or ch < y1 - y0
+        out = np.zeros((self.size, self.size) + image.shape[2:], dtype=image.dtype)
+        out[cy:cy + ch, cx:cx + cw] = cv2.resize(crop, (cw, ch),
+                                                 interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+        return out
+
+    def image_grid(self, stride: float) -> tuple[np.ndarray, tuple[int, int]]:
+        """An image-aligned grid of cells `stride` px apart over the roi: the pixel of cell
+        [0, 0] (2,) (the roi's first pixel) and the grid shape (h, w)."""
+        x0, y0, x1, y1 = self.roi
+        w = int(np.floor((x1 - 1 - x0) / stride)) + 1
+        h = int(np.floor((y1 - 1 - y0) / stride)) + 1
+        return np.array([x0, y0], dtype=np.float64), (h, w)
+
+    def maps_to_image(self, maps: np.ndarray, origin: np.ndarray, stride: float,
+                      shape: tuple[int, int]) -> np.ndarray:
+        """Resample maps (J, size, size), value [j, y, x] at input pixel (x, y), onto the image
+        grid whose cell [r, c] is at image pixel origin + stride * (c, r), shape (h, w): returns
+        (J, h, w). Separable tent interpolation whose support widens to one output cell when
+        cells are coarser than the input's pixels (bilinear otherwise), so a peak keeps its mass;
+        0 where a cell falls outside the input."""
+        h, w = shape
+        cols = self.to_input(np.stack([origin[0] + stride * np.arange(w), np.zeros(w)], -1))[:, 0]
+        rows = self.to_input(np.stack([np.zeros(h), origin[1] + stride * np.arange(h)], -1))[:, 1]
+        ix, wx = _tent_taps(cols, self.size, stride * self.scale[0])  # (w, K)
+        iy, wy = _tent_taps(rows, self.size, stride * self.scale[1])  # (h, K)
+        maps = np.asarray(maps, dtype=np.float32)
+        across = (maps[:, :, ix] * wx).sum(axis=-1)  # (J, size, w)
+        return (across[:, iy, :] * wy[..., None]).sum(axis=2)  # (J, h, w)
+
+
+def _tent_taps(positions: np.ndarray, n: int, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Interpolation of samples 0..n-1 at fractional positions (N,): sample indices and weights
+    (N, K) of a tent of half-width max(1, step) samples, weights summing to 1 (all 0 for
+    positions outside [0, n - 1])."""
+    radius = max(1.0, float(step))
+    k = np.arange(-int(np.ceil(radius)), int(np.ceil(radius)) + 1)
+    index = np.floor(positions)[:, None].astype(np.intp) + k[None, :]
+    weights = np.maximum(0.0, 1.0 - np.abs(positions[:, None] - index) / radius)
+    weights[(index < 0) | (index >= n)] = 0.0
+    total = weights.sum(axis=1, keepdims=True)
+    inside = (positions >= 0) & (positions <= n - 1)
+    weights = np.where(inside[:, None] & (total > 0), weights / np.where(total > 0, total, 1.0), 0.0)
+    return np.clip(index, 0, n - 1), weights.astype(np.float32)
+
+
+def letterbox(width: int, height: int, box: np.ndarray, size: int) -> Letterbox:
+    """The letterbox of the image region box (u0, v0, u1, v1), pixel edges in pixel-centre
+    coordinates (the whole image is (-0.5, -0.5, width - 0.5, height - 0.5)), cut to the image
+    and to whole pixels, into a size x size input. ValueError when the region holds no pixel."""
+    u0, v0, u1, v1 = np.asarray(box, dtype=np.float64)
+    x0, y0 = max(0, int(np.floor(u0 + 0.5))), max(0, int(np.floor(v0 + 0.5)))
+    x1, y1 = min(width, int(np.ceil(u1 + 0.5))), min(height, int(np.ceil(v1 + 0.5)))
+    if not (x1 > x0 and y1 > y0):
+        raise ValueError(f'letterbox region {np.round([u0, v0, u1, v1], 1).tolist()} holds no pixel of '
+                         f'the {width}x{height} image')
+    n = np.array([x1 - x0, y1 - y0], dtype=np.float64)
+    fitted = np.maximum(1, np.round(n * size / n.max())).astype(int)
+    offset = (size - fitted) // 2
+    scale = fitted / n
+    # edges map to edges: x + 0.5 = offset + scale * (u + 0.5 - x0)
+    shift = offset + scale * (0.5 - np.array([x0, y0])) - 0.5
+    return Letterbox(roi=(x0, y0, x1, y1), content=(int(offset[0]), int(offset[1]), int(fitted[0]), int(fitted[1])),
+                     size=int(size), scale=scale, shift=shift)
+
+
+def whole_image(width: int, height: int, size: int) -> Letterbox:
+    """The letterbox of a whole width x height image into size x size."""
+    return letterbox(width, height, np.array([-0.5, -0.5, width - 0.5, height - 0.5]), size)

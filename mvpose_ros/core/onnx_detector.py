@@ -1,0 +1,247 @@
+"""2D people with heatmaps from a camera image, with two ONNX models on onnxruntime: MoveNet
+MultiPose finds the people (boxes and COCO-17 keypoints) in the whole letterboxed frame, then
+EfficientPose (RT or I) gives each person's MPII-16 heatmaps on a letterboxed crop around its
+box, batched over the people of the frame.
+
+Joint mapping (body.SOURCE_INDEX['mpii16']): the 12 limb joints one-to-one; MPII upper_neck ->
+inference 'neck' and head_top -> inference 'head', the points the 'direct' head model takes as
+the dataset's bottom and top of the head. MPII has no ears: with `ears`, the r_ear / l_ear
+inference joints come from MultiPose's COCO ears (keypoint, and a Gaussian of std `sigma` px as
+their map), which the 'anatomical' head model needs.
+
+Heatmaps: EfficientPose's values are not probabilities (peaks 0.3-0.9, small negatives): they
+are clipped to [0, 1], so a map's peak is the joint's confidence as with the OpenPose backend's
+Gaussians; cells below `heatmap_floor` of their map's peak are set to 0 so that sampling a map as
+a pmf stays near its evidence; a joint whose peak is below `min_joint_score` is not detected
+(empty map, score 0). Maps are resampled from the crop onto an image-aligned grid of `stride` px
+cells and each is cut to the cells holding its evidence, which keeps messages small.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mvpose_ros.core.body import COCO17_NAMES, L_EAR, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX, to_inference
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap
+from mvpose_ros.core.letterbox import Letterbox, letterbox, whole_image
+from mvpose_ros.core.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
+                                         load_session)
+from mvpose_ros.core.person2d import Person2D
+
+MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
+# EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])
+_MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
+_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
+_COCO_EARS = {R_EAR: COCO17_NAMES.index('r_ear'), L_EAR: COCO17_NAMES.index('l_ear')}
+_MULTIPOSE_KEYPOINTS = 17
+
+
+@dataclass(frozen=True)
+class OnnxDetectorConfig:
+    """model_dir: folder of the .onnx files (<data root>/models). model: EfficientPose 'rt'
+    (224 px crops) or 'i' (256 px). providers: onnxruntime execution providers in order of
+    preference; threads: intra-op threads per session (0 = one per core). input_size: MultiPose's
+    square input side (a multiple of 32). box_margin: each side of a MultiPose box grows by this
+    fraction of the box's width (height) before the crop. min_person_score: MultiPose people below
+    it are dropped. min_joint_score, heatmap_floor, stride: see the module docstring. ears: fill the
+    ear joints from MultiPose's COCO ears, rendered as Gaussians of std sigma px."""
+
+    model_dir: Path
+    model: str = 'rt'
+    providers: tuple[str, ...] = DEFAULT_PROVIDERS
+    threads: int = 0
+    input_size: int = 384
+    box_margin: float = 0.1
+    min_person_score: float = 0.25
+    min_joint_score: float = 0.1
+    heatmap_floor: float = 0.1
+    stride: float = 4.0
+    ears: bool = True
+    sigma: float = 6.0
+
+    def __post_init__(self) -> None:
+        problems = []
+        if self.model not in MODELS:
+            problems.append(f'model {self.model!r} is not one of {", ".join(MODELS)}')
+        if not (self.input_size >= 32 and self.input_size % 32 == 0):
+            problems.append(f'input_size {self.input_size} is not a positive multiple of 32')
+        if self.threads < 0:
+            problems.append(f'threads {self.threads} is negative')
+        if not self.box_margin >= 0:
+            problems.append(f'box_margin {self.box_margin} is negative')
+        if not (0 <= self.min_person_score <= 1 and 0 <= self.min_joint_score <= 1 and 0 <= self.heatmap_floor < 1):
+            problems.append(f'min_person_score {self.min_person_score}, min_joint_score {self.min_joint_score} '
+                            f'must lie in [0, 1] and heatmap_floor {self.heatmap_floor} in [0, 1)')
+        if not (self.stride > 0 and self.sigma > 0):
+            problems.append(f'stride {self.stride} and sigma {self.sigma} must be > 0')
+        if problems:
+            raise ValueError('; '.join(problems))
+
+
+@dataclass
+class DetectionTiming:
+    """Wall seconds of the last detect(): MultiPose (letterbox, run, decode), EfficientPose
+    (crops and one batched run), and everything including the heatmaps' resampling."""
+
+    multipose: float = 0.0
+    efficientpose: float = 0.0
+    total: float = 0.0
+    people: int = 0
+
+
+@dataclass
+class _Found:
+    """MultiPose's people in image pixels: keypoints (P, 17, 3) u, v, score; boxes (P, 4) u0, v0,
+    u1, v1 (edges, pixel-centre coordinates)."""
+
+    keypoints: np.ndarray
+    boxes: np.ndarray
+
+
+class OnnxPoseDetector:
+    """Both sessions are created (and checked) once, here; detect() runs them on one image."""
+
+    def __init__(self, config: OnnxDetectorConfig) -> None:
+        self.config = config
+        providers = check_providers(config.providers)
+        model_dir = Path(config.model_dir)
+        self._multipose = load_session(model_dir / MULTIPOSE.file, MULTIPOSE, providers, config.threads)
+        self._spec = EFFICIENTPOSE[config.model]
+        self._efficientpose = load_session(model_dir / self._spec.file, self._spec, providers, config.threads)
+        self.providers = tuple(self._efficientpose.get_providers())  # those onnxruntime actually uses
+        self.timing = DetectionTiming()
+
+    def detect(self, bgr: np.ndarray) -> list[Person2D]:
+        """The people in bgr (H, W, 3) uint8, each with its 16 inference keypoints and heatmaps;
+        self.timing tells how long each step took."""
+        bgr = np.asarray(bgr)
+        if bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8:
+            raise ValueError(f'image: expected (H, W, 3) uint8 BGR, got {bgr.dtype} {bgr.shape}')
+        t0 = time.perf_counter()
+        rgb = np.ascontiguousarray(bgr[..., ::-1])
+        found = self._find_people(rgb)
+        t1 = time.perf_counter()
+        boxes = [letterbox(rgb.shape[1], rgb.shape[0], box, self._spec.input_side)
+                 for box in _grown(found.boxes, self.config.box_margin)]
+        maps = self._heatmaps(rgb, boxes)
+        t2 = time.perf_counter()
+        people = [p for p in (self._person(lb, m, kp) for lb, m, kp in zip(boxes, maps, found.keypoints))
+                  if p is not None]
+        self.timing = DetectionTiming(t1 - t0, t2 - t1, time.perf_counter() - t0, len(people))
+        return people
+
+    def _find_people(self, rgb: np.ndarray) -> _Found:
+        """MultiPose on the whole letterboxed frame: people scoring at least min_person_score whose
+        box holds image pixels."""
+        side = self.config.input_size
+        lb = whole_image(rgb.shape[1], rgb.shape[0], side)
+        (out,) = self._multipose.run([MULTIPOSE.output_name],
+                                     {MULTIPOSE.input_name: lb.apply(rgb)[None].astype(np.int32)})
+        rows = out[0]
+        n = 3 * _MULTIPOSE_KEYPOINTS
+        rows = rows[rows[:, n + 4] >= self.config.min_person_score]
+        # normalised (y, x) -> input pixels: 1.0 is the input's far edge, at pixel side - 0.5
+        yx = rows[:, :n].reshape(-1, _MULTIPOSE_KEYPOINTS, 3)
+        keypoints = np.concatenate([lb.to_image(yx[..., 1::-1] * side - 0.5), yx[..., 2:]], axis=-1)
+        corners = lb.to_image(rows[:, [n + 1, n, n + 3, n + 2]].reshape(-1, 2, 2) * side - 0.5)
+        boxes = corners.reshape(-1, 4)
+        edge = np.array([rgb.shape[1], rgb.shape[0]]) - 0.5
+        keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > -0.5) & (boxes[:, :2] < edge)).all(axis=1)
+        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64))
+
+    def _heatmaps(self, rgb: np.ndarray, boxes: list[Letterbox]) -> np.ndarray:
+        """EfficientPose heatmaps (P, 16, side, side) of the letterboxed crops, one batched run."""
+        side = self._spec.input_side
+        if not boxes:
+            return np.zeros((0, 16, side, side), dtype=np.float32)
+        crops = np.stack([lb.apply(rgb) for lb in boxes]).astype(np.float32)
+        crops = (crops / 255.0 - _MEAN) / _STD
+        (out,) = self._efficientpose.run([self._spec.output_name], {self._spec.input_name: crops})
+        return np.ascontiguousarray(out.transpose(0, 3, 1, 2))  # BLAS wants C order for the resampling
+
+    def _person(self, lb: Letterbox, raw: np.ndarray, coco: np.ndarray) -> Person2D | None:
+        """One person from its crop's MPII-16 maps raw (16, side, side) and its MultiPose COCO
+        keypoints coco (17, 3); None when no joint is detected."""
+        cfg = self.config
+        raw = np.clip(raw, 0.0, 1.0)
+        peaks = _peaks(raw)
+        mpii = np.concatenate([lb.to_image(peaks[:, :2]), peaks[:, 2:]], axis=1)  # (16, 3) MPII order
+        # a peak in the letterbox padding is no detection (and lies outside the maps' grid)
+        mpii[(mpii[:, 2] < cfg.min_joint_score) | ~lb.contains(mpii[:, :2]), 2] = 0.0
+        keypoints = to_inference(mpii, 'mpii16')
+        origin, shape = lb.image_grid(cfg.stride)
+        source = SOURCE_INDEX['mpii16']
+        maps = np.zeros((NUM_INFERENCE_JOINTS,) + shape, dtype=np.float32)
+        has = source >= 0
+        maps[has] = lb.maps_to_image(raw[source[has]], origin, cfg.stride, shape)
+        if cfg.ears:
+            for joint, k in _COCO_EARS.items():
+                if coco[k, 2] >= cfg.min_joint_score and lb.contains(coco[k, :2]):
+                    keypoints[joint] = coco[k]
+                    maps[joint] = _gaussian(coco[k], origin, cfg.stride, shape, cfg.sigma)
+        peak = maps.max(axis=(1, 2), keepdims=True)
+        maps[(maps < cfg.heatmap_floor * peak) | (keypoints[:, 2] <= 0)[:, None, None]] = 0.0
+        if not (keypoints[:, 2] > 0).any():
+            return None
+        return Person2D(keypoints, _trimmed(maps, origin, float(cfg.stride)))
+
+
+def _grown(boxes: np.ndarray, margin: float) -> np.ndarray:
+    """Boxes (P, 4) u0, v0, u1, v1 with each side moved out by margin times the box's size."""
+    size = boxes[:, 2:] - boxes[:, :2]
+    return np.concatenate([boxes[:, :2] - margin * size, boxes[:, 2:] + margin * size], axis=1)
+
+
+def _peaks(maps: np.ndarray) -> np.ndarray:
+    """(J, 3) x, y (input pixels, sub-pixel by a parabola through the maximum and its two
+    neighbours along each axis) and value of each map's maximum (maps (J, h, w))."""
+    n_j, h, w = maps.shape
+    flat = maps.reshape(n_j, -1)
+    best = flat.argmax(axis=1)
+    row, col = np.divmod(best, w)
+    value = flat[np.arange(n_j), best]
+    j = np.arange(n_j)
+
+    def offset(lo: np.ndarray, mid: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        curvature = lo - 2.0 * mid + hi
+        safe = np.where(curvature < 0, curvature, -1.0)
+        return np.where(curvature < 0, np.clip(0.5 * (lo - hi) / safe, -0.5, 0.5), 0.0)
+
+    cl, cr = np.maximum(col - 1, 0), np.minimum(col + 1, w - 1)
+    rl, rr = np.maximum(row - 1, 0), np.minimum(row + 1, h - 1)
+    dx = offset(maps[j, row, cl], value, maps[j, row, cr]) * ((col > 0) & (col < w - 1))
+    dy = offset(maps[j, rl, col], value, maps[j, rr, col]) * ((row > 0) & (row < h - 1))
+    return np.stack([col + dx, row + dy, value], axis=1).astype(np.float64)
+
+
+def _gaussian(centre: np.ndarray, origin: np.ndarray, stride: float, shape: tuple[int, int],
+              sigma: float) -> np.ndarray:
+    """(h, w) map: a Gaussian of std sigma px and peak centre[2] at pixel centre[:2] on the grid,
+    cut to 0 beyond MARGIN_SIGMAS * sigma along u or v as heatmap.render_heatmap does."""
+    h, w = shape
+    du = origin[0] + stride * np.arange(w) - centre[0]
+    dv = origin[1] + stride * np.arange(h) - centre[1]
+    gu = np.where(np.abs(du) <= MARGIN_SIGMAS * sigma, np.exp(-0.5 * (du / sigma) ** 2), 0.0)
+    gv = np.where(np.abs(dv) <= MARGIN_SIGMAS * sigma, np.exp(-0.5 * (dv / sigma) ** 2), 0.0)
+    return (min(float(centre[2]), 1.0) * gv[:, None] * gu[None, :]).astype(np.float32)
+
+
+def _trimmed(maps: np.ndarray, origin: np.ndarray, stride: float) -> PersonHeatmap:
+    """The heatmap of maps (J, h, w) on the grid at origin (2,) with each map cut to the rows and
+    columns holding its own evidence (its own origin), all padded with zeros to the largest of
+    these extents (one cell when every map is empty), as heatmap.render_heatmaps lays maps out."""
+    n_j, h, w = maps.shape
+    rows, cols = maps.any(axis=2), maps.any(axis=1)  # (J, h), (J, w)
+    has = rows.any(axis=1)
+    r0 = np.where(has, rows.argmax(axis=1), 0)
+    c0 = np.where(has, cols.argmax(axis=1), 0)
+    r1 = np.where(has, h - rows[:, ::-1].argmax(axis=1), 1)
+    c1 = np.where(has, w - cols[:, ::-1].argmax(axis=1), 1)
+    out_h, out_w = int((r1 - r0).max()), int((c1 - c0).max())
+    padded = np.pad(maps, ((0, 0), (0, out_h), (0, out_w)))
+    cut = padded[np.arange(n_j)[:, None, None], (r0[:, None] + np.arange(out_h))[:, :, None],
+                 (c0[:, None] + np.arange(out_w))[:, None, :]]
+    return PersonHeatmap(cut, origin + stride * np.stack([c0, r0], axis=1).astype(np.float64), stride)

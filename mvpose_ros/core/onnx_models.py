@@ -1,0 +1,95 @@
+"""The ONNX 2D pose models (MoveNet MultiPose, EfficientPose RT / I): what each file must look
+like, and onnxruntime sessions checked against it when they are loaded, so that a wrong file is
+a clear error at start-up rather than a shape error on the first image."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import onnxruntime as ort
+
+DEFAULT_PROVIDERS = ('CPUExecutionProvider',)
+
+
+class ModelError(ValueError):
+    """A model file that cannot be used (missing, not ONNX, or another model's inputs and
+    outputs); the message names the file and the problem."""
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A model's file name, its one input and the output used: names, element type, and shape
+    (None = any size, e.g. a dynamic batch)."""
+
+    kind: str
+    file: str
+    input_name: str
+    input_type: str
+    input_shape: tuple[int | None, ...]
+    output_name: str
+    output_shape: tuple[int | None, ...]
+
+    @property
+    def input_side(self) -> int | None:
+        """The fixed square input side (EfficientPose), None when the model takes any size."""
+        return self.input_shape[1]
+
+
+MULTIPOSE = ModelSpec('MoveNet MultiPose', 'movenet_multipose.onnx', 'input', 'tensor(int32)', (1, None, None, 3),
+                      'output_0', (1, 6, 56))
+EFFICIENTPOSE = {
+    variant: ModelSpec(f'EfficientPose {variant.upper()}', f'efficientpose_{variant}.onnx', 'input_res1:0',
+                       'tensor(float)', (None, side, side, 3), 'upscaled_confs/BiasAdd:0', (None, side, side, 16))
+    for variant, side in (('rt', 224), ('i', 256))
+}
+
+
+def check_providers(providers: Sequence[str]) -> tuple[str, ...]:
+    """The execution providers, ValueError when one is not in this onnxruntime build (which
+    would otherwise fall back to the CPU with only a warning)."""
+    available = ort.get_available_providers()
+    missing = [p for p in providers if p not in available]
+    if not providers or missing:
+        raise ValueError(f'execution providers {list(providers)}: '
+                         f'{"none given" if not providers else f"{missing} not available"} '
+                         f'(this onnxruntime has {", ".join(available)})')
+    return tuple(providers)
+
+
+def _shape_matches(shape: Sequence[object], expected: Sequence[int | None]) -> bool:
+    # ONNX symbolic dimensions come back as strings (or None): they match a None in the spec only
+    return len(shape) == len(expected) and all(e is None or s == e for s, e in zip(shape, expected))
+
+
+def _describe(args: Sequence[ort.NodeArg]) -> str:
+    return ', '.join(f'{a.name} {a.type} {list(a.shape)}' for a in args) or 'none'
+
+
+def load_session(path: str | Path, spec: ModelSpec, providers: Sequence[str] = DEFAULT_PROVIDERS,
+                 threads: int = 0) -> ort.InferenceSession:
+    """An onnxruntime session of the model file `path`, checked against `spec`; threads: intra-op
+    threads (0 = onnxruntime's default, one per core). ModelError when the file is missing, is not
+    an ONNX model, or has other inputs or outputs than spec."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f'{path}: {spec.kind} model file not found')
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    options.log_severity_level = 3  # errors only: onnxruntime's warnings are not the user's business
+    try:
+        session = ort.InferenceSession(str(path), options, providers=list(providers))
+    except Exception as exc:  # onnxruntime's own exception types (InvalidProtobuf, Fail, ...) share no base
+        reason = ' '.join(str(exc).split())
+        raise ModelError(f'{path}: not a loadable ONNX model ({reason})') from None
+    inputs, outputs = session.get_inputs(), session.get_outputs()
+    output = [o for o in outputs if o.name == spec.output_name]
+    if not (len(inputs) == 1 and inputs[0].name == spec.input_name and inputs[0].type == spec.input_type
+            and _shape_matches(inputs[0].shape, spec.input_shape)
+            and output and _shape_matches(output[0].shape, spec.output_shape)):
+        expected = (f'input {spec.input_name} {spec.input_type} {list(spec.input_shape)}, output '
+                    f'{spec.output_name} {list(spec.output_shape)} (None = any)')
+        raise ModelError(f'{path}: not the {spec.kind} model: expected {expected}; the file has input '
+                         f'{_describe(inputs)}, output {_describe(outputs)}')
+    return session

@@ -1,0 +1,54 @@
+"""Overlay images: 3D skeletons reprojected into a camera image, each person in its own colour,
+over that camera's 2D detections drawn thinly."""
+from __future__ import annotations
+
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from mvpose_ros.core.body import BONES, NUM_JOINTS
+from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.person2d import Person2D
+
+DETECTION_BGR = (255, 255, 255)
+_SHIFT = 4  # cv2 sub-pixel drawing: coordinates in 1/16 px
+_BONES = np.array(BONES)  # (B, 2) joints of each bone, the 14 dataset joints
+
+
+def _segments(uv: np.ndarray) -> np.ndarray:
+    """(S, 2, 2) fixed-point endpoints of the bones whose two joints are finite (uv: (14, 2))."""
+    ends = uv[_BONES]  # (B, 2, 2)
+    ok = np.isfinite(ends).all(axis=(1, 2))
+    return np.round(ends[ok] * (1 << _SHIFT)).astype(np.int32)
+
+
+def draw_detections(bgr: np.ndarray, people: Sequence[Person2D]) -> None:
+    """Thin lines over each 2D person's detected bones (the first 14 inference joints are the
+    dataset's joints with neck and head for the two head joints), in place."""
+    for person in people:
+        kp = person.keypoints[:NUM_JOINTS]
+        uv = np.where((kp[:, 2] > 0)[:, None], kp[:, :2], np.nan)
+        cv2.polylines(bgr, list(_segments(uv)), False, DETECTION_BGR, 1, cv2.LINE_AA, _SHIFT)
+
+
+def draw_skeletons(bgr: np.ndarray, camera: Camera, joints: np.ndarray,
+                   colours: Sequence[tuple[float, float, float]]) -> None:
+    """Each person's 3D joints (P, 14, 3) metres reprojected through camera, bones and joints in
+    its colour (r, g, b in [0, 1]), in place; line width follows the image size."""
+    width = max(2, round(bgr.shape[1] / 300))
+    for xyz, (r, g, b) in zip(np.asarray(joints, dtype=np.float64), colours):
+        colour = (int(255 * b), int(255 * g), int(255 * r))
+        uv = camera.project(xyz)
+        cv2.polylines(bgr, list(_segments(uv)), False, colour, width, cv2.LINE_AA, _SHIFT)
+        for point in np.round(uv[np.isfinite(uv).all(axis=1)] * (1 << _SHIFT)).astype(np.int32):
+            cv2.circle(bgr, tuple(point.tolist()), (width + 2) << _SHIFT, colour, -1, cv2.LINE_AA, _SHIFT)
+
+
+def overlay(bgr: np.ndarray, camera: Camera, people: Sequence[Person2D], joints: np.ndarray,
+            colours: Sequence[tuple[float, float, float]]) -> np.ndarray:
+    """A copy of bgr with the 2D detections (thin, white) and the reprojected 3D skeletons."""
+    out = np.array(bgr, copy=True)
+    draw_detections(out, people)
+    draw_skeletons(out, camera, joints, colours)
+    return out

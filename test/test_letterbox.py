@@ -1,0 +1,108 @@
+"""The letterbox transform both ways: image pixels into the network input (the image itself,
+resized into place) and the network's maps back onto image pixels, for whole non-square images,
+person crops, and crops cut by the image border."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.letterbox import letterbox, whole_image
+
+# (width, height, region u0, v0, u1, v1 in pixel-centre coordinates, input side)
+CASES = [
+    (1032, 776, (-0.5, -0.5, 1031.5, 775.5), 384),   # a whole landscape image
+    (300, 500, (-0.5, -0.5, 299.5, 499.5), 256),     # a whole portrait image
+    (1032, 776, (412.3, 80.7, 688.9, 742.2), 224),   # a tall person crop
+    (1032, 776, (-60.0, 500.0, 150.0, 900.0), 224),  # cut by the left and bottom borders
+    (1032, 776, (900.0, -40.0, 1100.0, 120.0), 256),  # cut by the right and top borders
+]
+
+
+def _blob(shape: tuple[int, int], centre: np.ndarray, sigma: float) -> np.ndarray:
+    v, u = np.mgrid[:shape[0], :shape[1]]
+    return np.exp(-0.5 * ((u - centre[0]) ** 2 + (v - centre[1]) ** 2) / sigma ** 2)
+
+
+def _centroid(image: np.ndarray) -> np.ndarray:
+    v, u = np.mgrid[:image.shape[0], :image.shape[1]]
+    return np.array([(u * image).sum(), (v * image).sum()]) / image.sum()
+
+
+@pytest.mark.parametrize('width, height, box, side', CASES)
+def test_maps_are_inverse_and_region_edges_land_on_the_content_edges(width, height, box, side):
+    lb = letterbox(width, height, np.array(box), side)
+    x0, y0, x1, y1 = lb.roi
+    assert 0 <= x0 < x1 <= width and 0 <= y0 < y1 <= height
+    cx, cy, cw, ch = lb.content
+    assert max(cw, ch) == side and 0 <= cx and cx + cw <= side and 0 <= cy and cy + ch <= side
+    # centred: the padding differs by at most one pixel on the two sides
+    assert abs(cx - (side - cx - cw)) <= 1 and abs(cy - (side - cy - ch)) <= 1
+    # the cut region's outer pixel edges are the content's edges
+    np.testing.assert_allclose(lb.to_input([[x0 - 0.5, y0 - 0.5], [x1 - 0.5, y1 - 0.5]]),
+                               [[cx - 0.5, cy - 0.5], [cx + cw - 0.5, cy + ch - 0.5]], atol=1e-9)
+    uv = np.random.default_rng(0).uniform([x0, y0], [x1 - 1, y1 - 1], size=(50, 2))
+    np.testing.assert_allclose(lb.to_image(lb.to_input(uv)), uv, atol=1e-9)
+    assert lb.contains(uv).all()
+    assert not lb.contains(np.array([[x0 - 1.0, y0], [x0, y1], [np.nan, y0]])).any()
+    # uniform scale up to the rounding of the resized size
+    assert abs(lb.scale[0] / lb.scale[1] - 1) < 2 / min(cw, ch)
+
+
+@pytest.mark.parametrize('width, height, box, side', CASES)
+def test_an_image_blob_lands_at_its_mapped_input_pixel(width, height, box, side):
+    lb = letterbox(width, height, np.array(box), side)
+    x0, y0, x1, y1 = lb.roi
+    # a blob well inside the cut region, at a fractional position
+    centre = np.array([x0 + 0.37 * (x1 - x0) + 0.3, y0 + 0.61 * (y1 - y0) + 0.7])
+    sigma = 0.03 * max(x1 - x0, y1 - y0)
+    image = (255 * _blob((height, width), centre, sigma))[..., None].repeat(3, axis=2).astype(np.float32)
+    net = lb.apply(image)[..., 0]
+    assert net.shape == (side, side)
+    # area resampling keeps a blob's centroid in place to well under an input pixel
+    np.testing.assert_allclose(_centroid(net), lb.to_input(centre), atol=0.15)
+    # nothing outside the content rectangle
+    cx, cy, cw, ch = lb.content
+    mask = np.zeros_like(net, dtype=bool)
+    mask[cy:cy + ch, cx:cx + cw] = True
+    assert net[~mask].max() == 0
+
+
+@pytest.mark.parametrize('width, height, box, side', CASES)
+@pytest.mark.parametrize('stride', [1.0, 4.0, 8.0])
+def test_a_heatmap_peak_at_a_known_input_cell_maps_back_to_its_image_pixel(width, height, box, side, stride):
+    lb = letterbox(width, height, np.array(box), side)
+    cx, cy, cw, ch = lb.content
+    # peaks at known input cells, one per joint, inside the content rectangle
+    cells = np.array([[cx + 0.3 * cw, cy + 0.5 * ch], [cx + 0.8 * cw + 0.4, cy + 0.2 * ch],
+                      [cx + 0.5 * cw, cy + 0.9 * ch - 0.3]])
+    maps = np.stack([_blob((side, side), c, 3.0) for c in cells]).astype(np.float32)
+    origin, shape = lb.image_grid(stride)
+    resampled = lb.maps_to_image(maps, origin, stride, shape)
+    assert resampled.shape == (len(cells),) + shape
+    expected = lb.to_image(cells)
+    # the map's mass centre, in image pixels, is the mapped cell (sub-pixel)
+    got = np.array([origin + stride * _centroid(m) for m in resampled])
+    np.testing.assert_allclose(got, expected, atol=0.05 * stride / lb.scale.min() + 0.2)
+    # and the heatmap's peak cell is the one nearest it
+    peak = PersonHeatmap(resampled, origin, stride).peak()
+    assert np.all(np.abs(peak[:, :2] - expected) <= 0.5 * stride + 0.5 / lb.scale.min())
+    # a peak keeps its mass (cells coarser than the input's pixels average, finer ones interpolate)
+    step = stride * lb.scale
+    np.testing.assert_allclose(resampled.sum(axis=(1, 2)) * step[0] * step[1], maps.sum(axis=(1, 2)), rtol=0.05)
+
+
+def test_the_image_grid_covers_the_cut_region_only():
+    lb = letterbox(1032, 776, np.array([-60.0, 500.0, 150.0, 900.0]), 224)
+    assert lb.roi == (0, 500, 151, 776)
+    origin, (h, w) = lb.image_grid(4.0)
+    np.testing.assert_array_equal(origin, [0, 500])
+    assert origin[0] + 4.0 * (w - 1) <= 150 < origin[0] + 4.0 * w
+    assert origin[1] + 4.0 * (h - 1) <= 775 < origin[1] + 4.0 * h
+
+
+def test_whole_image_and_empty_regions():
+    lb = whole_image(1032, 776, 384)
+    assert lb.roi == (0, 0, 1032, 776) and lb.content == (0, 47, 384, 289)
+    with pytest.raises(ValueError, match='holds no pixel of the 1032x776 image'):
+        letterbox(1032, 776, np.array([1100.0, 10.0, 1200.0, 50.0]), 224)
