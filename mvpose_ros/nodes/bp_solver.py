@@ -3,8 +3,10 @@ belief propagation; publishes every frame's 3D skeletons `lag` frames after it a
 
 Out: /skeletons (PointCloud2 encoding D, frame world: one record per person joint, empty when
 nobody is seen) and /skeletons/markers (MarkerArray for RViz), both with the input frame's
-stamp. Every bundle message yields exactly one skeleton message. With no input for `idle_flush`
-seconds (the end of a replay, or a stalled graph) every pending frame is decoded and published.
+stamp. Every bundle message yields exactly one skeleton message, but for a late one (a frame not
+after the last one taken: a duplicate, or out of order), which is logged and dropped. A gap in
+the frame numbers breaks the temporal chains. With no input for `idle_flush` seconds (the end of
+a replay, or a stalled graph) every pending frame is decoded and published.
 """
 from __future__ import annotations
 
@@ -68,6 +70,7 @@ class BpSolverNode(Node):
         self._idle = p['idle_flush']
         self._inference = Inference3D(cameras, config)
         self._stamps: dict[int, Time] = {}  # frames pushed, not yet output
+        self._last_frame: int | None = None  # the last frame pushed
         self._last_input = time.monotonic()
         self._frames_out = 0
         self._skeletons = self.create_publisher(PointCloud2, '/skeletons', DATA_QOS)
@@ -86,9 +89,13 @@ class BpSolverNode(Node):
                 bad = [c for c in views if c >= self._n_cameras]
                 if bad:
                     raise ValueError(f'person {pid}: camera {bad[0]} is not in the rig of {self._n_cameras}')
-            if frame in self._stamps:
-                raise ValueError(f'frame {frame} is already in the window')
+            if self._last_frame is not None and frame <= self._last_frame:
+                # its output exists or is pending (a duplicate), or the window has moved past it
+                self.get_logger().error(f'bundles stamp {stamp_ns(msg.header.stamp)} ns (frame {frame}) came after '
+                                        f'frame {self._last_frame}: late or duplicate, dropped')
+                return
             results = self._inference.push(frame, bundles)
+            self._last_frame = frame
         except ValueError as exc:
             self.get_logger().error(f'bundles stamp {stamp_ns(msg.header.stamp)} ns (frame {frame}): {exc}; '
                                     f'published with no people')
