@@ -57,13 +57,16 @@ class HeatmapStack:
 
     @classmethod
     def of(cls, heatmaps: Sequence[PersonHeatmap]) -> HeatmapStack:
-        n_j = len(heatmaps[0].maps) if heatmaps else 0
+        if not heatmaps:  # a frame with nobody in it
+            return cls(np.zeros(0, np.float32), np.zeros((0, 0), np.intp), np.zeros((0, 2), np.intp),
+                       np.zeros((0, 0, 2)), np.zeros(0))
+        n_j = len(heatmaps[0].maps)
         if any(len(hm.maps) != n_j for hm in heatmaps):
             raise ValueError('heatmaps of a stack must have the same number of joints')
         shape = np.array([hm.maps.shape[1:] for hm in heatmaps], dtype=np.intp).reshape(-1, 2)
         size = shape[:, 0] * shape[:, 1]
         first = np.concatenate([[0], np.cumsum(size * n_j)[:-1]]).astype(np.intp)
-        return cls(values=np.concatenate([hm.maps.ravel() for hm in heatmaps]) if heatmaps else np.zeros(0, np.float32),
+        return cls(values=np.concatenate([hm.maps.ravel() for hm in heatmaps]),
                    start=first[:, None] + size[:, None] * np.arange(n_j),
                    shape=shape,
                    origin=np.array([hm.origin for hm in heatmaps], dtype=np.float64).reshape(-1, n_j, 2),
