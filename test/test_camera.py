@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import cv2
 import numpy as np
@@ -226,3 +227,33 @@ def test_ray_ray_distance_parallel():
     offset = np.array([[3.0, 4, 7], [0.5, -0.5, 2]])
     dist = ray_ray_distance(o1, d, o1 + offset, -2.5 * d)
     np.testing.assert_allclose(dist, [5.0, np.sqrt(0.5 + 4)], atol=1e-12)
+
+
+def _broken_calibration(tmp_path, change) -> str:
+    entries = json.loads((_calibration('shelf') / 'calibration_shelf.json').read_text())
+    change(entries['1'])
+    path = tmp_path / 'calibration_shelf.json'
+    path.write_text(json.dumps(entries))
+    return str(path)
+
+
+@pytest.mark.parametrize('change, problem', [
+    (lambda e: e.pop('fx'), "camera '1': missing fx"),
+    (lambda e: e.update(R=[[0.0] * 3] * 3), "camera '1': R is not a rotation (determinant 0)"),
+    (lambda e: e.update(R=[[-1.0, 0, 0], [0, 1, 0], [0, 0, 1]]), 'R is not a rotation (determinant -1)'),
+    (lambda e: e.update(fx=0.0), 'focal lengths fx, fy must be > 0 (a singular K)'),
+    (lambda e: e.update(T=[1.0, 'a', 2.0]), 'must be numbers'),
+    (lambda e: e.update(cy=float('nan')), 'non-finite values'),
+])
+def test_bad_calibration_is_a_clear_error_naming_file_camera_and_field(tmp_path, change, problem):
+    path = _broken_calibration(tmp_path, change)
+    with pytest.raises(ValueError) as err:
+        load_rig(path)
+    assert str(err.value).startswith(path) and problem in str(err.value) and '\n' not in str(err.value)
+
+
+def test_calibration_that_is_not_json(tmp_path):
+    path = tmp_path / 'calibration_x.json'
+    path.write_text('{"0": {"R": [1, 2')
+    with pytest.raises(ValueError, match=r'calibration_x.json: not valid JSON'):
+        load_rig(path)

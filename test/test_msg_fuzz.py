@@ -1,21 +1,28 @@
-"""Property-based tests of the PointCloud2 decoders: arbitrary record bytes under a correct
-field layout either decode to a valid result (which re-encodes to the same thing) or raise
-ValueError, never another exception; and random valid inputs survive encode -> decode."""
+"""Property-based tests of every msg_adapters decoder: arbitrary record bytes under a correct
+PointCloud2 field layout, and arbitrary Image and CameraInfo fields, either decode to a valid
+result (which re-encodes to the same thing) or raise ValueError, never another exception; and
+random valid inputs survive encode -> decode."""
 from __future__ import annotations
 
 import array
+import dataclasses
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
+from msg_adapters.camera_info_msg import DISTORTION_MODEL, camera_to_info, check_info, info_to_intrinsics
+from msg_adapters.image_msg import image_to_msg, msg_to_image
 from msg_adapters.openpose_msg import OPENPOSE_DTYPE, msg_to_openpose, openpose_to_msg
 from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles, msg_to_people,
                                      people_dtype, people_to_msg)
 from msg_adapters.records import to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
+from mvpose_ros.core.camera import load_rig
+from mvpose_ros.core.datasets import dataset_dir
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.person2d import Person2D
@@ -241,3 +248,46 @@ def test_skeleton_round_trip(ids, data):
     order = np.argsort(ids)
     assert back_ids.tolist() == sorted(ids)
     assert np.array_equal(back, joints[order])
+
+
+# --- images and camera infos ---------------------------------------------------------------
+
+@FUZZ
+@given(st.sampled_from(['bgr8', 'rgb8', 'mono8', '', 'bgra8']), st.integers(0, 5), st.integers(0, 5),
+       st.integers(0, 20), st.binary(max_size=120))
+def test_image_decoder_on_random_fields(encoding, width, height, step, data):
+    msg = Image(header=HEADER, encoding=encoding, width=width, height=height, step=step,
+                data=array.array('B', data))
+    bgr = _decodes_or_value_error(msg_to_image, msg)
+    if bgr is not None:
+        assert bgr.shape == (height, width, 3) and bgr.dtype == np.uint8
+        np.testing.assert_array_equal(msg_to_image(image_to_msg(bgr, HEADER)), bgr)
+
+
+@FUZZ
+@given(st.sampled_from([DISTORTION_MODEL, 'equidistant', '']),
+       st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=0, max_size=8),
+       hnp.arrays(np.float64, 9, elements=st.one_of(st.floats(-2e3, 2e3), st.sampled_from([0.0, 1.0, np.nan]))),
+       st.integers(0, 3000), st.integers(0, 3000))
+def test_camera_info_decoder_on_random_fields(model, d, k, width, height):
+    msg = CameraInfo(header=HEADER, distortion_model=model, d=d, k=k.tolist(), width=width, height=height)
+    out = _decodes_or_value_error(info_to_intrinsics, msg)
+    if out is not None:
+        K, dist, w, h = out
+        assert np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1
+        assert dist.shape == (5,) and np.isfinite(dist).all() and w >= 1 and h >= 1
+
+
+@FUZZ
+@given(st.floats(-5, 5), st.floats(-30, 30), st.integers(-3, 3))
+def test_camera_info_check_on_plausible_changes(scale_error, shift_px, size_error):
+    """A CameraInfo made from the rig's own camera passes, one changed beyond tolerance fails with
+    the name of what changed: never another exception."""
+    camera = load_rig(dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json')[0]
+    changed = dataclasses.replace(camera, K=camera.K + [[scale_error, 0, shift_px], [0, 0, 0], [0, 0, 0]],
+                                  width=camera.width + size_error)
+    try:
+        check_info(camera_to_info(changed, HEADER), camera)
+        assert size_error == 0 and abs(scale_error) <= 0.5 and abs(shift_px) <= 0.5
+    except ValueError as exc:
+        assert str(exc).startswith('CameraInfo ')

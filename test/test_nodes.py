@@ -3,12 +3,15 @@ DDS: one output per good input frame, the same numbers as the ROS-free core, and
 logged with a reason while the node keeps going."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
-from sensor_msgs.msg import PointCloud2, PointField
+from sensor_msgs.msg import CameraInfo, PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
+from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, msg_to_people, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
@@ -47,15 +50,22 @@ def _collect(node, topic: str, msg_type, into: dict) -> None:
 
 
 def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(shelf, tmp_path):
-    _, raw = shelf
+    cameras, raw = shelf
     log = tmp_path / 'detector.log'
     with probe(161, 'detector_probe') as (node, executor):
         out: dict[int, list] = {}
         _collect(node, '/cam1/people2d', PointCloud2, out)
         pub = node.create_publisher(PointCloud2, '/cam1/openpose', DATA_QOS)
+        info = node.create_publisher(CameraInfo, '/cam1/camera_info', DATA_QOS)
         proc = start_node('heatmap_detector', 161, log, '-r', '__ns:=/cam1', '-p', 'camera:=1')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            assert spin_until(executor, lambda: info.get_subscription_count() > 0), log.read_text()
+            info.publish(camera_to_info(cameras[1], _header(300, 'cam1')))  # agrees: nothing said
+            wrong = camera_to_info(dataclasses.replace(cameras[1], K=cameras[1].K * [[1.1], [1], [1]]),
+                                   _header(301, 'cam1'))
+            info.publish(wrong)
+            info.publish(wrong)  # the same problem again: said once
             for f in (300, 301, 302):
                 pub.publish(openpose_to_msg(raw[1][f - FIRST], _header(f, 'cam1')))
             pub.publish(openpose_to_msg(raw[1][303 - FIRST], _header(303, 'cam7')))  # not this camera
@@ -76,6 +86,9 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(she
     text = log.read_text()
     assert "stamp 12120000000 ns dropped: frame_id 'cam7' is not this camera" in text
     assert 'stamp 12160000000 ns dropped' in text
+    # the CameraInfo that contradicts the calibration parameter: named, once; the node goes on
+    assert text.count('contradicts the calibration parameter: CameraInfo fx') == 1, text
+    assert 'camera_info stamp 12040000000 ns' in text and 'camera_info stamp 12000000000' not in text
 
 
 def test_heatmap_detector_with_a_bad_parameter_exits_2_with_one_line(tmp_path):

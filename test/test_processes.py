@@ -9,14 +9,17 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
 import pytest
 from sensor_msgs.msg import PointCloud2
 
-from mvpose_ros.bags.io import write_bag
+from mvpose_ros.bags.io import read_bag, write_bag
+from mvpose_ros.bags.replay import group_frames, looped
 from mvpose_ros.cli import graph
+from mvpose_ros.core.predictions import read_predictions
 from mvpose_ros.graph.processes import ProcessGroup
 
 DOMAIN_ID = 171
@@ -231,6 +234,8 @@ elif role == 'bag_player':
         for p in openpose:
             p.publish(PointCloud2(header=header))
         info.publish(CameraInfo(header=header))
+        with open(os.path.join(os.environ['FAKE_PIDS'], os.pardir, 'played'), 'w') as f:
+            f.write(str(frame))
         time.sleep(0.01)
     sys.exit(0)
 try:
@@ -291,3 +296,45 @@ def test_runner_plays_collects_and_scores(fake_graph, tmp_path, monkeypatch, cap
     assert [n for n, (pid, _) in started.items() if alive(int(pid))] == []
     # Every node used the Fast DDS profile beside the parameter file.
     assert {profile for _, profile in started.values()} == {str(tmp_path / 'fastdds.xml')}
+
+
+def test_runner_interrupted_stops_everything_and_writes_what_it_has(fake_graph, tmp_path, monkeypatch, capsys):
+    args, predictions, _ = fake_graph
+    frames = range(300, 700)  # ~4 s of playing: long enough to be interrupted in the middle
+    monkeypatch.setenv('FAKE_FRAMES', f'{frames.start}:{frames.stop}')
+    bag = tmp_path / 'long_bag'
+    write_bag(bag, [('/cam0/openpose', PointCloud2(), f * 1_000_000_000 // 25) for f in frames])
+    args = [a if a != args[args.index('--bag') + 1] else str(bag) for a in args]
+    predictions.parent.mkdir(parents=True, exist_ok=True)
+    predictions.write_text('an older run\n')
+
+    def ctrl_c_once_playing():
+        played = tmp_path / 'played'
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (played.exists() and played.read_text()
+                                                   and int(played.read_text()) >= 400):
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=ctrl_c_once_playing, daemon=True).start()
+    code = graph.main(args)
+    err = capsys.readouterr().err
+    assert code == 128 + signal.SIGINT, err
+    assert 'interrupted by SIGINT; every node stopped' in err
+    written = read_predictions(predictions)  # a whole, valid file: not the older run, not cut short
+    assert 0 < len(written) < len(frames)
+    assert list(written) == list(range(300, 300 + len(written)))
+    assert not predictions.with_name(predictions.name + '.partial').exists()
+    started = {p.name: int(p.read_text().split('\n')[0]) for p in (tmp_path / 'pids').iterdir()}
+    assert 'bag_player' in started and [n for n, pid in started.items() if alive(pid)] == []
+
+
+def test_runner_expects_the_stamps_of_every_loop_as_the_player_sends_them(tmp_path):
+    frames = range(300, 310)
+    bag = tmp_path / 'bag'
+    write_bag(bag, [('/cam0/openpose', PointCloud2(), f * 1_000_000_000 // 25) for f in frames])
+    stamps = graph.input_stamps(bag, '/cam0/openpose', loops=3)
+    player = [frame.stamp_ns + offset for _, offset, frame in
+              looped(lambda: group_frames(read_bag(bag, ['/cam0/openpose'])), 3)]
+    assert stamps == player and len(set(stamps)) == 30
+    assert [round(s * 25 / 1e9) for s in stamps] == list(range(300, 330))  # the timeline goes on

@@ -1,6 +1,6 @@
 """`mvpose-graph`: run the whole ROS graph on a bag, each node its own process, and score it.
 
-    mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R]
+    mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
                  [--predictions FILE] [--domain-id N] [--log-dir DIR]
 
 Starts the detectors, association and bp_solver (with the Fast DDS profile `fastdds.xml` beside
@@ -12,16 +12,20 @@ the detectors' input topic, which follows their backend (/cam0/openpose for open
 `timeout` s), stops every process, writes the predictions file and prints counts, latency and
 the PCP table of those frames against Shelf's ground truth (actors 1-3, as `mvpose-eval shelf
 --score` for the whole test clip). Exit code 1 with a one-line reason when a node crashes, the
-graph never connects, or outputs are missing.
+graph never connects, or outputs are missing. With --loops N (a soak run) the bag is replayed N
+times with its stamps moved on every loop; it then also prints each node's resident memory after
+the first loop and at the end, and one PCP line per loop. Ctrl-C stops every node and still
+writes the frames received so far (exit code 130).
 """
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import time
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping, Sequence, TextIO
 
@@ -37,12 +41,14 @@ from sensor_msgs.msg import CameraInfo, PointCloud2
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.bags.io import read_bag
+from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation import PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.predictions import read_predictions, write_predictions
 from mvpose_ros.core.window import FrameResult
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, detector_backend, expected_connections, graph_nodes,
                                      graph_settings, load_params, node_command, unknown_nodes)
+from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 
@@ -60,6 +66,7 @@ _DRAIN_S = 0.25
 # Node start-up (imports, calibration, models, DDS discovery, the player's wait for subscribers).
 STARTUP_TIMEOUT_S = 60.0
 _LOG_TAIL = 15
+MEMORY_PERIOD_S = 1.0
 
 
 class GraphFailure(Exception):
@@ -113,13 +120,16 @@ class RecorderNode(Node):
 
 @dataclass
 class Outcome:
-    """How the run ended: the input stamps (ns, bag order), why it stopped early if it did, and
-    the end of the failed node's log."""
+    """How the run ended: the input stamps (ns, bag order), why it stopped early if it did (a
+    failure, a stall, or the signal that interrupted it), the end of the failed node's log, and
+    the nodes' memory."""
 
     stamps: list[int]
+    memory: MemoryLog = field(default_factory=lambda: MemoryLog(0))
     failure: GraphFailure | None = None
     log_tail: str = ''
     stalled: bool = False
+    interrupted: int | None = None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -130,19 +140,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--bag', help='bag to play (default: mvpose_graph.bag)')
     p.add_argument('--rate', type=float,
                    help='playback speed, 0 = as fast as the graph keeps up (default: mvpose_graph.rate)')
+    p.add_argument('--loops', type=int, default=1,
+                   help='replay the bag this many times, stamps moved on every loop (a soak run; default 1)')
     p.add_argument('--predictions', help='predictions file to write (default: mvpose_graph.predictions)')
     p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID for the graph (default: inherited)')
     p.add_argument('--log-dir', type=Path, help='per-node logs (default: beside the predictions, <name>_logs)')
     return p
 
 
-def input_stamps(bag: Path, topic: str) -> list[int]:
-    """Header stamps (ns) of the frames in the bag: the log times of its messages on topic (camera
-    0's detector input)."""
+def input_stamps(bag: Path, topic: str, loops: int = 1) -> list[int]:
+    """Header stamps (ns) of the frames the player sends: the log times of the bag's messages on
+    topic (camera 0's detector input), moved on for each later loop as the player does."""
     stamps = [stamp for _, _, stamp, _ in read_bag(bag, [topic])]
     if not stamps:
         raise ValueError(f'{bag}: no {topic} messages')
-    return stamps
+    return [s + loop_offset_ns(k, stamps[0], stamps[-1]) for k in range(loops) for s in stamps]
 
 
 def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str] = ()) -> None:
@@ -165,15 +177,19 @@ def _wait_connected(node: RecorderNode, executor: SingleThreadedExecutor, group:
 
 
 def _play(node: RecorderNode, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
-          stamps: Sequence[int]) -> bool:
+          stamps: Sequence[int], memory: MemoryLog) -> bool:
     """Spin until every stamp has an output; True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
     after the player's start while neither happened yet)."""
     wanted = set(stamps)
     started = time.monotonic()
     player_done: float | None = None
+    sampled = 0.0
     while not wanted <= node.outputs.keys():
         executor.spin_once(timeout_sec=_SPIN_S)
+        if time.monotonic() - sampled > MEMORY_PERIOD_S:
+            sampled = time.monotonic()
+            memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
         _check_crashes(group, finished_ok=(PLAYER,))
         if player_done is None and PLAYER in group.poll():
             player_done = time.monotonic()
@@ -188,10 +204,12 @@ def _play(node: RecorderNode, executor: SingleThreadedExecutor, group: ProcessGr
 
 
 def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], stamps: list[int],
-              log_dir: Path, node: RecorderNode, executor: SingleThreadedExecutor, input_topic: str) -> Outcome:
-    """Start the nodes, wait for the connections, play, collect; every process is stopped on return.
-    input_topic: what each detector reads in its camera namespace."""
-    outcome = Outcome(stamps)
+              log_dir: Path, node: RecorderNode, executor: SingleThreadedExecutor, input_topic: str,
+              per_loop: int) -> Outcome:
+    """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
+    also after Ctrl-C (outcome.interrupted). input_topic: what each detector reads in its camera
+    namespace; per_loop: stamps in one pass of the bag (the memory baseline)."""
+    outcome = Outcome(stamps, MemoryLog(per_loop))
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
     with ProcessGroup(log_dir, env) as group:
@@ -200,9 +218,11 @@ def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], 
                 if spec.executable == PLAYER:
                     _wait_connected(node, executor, group, settings, input_topic)
                 group.start(spec.name, node_command(spec, config))
-            outcome.stalled = _play(node, executor, group, settings, stamps)
+            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory)
         except GraphFailure as failure:
             outcome.failure = failure
+        except Interrupted as exc:
+            outcome.interrupted = exc.signum
         group.stop()
         if outcome.failure is not None and outcome.failure.node:
             outcome.log_tail = group.log_tail(outcome.failure.node, _LOG_TAIL)
@@ -258,25 +278,35 @@ def report(outcome: Outcome, node: RecorderNode, settings: GraphSettings, out: T
 
 
 def save_predictions(outcome: Outcome, node: RecorderNode, frame_rate: float, path: Path) -> int:
-    """Write the received frames in bag order; returns how many."""
+    """Write the received frames in bag order; returns how many. Written beside and renamed into
+    place, so that an interruption never leaves a half-written file."""
     results = [FrameResult(_frame(s, frame_rate), [int(i) for i in node.outputs[s][0]], node.outputs[s][1])
                for s in outcome.stamps if s in node.outputs]
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, 'w', encoding='utf-8') as f:
-        return write_predictions(results, f)
+    partial = path.with_name(path.name + '.partial')
+    with open(partial, 'w', encoding='utf-8') as f:
+        n = write_predictions(results, f)
+    os.replace(partial, path)
+    return n
 
 
-def score(predictions: Path, frames: Sequence[int], root: str | None, out: TextIO) -> None:
-    """Print the PCP table and summary of the predictions over Shelf frames `frames` (actors 1-3),
-    with the paper's rows when they are the whole test clip."""
+def score(predictions: Path, frames: Sequence[int], root: str | None, out: TextIO, loops: int = 1) -> None:
+    """Print the PCP table and summary of the predictions over Shelf frames `frames` (one pass of
+    the bag; actors 1-3), with the paper's rows when they are the whole test clip; with loops > 1
+    a summary line per loop (loop k's frames are moved on by k times the span of `frames`)."""
     gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', frames)
-    ev = evaluate(read_predictions(predictions), gt, SHELF_ACTORS)
+    predicted = read_predictions(predictions)
+    span = max(frames) - min(frames) + 1
     whole = sorted(frames) == list(SHELF_TEST_FRAMES)
-    print(f'{predictions}: Shelf frames {frame_ranges(frames)}', file=out)
-    print(format_table(ev, PAPER_SHELF_PCP if whole else None), file=out)
-    print(f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
-          f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
-          f' | MPJPE {ev.mpjpe_all:5.1f} mm', file=out)
+    print(f'{predictions}: Shelf frames {frame_ranges(frames)}' + (f', {loops} loops' if loops > 1 else ''), file=out)
+    for k in range(loops):
+        ev = evaluate({f: predicted[f + k * span] for f in frames if f + k * span in predicted}, gt, SHELF_ACTORS)
+        if k == 0:
+            print(format_table(ev, PAPER_SHELF_PCP if whole else None), file=out)
+        print((f'loop {k + 1:2d}: ' if loops > 1 else '')
+              + f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
+              f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
+              f' | MPJPE {ev.mpjpe_all:5.1f} mm', file=out)
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
@@ -297,8 +327,11 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     except ValueError as exc:
         raise ValueError(f'{args.config}: {exc}') from None
     input_topic = INPUT_TOPICS[backend]
-    stamps = input_stamps(bag, f'/cam0/{input_topic}')
-    nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root)
+    if args.loops < 1:
+        raise ValueError(f'--loops must be >= 1, got {args.loops}')
+    stamps = input_stamps(bag, f'/cam0/{input_topic}', args.loops)
+    per_loop = len(stamps) // args.loops
+    nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root, args.loops)
     for section in unknown_nodes(params, nodes):
         print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
 
@@ -316,10 +349,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
-        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic)
-    except Interrupted as exc:
-        print(f'{PROG}: {exc}; every node stopped', file=err)
-        return 128 + exc.signum
+        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic, per_loop)
     finally:
         if node is not None:
             node.destroy_node()
@@ -332,8 +362,16 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     problems = report(outcome, node, settings, out)
     n = save_predictions(outcome, node, settings.frame_rate, predictions)
     print(f'wrote {n} frames to {predictions}', file=out)
+    if outcome.interrupted is not None:
+        print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped, '
+              f'{n} of {len(stamps)} frames written', file=err)
+        return 128 + outcome.interrupted
+    if args.loops > 1:
+        print('resident memory per process:', file=out)
+        for line in outcome.memory.lines():
+            print(f'  {line}', file=out)
     if settings.dataset == 'shelf' and n:
-        score(predictions, [_frame(s, settings.frame_rate) for s in stamps], root, out)
+        score(predictions, [_frame(s, settings.frame_rate) for s in stamps[:per_loop]], root, out, args.loops)
     if outcome.stalled:
         problems.insert(0, f'stopped: no {OUTPUT_TOPIC} for {settings.timeout:g} s')
     if problems:

@@ -144,23 +144,51 @@ def _image_size(path: Path, width: int | None, height: int | None,
 
 
 def _load_json(path: Path, width: int | None, height: int | None) -> list[Camera]:
-    cams = []
-    with open(path) as f:
-        entries = json.load(f)
-    for name in sorted(entries, key=lambda n: (len(n), n)):
-        e = entries[name]
-        # The files round R to 6 decimals; snap it back onto SO(3) so that R.T inverts it.
-        u, _, vt = np.linalg.svd(np.asarray(e['R'], dtype=float))
-        R = u @ vt
+    try:
+        with open(path) as f:
+            entries = json.load(f)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f'{path}: not valid JSON ({exc})') from None
+    if not isinstance(entries, dict) or not entries:
+        raise ValueError(f'{path}: expected an object of cameras, got {type(entries).__name__}')
+    return [_camera_from_json(path, name, entries[name], width, height)
+            for name in sorted(entries, key=lambda n: (len(n), n))]
+
+
+def _camera_from_json(path: Path, name: str, e: object, width: int | None, height: int | None) -> Camera:
+    """One camera of a Shelf-layout calibration; ValueError naming the file, camera and field."""
+    where = f'{path}: camera {name!r}'
+    if not isinstance(e, dict):
+        raise ValueError(f'{where}: expected an object, got {type(e).__name__}')
+    missing = [k for k in ('R', 'T', 'fx', 'fy', 'cx', 'cy') if k not in e]
+    if missing:
+        raise ValueError(f'{where}: missing {", ".join(missing)}')
+    try:
+        R_raw = np.asarray(e['R'], dtype=float).reshape(3, 3)
         centre = np.asarray(e['T'], dtype=float).reshape(3) / 1000.0  # mm -> m
+        fx, fy, cx, cy = (float(e[k]) for k in ('fx', 'fy', 'cx', 'cy'))
         k = np.ravel(e.get('k', [])).astype(float)
         p = np.ravel(e.get('p', [])).astype(float)
-        k = np.pad(k, (0, 3 - k.size))
-        p = np.pad(p, (0, 2 - p.size))
-        K = np.array([[e['fx'], 0.0, e['cx']], [0.0, e['fy'], e['cy']], [0.0, 0.0, 1.0]])
-        w, h = _image_size(path, width, height, e['cx'], e['cy'])
-        cams.append(Camera(name, K, R, -R @ centre, np.array([k[0], k[1], p[0], p[1], k[2]]), w, h))
-    return cams
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{where}: R (3x3), T (3), fx, fy, cx, cy, k, p must be numbers ({exc})') from None
+    if k.size > 3 or p.size > 2:
+        raise ValueError(f'{where}: expected at most 3 radial (k) and 2 tangential (p) coefficients')
+    values = np.concatenate([R_raw.ravel(), centre, [fx, fy, cx, cy], k, p])
+    if not np.isfinite(values).all():
+        raise ValueError(f'{where}: non-finite values')
+    # The files round R to 6 decimals; snap it back onto SO(3) so that R.T inverts it. A matrix
+    # far from a rotation (singular, a reflection) is an error, not something to snap.
+    if not abs(np.linalg.det(R_raw) - 1.0) < 1e-3:
+        raise ValueError(f'{where}: R is not a rotation (determinant {np.linalg.det(R_raw):.6g})')
+    if not (fx > 0 and fy > 0):
+        raise ValueError(f'{where}: focal lengths fx, fy must be > 0 (a singular K), got {fx}, {fy}')
+    u, _, vt = np.linalg.svd(R_raw)
+    R = u @ vt
+    k = np.pad(k, (0, 3 - k.size))
+    p = np.pad(p, (0, 2 - p.size))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    w, h = _image_size(path, width, height, cx, cy)
+    return Camera(name, K, R, -R @ centre, np.array([k[0], k[1], p[0], p[1], k[2]]), w, h)
 
 
 def _load_projections(files: list[Path], width: int | None, height: int | None) -> list[Camera]:

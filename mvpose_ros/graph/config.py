@@ -107,14 +107,15 @@ def graph_settings(path: str | Path) -> GraphSettings:
         raise ValueError(f'{path}: {RUNNER_SECTION}: {exc}') from None
 
 
-def graph_nodes(cameras: int, bag: str, rate: float, data_root: str | None = None) -> list[NodeSpec]:
+def graph_nodes(cameras: int, bag: str, rate: float, data_root: str | None = None, loops: int = 1) -> list[NodeSpec]:
     """The Shelf graph in start order: a heatmap_detector per camera (namespace cam{c}),
-    association, bp_solver, then bag_player (one pass: the runner expects one output per stamp)."""
+    association, bp_solver, then bag_player (`loops` passes; the runner expects one output per
+    stamp of every pass)."""
     data = {'data_root': data_root} if data_root is not None else {}
     return [*(NodeSpec('heatmap_detector', f'cam{c}', {'camera': c, **data}) for c in range(cameras)),
             NodeSpec('association', '', dict(data)),
             NodeSpec('bp_solver', '', dict(data)),
-            NodeSpec('bag_player', '', {'bag': bag, 'rate': float(rate), 'loops': 1})]
+            NodeSpec('bag_player', '', {'bag': bag, 'rate': float(rate), 'loops': int(loops)})]
 
 
 def _ros_value(value: bool | int | float | str) -> str:

@@ -5,7 +5,8 @@ Run one per camera, in namespace cam<camera>, so its topics resolve to /cam<c>/.
 the camera image on `image_raw` (sensor_msgs/Image, bgr8 or rgb8; MoveNet MultiPose and
 EfficientPose on onnxruntime, core.onnx_detector) into people on `people2d` (PointCloud2,
 encoding B), one output per input frame, empty when nobody is seen. A message that cannot be
-used is logged with its stamp and the reason.
+used is logged with its stamp and the reason. `camera_info` is checked against the calibration
+parameter; a contradiction is logged (once per distinct problem) and the calibration kept.
 """
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
-from sensor_msgs.msg import Image, PointCloud2
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
+from msg_adapters.camera_info_msg import check_info
 from msg_adapters.image_msg import msg_to_image
 from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
@@ -81,8 +83,25 @@ class HeatmapDetectorNode(Node):
             self.create_subscription(Image, topic, self._on_image, DATA_QOS)
         else:
             self.create_subscription(PointCloud2, topic, self._on_openpose, DATA_QOS)
+        # The calibration parameter is what the 3D stage uses; a CameraInfo that disagrees means a
+        # wrong file or a re-calibrated camera: said once per distinct problem, never acted on.
+        self._info_problems: set[str] = set()
+        self.create_subscription(CameraInfo, 'camera_info', self._on_info, DATA_QOS)
         self.get_logger().info(f'{self._frame_id}: backend {p["backend"]}, '
                                f'{self.resolve_topic_name(topic)} -> {self.resolve_topic_name("people2d")}')
+
+    def _on_info(self, msg: CameraInfo) -> None:
+        try:
+            if msg.header.frame_id != self._frame_id:
+                raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({self._frame_id!r})')
+            check_info(msg, self._camera)
+        except ValueError as exc:
+            problem = str(exc)
+            if problem not in self._info_problems:
+                self._info_problems.add(problem)
+                self.get_logger().error(f'camera_info stamp {stamp_ns(msg.header.stamp)} ns contradicts the '
+                                        f'calibration parameter: {problem}; the calibration is kept '
+                                        f'(said once per problem)')
 
     @staticmethod
     def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:

@@ -2,6 +2,7 @@
 the `calibration` parameter, one-line start-up errors, and the rclpy main loop."""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -61,11 +62,23 @@ def load_rig_parameter(values: dict[str, Any]) -> list[Camera]:
         raise StartupError(f'parameter calibration: {" ".join(str(exc).split())}') from None
 
 
+def params_files(args: Sequence[str]) -> list[str]:
+    """The files given with --params-file in a node's command line."""
+    return [args[i + 1] for i, a in enumerate(args[:-1]) if a == '--params-file']
+
+
 def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     """rclpy main: spin the node until Ctrl-C or shutdown, or, for a node with a `finished`
-    future, until it completes (its result is the exit code); a StartupError exits with code 2
-    after one fatal log line, not a traceback."""
-    rclpy.init(args=args)
+    future, until it completes (its result is the exit code). A bad parameter, parameter file or
+    data file (StartupError, or a parameter file rcl cannot parse) exits with code 2 after one
+    fatal log line naming the parameter files, not a traceback."""
+    files = params_files(sys.argv if args is None else args)
+    where = f'{", ".join(files)}: ' if files else ''
+    try:
+        rclpy.init(args=args)
+    except RuntimeError as exc:  # rcl's RCLError: e.g. a parameter file that is not valid YAML
+        rclpy.logging.get_logger('mvpose_ros').fatal(f'{where}{" ".join(str(exc).split())}')
+        raise SystemExit(2) from None
     node = None
     code = 0
     try:
@@ -77,7 +90,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
             rclpy.spin_until_future_complete(node, finished)
             code = finished.result() or 0
     except StartupError as exc:
-        rclpy.logging.get_logger('mvpose_ros').fatal(str(exc))
+        rclpy.logging.get_logger('mvpose_ros').fatal(f'{where}{exc}')
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

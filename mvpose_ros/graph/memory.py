@@ -1,0 +1,51 @@
+"""Resident memory of the graph's processes over a run, for soak runs: is any node growing?"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+
+def resident_bytes(pid: int) -> int | None:
+    """Resident set size of process pid (Linux /proc), None when it is gone or unreadable."""
+    try:
+        with open(f'/proc/{pid}/status', encoding='ascii') as f:
+            for line in f:
+                if line.startswith('VmRSS:'):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+@dataclass
+class MemoryLog:
+    """Per process, its resident size when the first `baseline_after` outputs had arrived (the
+    first loop of a soak: caches and DDS buffers are warm by then), the largest and the last."""
+
+    baseline_after: int
+    baseline: dict[str, int] = field(default_factory=dict)
+    peak: dict[str, int] = field(default_factory=dict)
+    last: dict[str, int] = field(default_factory=dict)
+
+    def sample(self, pids: Mapping[str, int], outputs: int) -> None:
+        """Record every live process's size; outputs: frames output so far."""
+        for name, pid in pids.items():
+            rss = resident_bytes(pid)
+            if rss is None:
+                continue
+            self.last[name] = rss
+            self.peak[name] = max(rss, self.peak.get(name, 0))
+            if outputs >= self.baseline_after and name not in self.baseline:
+                self.baseline[name] = rss
+
+    def growth(self) -> dict[str, float]:
+        """Per process with a baseline: (last - baseline) / baseline."""
+        return {name: (self.last[name] - base) / base for name, base in self.baseline.items() if base}
+
+    def lines(self) -> list[str]:
+        """One line per process: 'name: 85.1 MiB after loop 1 -> 86.0 MiB at the end (max 86.2), +1.1%'."""
+        mib = 1 / 2 ** 20
+        growth = self.growth()
+        return [f'{name}: {base * mib:.1f} MiB after loop 1 -> {self.last[name] * mib:.1f} MiB at the end '
+                f'(max {self.peak[name] * mib:.1f}), {100 * growth[name]:+.1f}%'
+                for name, base in sorted(self.baseline.items())]

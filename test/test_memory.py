@@ -1,0 +1,39 @@
+"""The soak run's memory log: resident sizes from /proc and growth after the first loop."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from mvpose_ros.graph.memory import MemoryLog, resident_bytes
+
+
+def test_resident_bytes_of_a_process_and_of_none():
+    # a fresh process that makes 128 MiB resident (this one may reuse memory it already holds)
+    child = subprocess.Popen([sys.executable, '-c', 'import sys, time\n'
+                              'block = bytearray(128 * 2 ** 20)\n'
+                              'block[::4096] = b"x" * len(block[::4096])\n'
+                              'print("ready", flush=True)\n'
+                              'time.sleep(30)'], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == 'ready'
+        assert resident_bytes(child.pid) > 128 * 2 ** 20
+        assert 0 < resident_bytes(os.getpid())
+    finally:
+        child.kill()
+        child.wait()
+    assert resident_bytes(child.pid) is None  # gone
+    assert resident_bytes(2 ** 22 + 12345) is None  # beyond pid_max: no such process
+
+
+def test_growth_is_measured_from_the_first_loop():
+    log = MemoryLog(baseline_after=100)
+    log.sample({'a': os.getpid()}, outputs=10)
+    assert log.baseline == {}  # warm-up: before the first loop ended
+    log.sample({'a': os.getpid()}, outputs=100)
+    base = log.baseline['a']
+    log.last['a'] = int(base * 1.05)  # as if it had grown 5%
+    assert abs(log.growth()['a'] - 0.05) < 1e-6
+    assert log.lines()[0].startswith('a: ') and log.lines()[0].endswith('+5.0%')
+    log.sample({'gone': 2 ** 22 + 12345}, outputs=200)
+    assert 'gone' not in log.baseline
