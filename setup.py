@@ -28,6 +28,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'mvpose-bench = mvpose_ros.cli.bench:main',
             'mvpose-eval = mvpose_ros.cli.evaluate:main',
             'mvpose-graph = mvpose_ros.cli.graph:main',
             'mvpose-images = mvpose_ros.cli.images:main',

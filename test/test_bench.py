@@ -1,0 +1,204 @@
+"""mvpose-bench: scene multiplication (geometry of the copies, association of a crowd), the
+OpenCV plots, and a smoke run of the command on a few real Shelf frames. No test asserts a time."""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from mvpose_ros.bench.plot import Series, line_plot, nice_ticks
+from mvpose_ros.bench.scene import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene, scene_people,
+                                    triangulate)
+from mvpose_ros.cli import bench
+from mvpose_ros.core.association import AssociationConfig, Associator
+from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.person2d import Person2D
+
+REPO = Path(__file__).resolve().parents[1]
+N_JOINTS = 16
+
+
+def _look_at(name: str, centre, target, f: float = 600.0, size=(1000, 800)) -> Camera:
+    centre, target = np.asarray(centre, float), np.asarray(target, float)
+    forward = (target - centre) / np.linalg.norm(target - centre)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])
+    K = np.array([[f, 0, size[0] / 2], [0, f, size[1] / 2], [0, 0, 1]])
+    return Camera(name, K, R, -R @ centre, np.zeros(5), *size)
+
+
+@pytest.fixture(scope='module')
+def rig() -> list[Camera]:
+    """Four cameras 11 m from the middle, 3 m up, looking at it; no two face each other (rays
+    of opposite cameras are nearly collinear, which lets people in line with them match)."""
+    return [_look_at(str(i), (11 * np.cos(a), 11 * np.sin(a), 3.0), (0.0, 0.0, 1.0))
+            for i, a in enumerate(np.radians([10, 85, 160, 235]))]
+
+
+def _skeleton(at) -> np.ndarray:
+    """(16, 3) a standing body's joints around floor point `at`."""
+    rng = np.random.default_rng(7)
+    heights = np.linspace(0.1, 1.7, N_JOINTS)
+    side = rng.uniform(-0.2, 0.2, (N_JOINTS, 2))
+    return np.column_stack([at[0] + side[:, 0], at[1] + side[:, 1], heights])
+
+
+def _views(rig: list[Camera], joints: np.ndarray, score: float = 0.9) -> list[Person2D]:
+    out = []
+    for cam in rig:
+        kp = np.column_stack([cam.project(joints), np.full(N_JOINTS, score)])
+        out.append(Person2D.from_keypoints(kp, stride=4.0, sigma=6.0))
+    return out
+
+
+def _frames(rig, centres, n_frames: int = 5):
+    """Per frame, per camera, the 2D people at `centres` (walking slowly along x)."""
+    frames = []
+    for t in range(n_frames):
+        per_person = [_views(rig, _skeleton((x + 0.02 * t, y))) for x, y in centres]
+        frames.append([[views[c] for views in per_person] for c in range(len(rig))])
+    return frames
+
+
+def test_copied_keypoint_is_exactly_the_projection_of_the_shifted_triangulated_point(rig):
+    truth = _skeleton((0.5, -0.5))
+    [[person]] = scene_people(rig, [0], [[[v] for v in _views(rig, truth)]])
+    np.testing.assert_allclose(person.joints, truth, atol=1e-6)
+    offset = np.array([2.5, 1.0, 0.0])
+    copy = copy_person(rig, person, offset)
+    assert sorted(copy) == [0, 1, 2, 3]
+    for c, view in copy.items():
+        np.testing.assert_array_equal(view.keypoints[:, :2], rig[c].project(person.joints + offset))
+        np.testing.assert_array_equal(view.keypoints[:, 2], person.views[c].keypoints[:, 2])  # scores kept
+        assert view.track_id == -1
+
+
+def test_copied_heatmap_peak_moves_by_the_joint_displacement(rig):
+    [[person]] = scene_people(rig, [0], [[[v] for v in _views(rig, _skeleton((0.0, 0.0)))]])
+    offset = np.array([-2.0, 1.5, 0.0])
+    for c, view in copy_person(rig, person, offset).items():
+        shift = rig[c].project(person.joints + offset) - rig[c].project(person.joints)
+        before, after = person.views[c].heatmap.peak(), view.heatmap.peak()
+        np.testing.assert_allclose(after[:, :2], before[:, :2] + shift, atol=1e-9)
+        np.testing.assert_array_equal(after[:, 2], before[:, 2])
+        assert view.heatmap.maps is person.views[c].heatmap.maps  # cells unchanged, shared
+
+
+def test_a_joint_without_3d_or_outside_the_image_is_dropped(rig):
+    views = _views(rig, _skeleton((0.0, 0.0)))
+    for v in views[1:]:  # joint 3 seen by camera 0 only: no 3D estimate
+        v.keypoints[3] = (np.nan, np.nan, 0.0)
+    person = ScenePerson({c: v for c, v in enumerate(views)}, triangulate(rig, [dict(enumerate(views))], 0.1)[0])
+    assert np.isnan(person.joints[3]).all() and np.isfinite(np.delete(person.joints, 3, axis=0)).all()
+    moved = copy_view(rig[0], views[0], person.joints, np.array([1.0, 0.0, 0.0]))
+    assert moved.keypoints[3, 2] == 0 and np.isnan(moved.keypoints[3, :2]).all()
+    assert not moved.heatmap.maps[3].any() and views[0].heatmap.maps[3].any()
+    # high above every camera's view: no view of the copy
+    assert copy_person(rig, person, np.array([0.0, 0.0, 100.0])) == {}
+    # half out of the image: kept with min_inside 0.5 only while at least half its joints stay in
+    cam = _look_at('narrow', (11.0, 0.0, 3.0), (0.0, 0.0, 1.0), f=3000.0)
+    view = Person2D.from_keypoints(np.column_stack([cam.project(person.joints), np.full(N_JOINTS, 0.9)]), 4.0, 6.0)
+    lifts = np.arange(0.0, 2.0, 0.02)
+    out = [(~(cam.project(person.joints + [0, 0, dz])[:, 1] >= 0)).sum() - 1 for dz in lifts]  # joint 3: NaN
+    dz = lifts[next(i for i, n in enumerate(out) if 0 < n < 7)]  # the head out, most of the body in
+    assert copy_view(cam, view, person.joints, np.array([0, 0, dz]), min_inside=1.0) is None
+    lenient = copy_view(cam, view, person.joints, np.array([0, 0, dz]), min_inside=0.5)
+    dropped = lenient.keypoints[:, 2] == 0
+    assert 1 < dropped.sum() < 8 and np.isnan(lenient.keypoints[dropped, :2]).all()
+    assert not lenient.heatmap.maps[dropped].any()
+
+
+def test_copies_do_not_merge_in_association(rig):
+    frames = _frames(rig, [(-1.0, 0.0), (1.0, 0.5)])
+    offsets = np.array([[0, 0, 0], [0, 3.0, 0], [3.0, 0, 0], [-3.0, -3.0, 0]])
+    counts = []
+    for k in range(1, len(offsets) + 1):
+        scene = multiply_scene(rig, range(len(frames)), frames, 0, offsets=offsets[:k])
+        associator = Associator(rig, AssociationConfig())
+        found = [len(associator.update(f, people)) for f, people in enumerate(scene.people)]
+        counts.append(found)
+        assert all(len(per_camera) == 2 * k for per_camera in scene.people[0])
+    assert counts == [[2 * k] * len(frames) for k in range(1, len(offsets) + 1)]  # linear in copies
+
+
+def test_offsets_reach_the_target_and_keep_people_apart(rig):
+    frames = _frames(rig, [(-1.0, 0.0), (1.0, 0.5)])
+    scene = scene_people(rig, range(len(frames)), frames)
+    offsets, expected = choose_offsets(rig, scene, 6, sample_every=1)
+    assert len(offsets) == 3 and not offsets[0].any() and (offsets[:, 2] == 0).all()
+    assert expected == pytest.approx(6)
+    centres = np.array([[p.centre[:2] + d[:2] for d in offsets for p in scene[f]] for f in range(len(scene))])
+    gaps = np.linalg.norm(centres[:, :, None] - centres[:, None], axis=-1)
+    assert gaps[:, ~np.eye(centres.shape[1], dtype=bool)].min() >= 0.6
+    # a target the scene already has: no copies
+    assert len(choose_offsets(rig, scene, 2)[0]) == 1
+
+
+def test_line_plot_writes_a_png_of_the_size_with_the_series_drawn(tmp_path):
+    red = (0, 0, 255)
+    path = line_plot(tmp_path / 'p.png', [Series('total', [1, 2, 5], [3.0, 6.5, 14.0], color=red),
+                                          Series('bp', [1, 2, 5], [1.0, 2.0, float('nan')])],
+                     title='t', xlabel='people', ylabel='ms', size=(640, 400))
+    img = cv2.imread(str(path))
+    assert img.shape == (400, 640, 3)
+    assert (img < 250).any(axis=-1).mean() > 0.01  # not blank
+    assert np.all(img == red, axis=-1).sum() > 100  # the red line and its markers
+
+
+def test_nice_ticks_are_round_and_cover_the_range():
+    ticks = nice_ticks(0, 37.3)
+    assert ticks[0] == 0 and ticks[-1] >= 37.3 and np.allclose(np.diff(ticks), ticks[1] - ticks[0])
+    assert ticks[1] in (5, 10)
+
+
+def test_the_default_row_is_the_graph_config():
+    assert bench.graph_config_from(REPO / 'config' / 'shelf.yaml') == bench.GRAPH
+
+
+def test_plan_measures_each_setting_once():
+    args = bench.build_parser().parse_args(['--frames', '100', '--scaling', 'quick', '--people', '3,10'])
+    runs = bench.plan(args, bench.GRAPH)
+    assert runs[0] == replace(bench.GRAPH, frames=100) and runs[1].name.startswith('offline')
+    sweeps = {s: [r for r in runs if r.sweep == s] for s in bench.SWEEPS}
+    assert [r.cameras for r in sweeps['cameras']] == [1, 2, 3, 4, 5]
+    assert [r.people for r in sweeps['people']] == [None, 10.0]
+    assert all(r.frames == bench.QUICK_FRAMES for s in sweeps.values() for r in s)
+    assert len({r.key() for r in runs}) < len(runs)  # cameras=5, people~3, window=8, M=64: one run
+
+
+def test_one_camera_gives_no_people_and_no_crash():
+    result = bench.run_config(replace(bench.GRAPH, frames=3, cameras=1))
+    assert result['people_3d'] == 0 and result['frames_out'] == 3 and result['pcp']['strict_frame_weighted'] == 0
+
+
+def test_smoke_prints_every_stage_and_the_frame_rates(tmp_path, capsys):
+    assert bench.main(['--frames', '5', '--scaling', 'none', '--output', str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for stage in ('grouping and heatmaps', 'tracking and matching', 'sampling', 'data term', 'BP'):
+        assert stage in out
+    assert 'whole 3D stage' in out and 'from 2D people' in out and 'frames/s' in out
+    data = json.loads((tmp_path / 'bench.json').read_text())
+    names = [r['config']['name'] for r in data['runs']]
+    assert names == ['graph (default)', 'offline (mvpose-eval)']
+    for r in data['runs']:
+        assert r['frames'] == 5 and r['figures']['fps'] > 0 and r['peak_rss_kib'] > r['rss_start_kib'] > 0
+        assert {'grouping and heatmaps', 'association', 'sampling', 'data term'} <= set(r['stages_s'])
+
+
+def test_plots_of_the_sweeps(tmp_path):
+    def fake(sweep, value, people, ms):
+        config = replace(bench.GRAPH, sweep=sweep, cameras=value if sweep == 'cameras' else 5)
+        stages = {'grouping and heatmaps': ms / 4000, 'association': ms / 4000, 'sampling': ms / 2000}
+        return {'config': asdict(config), 'frames': 1, 'cameras': config.cameras, 'people_3d': people,
+                'stages_s': stages}
+    results = [fake('cameras', k, 3.0 if k > 1 else 0.0, 5.0 * k) for k in (1, 2, 3)]
+    results += [fake('people', 0, p, 3.0 * p) for p in (3.1, 9.0, 17.5)]
+    paths = bench.write_plots(results, tmp_path)
+    assert sorted(p.name for p in paths) == ['time_vs_cameras.png', 'time_vs_people.png']
+    assert all(cv2.imread(str(p)).shape == (620, 1000, 3) for p in paths)
