@@ -76,7 +76,7 @@ def triangulate(cameras: Sequence[Camera], views: Sequence[dict[int, Person2D]],
             kp = view.keypoints
             ok = (kp[:, 2] > min_score) & np.isfinite(kp[:, :2]).all(axis=1)
             origins[p, :, k] = cameras[c].centre
-            dirs[p, ok, k] = cameras[c].rays(kp[ok, :2])[1]
+            dirs[p, ok, k] = cameras[c].directions(kp[ok, :2])
             seen[p, :, k] = ok
     points = closest_point_to_rays(origins, dirs, seen)
     points[seen.sum(axis=-1) < 2] = np.nan

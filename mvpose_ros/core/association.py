@@ -49,7 +49,7 @@ def rough_centres(cameras: Sequence[Camera], people: Sequence[dict[int, Person2D
     for p, views in enumerate(people):
         for k, (c, person) in enumerate(views.items()):
             origins[p, :, k] = cameras[c].centre
-            dirs[p, :, k] = cameras[c].rays(person.keypoints[:, :2])[1]
+            dirs[p, :, k] = cameras[c].directions(person.keypoints[:, :2])
             seen[p, :, k] = person.keypoints[:, 2] > min_score
     twice = seen.sum(axis=-1) >= 2  # (P, J)
     points = closest_point_to_rays(origins, dirs, seen)  # (P, J, 3)

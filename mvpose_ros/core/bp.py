@@ -9,6 +9,7 @@ windows neither underflow nor drift.
 """
 from __future__ import annotations
 
+from collections import defaultdict
 from dataclasses import dataclass, field, replace
 from typing import Sequence
 
@@ -143,6 +144,44 @@ class ChainBP:
     def marginals(self) -> np.ndarray:
         """(T, J, M) normalised beliefs."""
         return _softmax(self.total)
+
+
+def run_chains(chains: Sequence[ChainBP], iterations: int) -> None:
+    """ChainBP.run of every chain, with the chains of one shape stacked along the joint axis so
+    that each message update is one set of numpy calls for all of them (chains are independent:
+    the messages are exactly those of running each on its own)."""
+    alike: dict[tuple, list[ChainBP]] = defaultdict(list)
+    for chain in chains:
+        key = (chain.total.shape, tuple(t is None for t in chain.temporal),
+               tuple((g.name, len(g.edges)) for g in chain.groups))
+        alike[key].append(chain)
+    for group in alike.values():
+        if len(group) == 1:
+            group[0].run(iterations)
+            continue
+        joint = _stacked(group)
+        joint.run(iterations)
+        n_j = group[0].total.shape[1]
+        for p, chain in enumerate(group):
+            joints = slice(p * n_j, (p + 1) * n_j)
+            chain.total = joint.total[:, joints]
+            chain.messages = Messages(joint.messages.temporal[:, :, joints],
+                                      [pm[:, p * len(g.edges):(p + 1) * len(g.edges)]
+                                       for pm, g in zip(joint.messages.pairwise, chain.groups)])
+
+
+def _stacked(chains: Sequence[ChainBP]) -> ChainBP:
+    """One chain whose joints are those of every chain in turn (same length and factor layout)."""
+    n_j = chains[0].total.shape[1]
+    temporal = [None if t is None else np.concatenate([c.temporal[i] for c in chains])
+                for i, t in enumerate(chains[0].temporal)]
+    groups = [PairwiseGroup(g.name, np.concatenate([c.groups[k].edges + p * n_j for p, c in enumerate(chains)]),
+                            np.concatenate([c.groups[k].tables for c in chains], axis=1))
+              for k, g in enumerate(chains[0].groups)]
+    messages = Messages(np.concatenate([c.messages.temporal for c in chains], axis=2),
+                        [np.concatenate([c.messages.pairwise[k] for c in chains], axis=1)
+                         for k in range(len(groups))])
+    return ChainBP(temporal, groups, messages, np.concatenate([c.total for c in chains], axis=1))
 
 
 def loopy_bp(

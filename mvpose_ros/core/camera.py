@@ -92,14 +92,18 @@ class Camera:
 
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 2) pixels -> world rays: origins (..., 3) (the centre), unit dirs (..., 3)."""
+        d = self.directions(uv)
+        return np.broadcast_to(self.centre, d.shape).copy(), d
+
+    def directions(self, uv: np.ndarray) -> np.ndarray:
+        """(..., 2) pixels -> (..., 3) unit world directions of their rays (from the centre)."""
         uv = np.asarray(uv, dtype=float)
         xy = (uv - self.K[:2, 2]) @ self._k_inv
         if self.has_distortion:
             xy = self._undistort(xy)
-        d_cam = np.concatenate([xy, np.ones_like(xy[..., :1])], axis=-1)
-        d = d_cam @ self.R  # R.T @ d_cam for each ray
-        d /= np.linalg.norm(d, axis=-1, keepdims=True)
-        return np.broadcast_to(self.centre, d.shape).copy(), d
+        d = xy @ self.R[:2] + self.R[2]  # R.T @ (x, y, 1) for each ray
+        d /= np.sqrt(np.einsum('...i,...i->...', d, d))[..., None]
+        return d
 
     def _distort(self, xy: np.ndarray) -> np.ndarray:
         """(..., 2) undistorted -> distorted normalised coordinates."""

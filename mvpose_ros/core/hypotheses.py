@@ -78,7 +78,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     cameras = [cam for views in people for cam, _ in views]
     for cam in {id(c): c for c in cameras}.values():
         idx = [v for v, c in enumerate(cameras) if c is cam]
-        dirs[idx] = cam.rays(pixels[idx])[1]
+        dirs[idx] = cam.directions(pixels[idx])
         centres[idx] = cam.centre
 
     # every (person, joint) seen by >= 2 cameras: its m rays per hypothesis, padded to K cameras
@@ -105,10 +105,13 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     if rows:
         # each ray's share of the normal equations once, then per hypothesis the weighted sum of
         # its rays' shares: one gather and one solve for the whole frame
-        terms = line_terms(centres[:, None, None], dirs).reshape(9, -1)  # (9, V * J * (m + 1))
+        # the last column is no ray at all (zeros): where a subset is padded to K cameras
+        terms = np.zeros((9, dirs[..., 0].size + 1))
+        terms[:, :-1] = line_terms(centres[:, None, None], dirs).reshape(9, -1)  # (9, V * J * (m + 1) + 1)
         ray = (np.concatenate(view_idx) * n_joints + np.concatenate(joint_idx)[:, None, None]) * (m + 1) \
             + np.concatenate(draw_idx)  # (Q, m, K)
-        summed = (terms[:, ray] * np.concatenate(weights)).sum(axis=-1)  # (9, Q, m)
+        ray[np.concatenate(weights) == 0] = -1
+        summed = terms[:, ray].sum(axis=-1)  # (9, Q, m)
         pp, pj = np.concatenate(rows).T
         out[pp, pj] = solve_line_terms(summed, width)  # (Q, m, 3)
 

@@ -43,7 +43,7 @@ def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Pers
     origins = np.empty((len(kp), 3))
     for c, cam in enumerate(cameras):
         if people[c]:
-            dirs[owner == c] = cam.rays(kp[owner == c, :, :2])[1]
+            dirs[owner == c] = cam.directions(kp[owner == c, :, :2])
             origins[owner == c] = cam.centre
     dist = ray_ray_distance(origins[:, None, None], dirs[:, None], origins[None, :, None], dirs[None])  # (N, N, J)
     seen = kp[..., 2] > config.min_score

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.bp import ChainBP, PairwiseGroup, loopy_bp
+from mvpose_ros.core.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
 from mvpose_ros.core.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
 
@@ -175,8 +175,10 @@ class SlidingWindow:
                     chain.hypotheses.popleft()
                     chain.best.popleft()
                 chain.first += excess
-            chain.bp.run(self.config.slide_iterations)
             self.timer.add('bp', t0)
+        t0 = time.perf_counter()
+        run_chains([self._chains[pid].bp for pid in slot.people], self.config.slide_iterations)
+        self.timer.add('bp', t0)
 
     def _groups(self, pid: int, i: int, best: deque[np.ndarray]) -> list[PairwiseGroup]:
         """The pairwise groups of person pid at buffer position i, as one-frame tables; limb
@@ -197,9 +199,15 @@ class SlidingWindow:
         prev, cur, nxt = self._slots[i - 1], self._slots[i], self._slots[i + 1]
         if not prev.frame + 1 == cur.frame == nxt.frame - 1:
             return
-        for pid in cur.people.keys() & prev.people.keys() & nxt.people.keys():
-            cur.temporal[pid] = temporal_table(prev.people[pid].hypotheses, cur.people[pid].hypotheses,
-                                               nxt.people[pid].hypotheses, self.config.factors)
+        pids = sorted(cur.people.keys() & prev.people.keys() & nxt.people.keys())
+        if not pids:
+            return
+        # every person's joints in one call: the table of a joint depends on that joint alone
+        n_j = len(cur.people[pids[0]].hypotheses)
+        tables = temporal_table(*(np.concatenate([s.people[pid].hypotheses for pid in pids]) for s in (prev, cur, nxt)),
+                                self.config.factors)
+        for k, pid in enumerate(pids):
+            cur.temporal[pid] = tables[k * n_j:(k + 1) * n_j]
 
     def _run(self, pid: int, i: int) -> range:
         """Buffer positions of the chain of person pid through position i (consecutive frames)."""
