@@ -1,6 +1,8 @@
-"""Timing and process faults at the bp_solver, a node as its own process fed real Shelf bundles:
-a burst at far above the frame rate, a gap in the frame numbers, late and duplicate frames, and a
-kill and restart mid-stream. Every input frame yields one output or a logged reason."""
+"""Timing, process and file faults at the nodes, each its own process fed real Shelf data: at
+bp_solver a burst far above the frame rate, a gap in the frame numbers, late and duplicate frames,
+a kill and restart mid-stream; at association a camera gone for good, a camera that sees nobody,
+repeated and out-of-order stamps; bad parameter and calibration files. Every input frame yields
+one output or a logged reason."""
 from __future__ import annotations
 
 import json
@@ -11,7 +13,7 @@ import pytest
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.people_msg import bundles_to_msg
+from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
 from mvpose_ros.core.association import AssociationConfig, Associator
@@ -141,3 +143,50 @@ def test_bad_parameter_or_calibration_file_is_one_fatal_line_and_exit_2(tmp_path
     fatal = [line for line in text.splitlines() if '[FATAL]' in line]
     assert len(fatal) == 1 and str(params) in fatal[0] and problem in fatal[0], text
     assert 'Traceback' not in text
+
+
+def test_association_with_a_camera_gone_for_good_and_stamps_out_of_order_or_repeated(tmp_path):
+    root = dataset_dir('shelf')
+    raw = [read_body25(root / 'openpose_body25' / f'{c}.txt')[:12] for c in range(5)]
+    frames = range(300, 312)
+    people = {f: [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig(stride=8.0)) for c in range(5)]
+              for f in frames}
+    log = tmp_path / 'association.log'
+    with probe(194, 'association_faults') as (node, executor):
+        got: dict[int, list] = {}
+        node.create_subscription(PointCloud2, '/people/bundles',
+                                 lambda m: got.setdefault(frame_of_stamp(m.header.stamp), []).append(m), DATA_QOS)
+        pubs = [node.create_publisher(PointCloud2, f'/cam{c}/people2d', DATA_QOS) for c in range(5)]
+        proc = start_node('association', 194, log, '-p', 'sync_timeout:=0.3')
+        try:
+            assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)), log.read_text()
+
+            def send(c: int, f: int, nobody: bool = False) -> None:
+                header = Header(stamp=stamp_of_frame(f), frame_id=f'cam{c}')
+                pubs[c].publish(people_to_msg([] if nobody else people[f][c], header))
+
+            for f in frames:
+                for c in range(5):
+                    if c == 4 and f >= 304:
+                        continue  # camera 4 is gone for good from frame 304
+                    if (c, f) == (1, 303):
+                        continue  # comes late, below
+                    send(c, f, nobody=(c, f) == (0, 305))  # camera 0 sees nobody at 305
+                if f == 306:
+                    send(2, 306)  # a repeated stamp
+                if f == 308:
+                    send(1, 303)  # out of order: frame 303 has gone on without camera 1
+                spin_until(executor, lambda: False, 0.04)
+            assert spin_until(executor, lambda: set(got) >= set(frames), 20.0), log.read_text()
+            spin_until(executor, lambda: False, 0.5)
+        finally:
+            stop(proc)
+    assert sorted(got) == list(frames) and all(len(v) == 1 for v in got.values())
+    bundles = {f: msg_to_bundles(got[f][0]) for f in frames}
+    assert all(len(bundles[f]) >= 2 for f in frames)  # the four cameras left still see everybody twice
+    assert all(4 not in views for f in frames if f >= 304 for _, views in bundles[f])
+    assert all(0 not in views for _, views in bundles[305])
+    text = log.read_text()
+    assert text.count('no data from cam4; going on without') == len(range(304, 312))
+    assert 'cam2 people2d stamp 12240000000 ns dropped' in text  # the repeat
+    assert 'cam1 people2d stamp 12120000000 ns dropped' in text  # the late one
