@@ -10,13 +10,19 @@ import cv2
 import numpy as np
 import pytest
 
+from mvpose_ros.bench.pipelined import run_two_processes
 from mvpose_ros.bench.plot import Series, line_plot, nice_ticks
 from mvpose_ros.bench.scene import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene, scene_people,
                                     triangulate)
 from mvpose_ros.cli import bench
 from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.camera import Camera, load_rig
+from mvpose_ros.core.datasets import dataset_dir
+from mvpose_ros.core.openpose import read_body25
+from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.pipeline import Inference3D, StageConfig
+from mvpose_ros.core.window import InferenceConfig
 
 REPO = Path(__file__).resolve().parents[1]
 N_JOINTS = 16
@@ -189,6 +195,29 @@ def test_smoke_prints_every_stage_and_the_frame_rates(tmp_path, capsys):
     for r in data['runs']:
         assert r['frames'] == 5 and r['figures']['fps'] > 0 and r['peak_rss_kib'] > r['rss_start_kib'] > 0
         assert {'grouping and heatmaps', 'association', 'sampling', 'data term'} <= set(r['stages_s'])
+    assert 'on two processes' in out and data['two_processes']['frames'] == 5
+    assert data['two_processes']['pcp'] == data['runs'][0]['pcp']  # the same solver on the same input
+
+
+def test_two_processes_give_the_results_of_one():
+    shelf = dataset_dir('shelf')
+    cameras = load_rig(shelf / 'calibration' / 'calibration_shelf.json')
+    files = [read_body25(shelf / 'openpose_body25' / f'{c}.txt')[:20] for c in range(len(cameras))]
+    frames = list(range(300, 320))
+    raw = [[f[k] for f in files] for k in range(len(frames))]
+    detector = OpenPoseDetectorConfig(stride=8.0)
+    config = StageConfig(inference=InferenceConfig(window=6, lag=3, bp_hypotheses=16, slide_iterations=1))
+    two = run_two_processes(cameras, frames, raw, detector, config)
+    associator, solver, one = Associator(cameras, config.association), Inference3D(cameras, config), []
+    for frame, per_camera in zip(frames, raw):
+        observations = associator.update(frame, [detect_people(f, detector) for f in per_camera])
+        one += solver.push(frame, [(o.person_id, o.views) for o in observations])
+    one += solver.flush()
+    assert [r.frame for r in two.results] == frames == [r.frame for r in one]
+    for a, b in zip(two.results, one):
+        assert a.person_ids == b.person_ids and len(a.person_ids) >= 2
+        np.testing.assert_array_equal(a.joints, b.joints)
+    assert {'grouping and heatmaps', 'association', 'sampling', 'bp'} <= set(two.seconds) and two.wall_s > 0
 
 
 def test_plots_of_the_sweeps(tmp_path):

@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-import cv2
 import numpy as np
 from std_msgs.msg import Header
 
@@ -27,7 +26,8 @@ from msg_adapters.image_msg import image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
-from mvpose_ros.core.camera import Camera, load_rig
+from mvpose_ros.core.camera import load_rig
+from mvpose_ros.core.image_file import read_image
 from mvpose_ros.core.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.openpose import read_body25
 
@@ -75,17 +75,6 @@ def _require(*paths: Path) -> None:
             raise FileNotFoundError(f'{path}: missing')
 
 
-def _image(path: Path, camera: Camera) -> np.ndarray:
-    """(H, W, 3) uint8 BGR image of `camera`, checked against its calibrated size."""
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise ValueError(f'{path}: not a readable image')
-    if bgr.shape[:2] != (camera.height, camera.width):
-        raise ValueError(f'{path}: image size {bgr.shape[1]}x{bgr.shape[0]}, camera {camera.name} '
-                         f'is calibrated for {camera.width}x{camera.height}')
-    return bgr
-
-
 def _headers(frame: int, n_cameras: int) -> tuple[int, list[Header]]:
     """Log stamp (ns) and one header per camera of `frame`."""
     stamp = stamp_of_frame(frame)
@@ -115,7 +104,7 @@ def shelf_recipe(shelf: Path, images_only: bool = False) -> Recipe:
                 yield f'/cam{c}/camera_info', camera_to_info(cam, headers[c]), ns
             if f in SHELF_IMAGE_FRAMES:
                 for c, cam in enumerate(rig):
-                    yield f'/cam{c}/image_raw', image_to_msg(_image(images[f, c], cam), headers[c]), ns
+                    yield f'/cam{c}/image_raw', image_to_msg(read_image(images[f, c], cam), headers[c]), ns
             for c, frames_of_camera in enumerate(openpose):
                 yield f'/cam{c}/openpose', openpose_to_msg(frames_of_camera[f - SHELF_TEST_FRAMES.start],
                                                            headers[c]), ns
@@ -156,7 +145,7 @@ def campus_recipe(campus_dir: str | Path) -> Recipe:
             for c, cam in enumerate(rig):
                 yield f'/cam{c}/camera_info', camera_to_info(cam, headers[c]), ns
             for c in present[f]:
-                yield f'/cam{c}/image_raw', image_to_msg(_image(campus_image(campus_dir, c, f), rig[c]),
+                yield f'/cam{c}/image_raw', image_to_msg(read_image(campus_image(campus_dir, c, f), rig[c]),
                                                          headers[c]), ns
             here = gt.present[i]
             yield GROUND_TRUTH_TOPIC, skeletons_to_msg(np.flatnonzero(here), gt.poses[i, here],

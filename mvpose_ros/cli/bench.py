@@ -2,7 +2,7 @@
 
     mvpose-bench [--data-root DIR] [--output out/bench] [--frames N] [--scaling none|quick|full]
                  [--cameras 1,2,3,4,5] [--people 3,10,20] [--windows 4,8,15] [--hypotheses 16,32,64]
-                 [--profile]
+                 [--profile] [--repeat N] [--no-two-processes]
 
 Every run replays the Shelf test frames' OpenPose BODY25 output through the whole 3D stage as
 the node graph streams it: grouping and per-person heatmaps (the detector nodes' work after the
@@ -11,7 +11,9 @@ factor tables, BP and decoding over the sliding window (bp_solver). It prints th
 frame of each stage (from the core's own timers; wall time they do not cover is 'other'), the
 frames per second of the whole 3D stage and of its part from 2D people on, peak memory, and the
 PCP of the runs on the original scene; it writes a JSON of every figure and PNG plots of the
-time per frame against people, cameras, M and window length into --output.
+time per frame against people, cameras, M and window length into --output. Last, the default row
+runs again with its two halves (grouping, heatmaps and association | sampling onward) in two
+processes, as the node graph splits them: the wall time per frame of the whole stage on two cores.
 
 Each configuration runs in a fresh process (`python -m mvpose_ros.cli.bench --one CONFIG`), so
 its peak RSS is its own. Rows: the graph's settings (config/shelf.yaml) and the offline
@@ -47,7 +49,7 @@ SHORT = {GROUPING: 'group+hm', 'association': 'trk+match', 'sampling': 'sampling
          'factors': 'factors', 'bp': 'BP', 'decoding': 'decode', OTHER: 'other'}
 SCENE_PEOPLE = 4  # Shelf test frames hold 3-4 people: a --people target up to this is the scene itself
 SWEEPS = ('cameras', 'people', 'window', 'M')
-FULL = {'cameras': (1, 2, 3, 4, 5), 'people': (3, 10, 20), 'window': (4, 8, 15), 'M': (16, 32, 64)}
+FULL = {'cameras': (1, 2, 3, 4, 5), 'people': (3, 10, 20), 'window': (4, 6, 10, 15), 'M': (16, 32, 64)}
 QUICK_FRAMES = 60
 RESULT_TAG = 'MVPOSE-BENCH-RESULT '
 
@@ -55,7 +57,7 @@ RESULT_TAG = 'MVPOSE-BENCH-RESULT '
 @dataclass(frozen=True)
 class RunConfig:
     """One benchmark run. Defaults: the graph's settings (config/shelf.yaml: heatmap_detector
-    stride 8; bp_solver window 8, lag 4, M 64, 12 hypotheses in BP, one warm-started iteration
+    stride 8; bp_solver window 6, lag 3, M 64, 16 hypotheses in BP, one warm-started iteration
     per slide, terms data,temp,col)."""
 
     name: str = 'graph (default)'
@@ -63,10 +65,10 @@ class RunConfig:
     frames: int = 301
     cameras: int = 5
     people: float | None = None  # target 3D people per frame (scene copies); None = the scene
-    window: int | None = 8
-    lag: int = 4
+    window: int | None = 6
+    lag: int = 3
     hypotheses: int = 64
-    bp_hypotheses: int = 12
+    bp_hypotheses: int = 16
     slide_iterations: int = 1
     iterations: int = 5
     stride: float = 8.0
@@ -164,14 +166,13 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
     around the stage's work only (grouping, then tracking onward), not around reading files."""
     from mvpose_ros.bench.scene import multiply_scene
     from mvpose_ros.core.association import Associator
-    from mvpose_ros.core.body import NUM_JOINTS
     from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
     from mvpose_ros.core.evaluation import evaluate
     from mvpose_ros.core.hypotheses import SamplingConfig
     from mvpose_ros.core.offline import as_predictions
     from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
     from mvpose_ros.core.pipeline import Inference3D, StageConfig
-    from mvpose_ros.core.window import FrameResult, InferenceConfig
+    from mvpose_ros.core.window import InferenceConfig
 
     rss_start = _rss_kib()
     frames = SHELF_TEST_FRAMES[:config.frames]
@@ -199,7 +200,7 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
     inference = Inference3D(seq.cameras, stage)
     associator = Associator(seq.cameras, stage.association)
     results: list = []
-    found, refused = [], 0
+    found = []
     if profiler:
         profiler.enable()
     t_start = time.perf_counter()
@@ -209,14 +210,7 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
         inference.timer.add('association', t0)
         bundles = [(obs.person_id, obs.views) for obs in observations]
         found.append(len(bundles))
-        if bundles:
-            results += inference.push(frame, bundles)
-            continue
-        try:  # a frame where nobody is seen by two cameras
-            results += inference.push(frame, bundles)
-        except ValueError:  # the core does not take an empty frame: output it empty, as bp_solver does
-            refused += 1
-            results.append(FrameResult(frame, [], np.zeros((0, NUM_JOINTS, 3))))
+        results += inference.push(frame, bundles)
     results += inference.flush()
     wall = time.perf_counter() - t_start
     if profiler:
@@ -236,7 +230,6 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
         'people_out': float(np.mean([len(r.person_ids) for r in results])) if results else 0.0,
         'frames_out': len(results),
         'empty_frames': int(sum(1 for n in found if n == 0)),
-        'empty_frames_refused': refused,
         'scene': scene,
         'rss_start_kib': rss_start,
         'rss_ready_kib': rss_ready,
@@ -329,9 +322,6 @@ def print_tables(results: Sequence[dict], out: TextIO) -> None:
         if r['people_3d'] == 0:
             notes.append(f'{c["name"]}: no 3D people (with {r["cameras"]} camera(s) no joint is seen twice); '
                          f'only grouping and association ran')
-        elif r['empty_frames_refused']:
-            notes.append(f'{c["name"]}: {r["empty_frames_refused"]} frame(s) with nobody seen twice were refused by '
-                         f'the core (Inference3D.push) and output empty')
         if r['scene']:
             s = r['scene']
             notes.append(f'{c["name"]}: target {c["people"]:g} people: {s["copies"]} shifted copies of the scene '
@@ -466,6 +456,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--profile', action='store_true',
                    help='also profile the default run (cProfile, in this process): top 20 functions by own time')
     p.add_argument('--no-offline', action='store_true', help='skip the offline evaluator\'s row')
+    p.add_argument('--no-two-processes', action='store_true',
+                   help='skip the default row pipelined over two processes (bench.pipelined)')
     p.add_argument('--repeat', type=int, default=1,
                    help='run each configuration this many times (each a fresh process) and keep the fastest '
                         '(on a shared machine the minimum is the least disturbed figure; default 1)')
@@ -540,6 +532,10 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     print_tables(main_rows + sweep_rows, out)
     if 'error' not in results[0]:
         print_default(results[0], out)
+    pipelined = None if args.no_two_processes else two_processes(replace(base, frames=args.frames),
+                                                                  args.data_root, args.repeat)
+    if pipelined:
+        print_two_processes(pipelined, out)
     if args.profile:
         print_profile(replace(base, frames=args.frames), args.data_root, args.output, out)
     args.output.mkdir(parents=True, exist_ok=True)
@@ -551,9 +547,64 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         if 'error' not in r:
             r['figures'] = figures(r)
     path = args.output / 'bench.json'
-    path.write_text(json.dumps({'meta': meta, 'runs': results}, indent=1) + '\n', encoding='utf-8')
+    path.write_text(json.dumps({'meta': meta, 'runs': results, 'two_processes': pipelined}, indent=1) + '\n',
+                    encoding='utf-8')
     print(f'\nwrote {path}' + ''.join(f'\nwrote {p}' for p in plots), file=out)
     return 0 if all('error' not in r for r in results) else 1
+
+
+def two_processes(config: RunConfig, data_root: str | None, repeat: int) -> dict:
+    """The whole 3D stage of `config` pipelined over two processes (bench.pipelined): the fastest
+    of `repeat` runs' wall time per frame and frame rate, each half's stage times, and the PCP."""
+    from mvpose_ros.bench.pipelined import run_two_processes
+    from mvpose_ros.core.camera import load_rig
+    from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+    from mvpose_ros.core.evaluation import evaluate
+    from mvpose_ros.core.hypotheses import SamplingConfig
+    from mvpose_ros.core.offline import as_predictions
+    from mvpose_ros.core.openpose import read_body25
+    from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
+    from mvpose_ros.core.pipeline import StageConfig
+    from mvpose_ros.core.window import InferenceConfig
+    shelf = dataset_dir('shelf', data_root)
+    cameras = load_rig(shelf / 'calibration' / 'calibration_shelf.json')[:config.cameras]
+    files = [read_body25(shelf / 'openpose_body25' / f'{c}.txt', cam.width, cam.height) for c, cam in enumerate(cameras)]
+    frames = list(SHELF_TEST_FRAMES[:config.frames])
+    raw = [[f[k] for f in files] for k in range(len(frames))]
+    stage = StageConfig(sampling=SamplingConfig(hypotheses=config.hypotheses),
+                        inference=InferenceConfig(terms=config.terms, window=config.window, lag=config.lag,
+                                                  iterations=config.iterations,
+                                                  bp_hypotheses=config.bp_hypotheses or None,
+                                                  slide_iterations=config.slide_iterations or None),
+                        head_model=config.head_model, seed=config.seed)
+    runs = [run_two_processes(cameras, frames, raw, OpenPoseDetectorConfig(stride=config.stride), stage)
+            for _ in range(max(repeat, 1))]
+    best = min(runs, key=lambda r: r.wall_s)
+    ev = evaluate(as_predictions(best.results), load_actors_gt(shelf / 'actorsGT.mat', frames), SHELF_ACTORS)
+    n = len(frames)
+    return {'config': asdict(config), 'frames': n, 'wall_ms': 1e3 * best.wall_s / n, 'fps': n / best.wall_s,
+            'walls_ms': [1e3 * r.wall_s / n for r in runs],
+            'stages_ms': {k: 1e3 * v / n for k, v in best.seconds.items()},
+            'pcp': {'strict_frame_weighted': ev.frame_weighted('strict'), 'strict_actor_avg': ev.actor_average('strict'),
+                    'lenient_frame_weighted': ev.frame_weighted('lenient'),
+                    'lenient_actor_avg': ev.actor_average('lenient'), 'mpjpe_mm': ev.mpjpe_all}}
+
+
+def print_two_processes(result: dict, out: TextIO) -> None:
+    front = ('grouping and heatmaps', 'association')
+    ms = result['stages_ms']
+    p = result['pcp']
+    print(f"\n{result['config']['name']} on two processes (grouping, heatmaps and association | sampling onward, "
+          f"frames streamed through a pipe; bench.pipelined):", file=out)
+    print(f"  whole 3D stage {result['wall_ms']:.2f} ms/frame wall -> {result['fps']:.1f} frames/s "
+          f"(runs: {', '.join(f'{w:.2f}' for w in result['walls_ms'])} ms/frame)", file=out)
+    print(f"  process 1: {sum(ms.get(k, 0.0) for k in front):.2f} ms/frame ("
+          + ', '.join(f'{k} {ms[k]:.2f}' for k in front if k in ms) + '); process 2: '
+          f"{sum(v for k, v in ms.items() if k not in front):.2f} ms/frame ("
+          + ', '.join(f'{k} {v:.2f}' for k, v in ms.items() if k not in front) + ')', file=out)
+    print(f"  PCP strict {p['strict_frame_weighted']:.2f} / {p['strict_actor_avg']:.2f} | lenient "
+          f"{p['lenient_frame_weighted']:.2f} / {p['lenient_actor_avg']:.2f} | MPJPE {p['mpjpe_mm']:.1f} mm "
+          f"(the single-process run's: the same solver on the same input)", file=out)
 
 
 def print_profile(config: RunConfig, data_root: str | None, output: Path, out: TextIO) -> None:

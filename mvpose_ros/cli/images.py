@@ -27,6 +27,7 @@ from mvpose_ros.core.body import HEAD_MODELS
 from mvpose_ros.core.camera import Camera, load_rig
 from mvpose_ros.core.datasets import data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation import FORMS, evaluate, format_table
+from mvpose_ros.core.image_file import read_image
 from mvpose_ros.core.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.overlay import overlay
 from mvpose_ros.core.pipeline import Inference3D, StageConfig
@@ -66,16 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _read_images(paths: Sequence[Path], cameras: Sequence[Camera]) -> list[np.ndarray]:
     if len(paths) != len(cameras):
         raise ValueError(f'--images: {len(paths)} images for {len(cameras)} calibrated cameras')
-    images = []
-    for path, cam in zip(paths, cameras):
-        bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise FileNotFoundError(f'{path}: missing or not a readable image')
-        if bgr.shape[:2] != (cam.height, cam.width):
-            raise ValueError(f'{path}: image size {bgr.shape[1]}x{bgr.shape[0]}, camera {cam.name} is calibrated '
-                             f'for {cam.width}x{cam.height}')
-        images.append(bgr)
-    return images
+    return [read_image(path, cam) for path, cam in zip(paths, cameras)]
 
 
 def _score(result: FrameResult, root: str | None, out: TextIO) -> None:

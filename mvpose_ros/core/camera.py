@@ -231,17 +231,26 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
     raise FileNotFoundError(f'{path}: no calibration_*.json or P<i>.txt files')
 
 
-def line_terms(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+def line_terms(origins: np.ndarray, dirs: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """(..., 3) lines with unit directions -> (9, ...) each line's share of the least-squares
     system A x = b of the point closest to several lines: A = I - d d^T as its six entries
     (xx, xy, xz, yy, yz, zz), then b = o - d (d . o). Summing the terms of some lines and
     solving (solve_line_terms) gives their closest point, so a set of lines used by many
-    solves is prepared once. Component-major, so every step runs on contiguous arrays."""
+    solves is prepared once. Component-major, so every step runs on contiguous arrays; out:
+    where to write them (9, ...)."""
     o = np.moveaxis(np.asarray(origins, dtype=float), -1, 0)
     dx, dy, dz = np.ascontiguousarray(np.moveaxis(np.asarray(dirs, dtype=float), -1, 0))
+    if out is None:
+        out = np.empty((9,) + dx.shape)
     along = dx * o[0] + dy * o[1] + dz * o[2]
-    return np.stack([1 - dx * dx, -dx * dy, -dx * dz, 1 - dy * dy, -dy * dz, 1 - dz * dz,
-                     o[0] - dx * along, o[1] - dy * along, o[2] - dz * along])
+    for k, (a, b) in enumerate(((dx, dx), (dx, dy), (dx, dz), (dy, dy), (dy, dz), (dz, dz))):
+        np.multiply(a, b, out=out[k])
+        np.negative(out[k], out=out[k])
+    out[[0, 3, 5]] += 1.0
+    for k, (oc, dc) in enumerate(zip(o, (dx, dy, dz)), start=6):
+        np.multiply(dc, along, out=out[k])
+        np.subtract(oc, out[k], out=out[k])
+    return out
 
 
 def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:

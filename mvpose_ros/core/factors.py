@@ -89,11 +89,12 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     # |b - mid|^2 expanded so the M^3 part is a single batched matmul
     sq = (np.einsum('jkd,jkd->jk', mid, mid)[:, :, None] + np.einsum('jbd,jbd->jb', cur, cur)[:, None, :]
           - 2.0 * mid @ cur.transpose(0, 2, 1))
-    sq = np.maximum(sq, 0.0, out=sq)
+    # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
+    sq = np.maximum(sq, 0.0, out=sq).astype(np.float32)
     if config.temporal_form == 'laplace':
-        table = np.exp(-np.sqrt(sq) / config.temporal_scale)
+        table = np.exp(np.sqrt(sq) * np.float32(-1.0 / config.temporal_scale))
     else:
-        table = np.exp(-sq / (2.0 * config.temporal_scale ** 2))
+        table = np.exp(sq * np.float32(-0.5 / config.temporal_scale ** 2))
     return _normalised(table.reshape(j, ma, mc, cur.shape[1]), axes=(1, 2, 3))
 
 

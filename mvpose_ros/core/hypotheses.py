@@ -107,11 +107,16 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
         # its rays' shares: one gather and one solve for the whole frame
         # the last column is no ray at all (zeros): where a subset is padded to K cameras
         terms = np.zeros((9, dirs[..., 0].size + 1))
-        terms[:, :-1] = line_terms(centres[:, None, None], dirs).reshape(9, -1)  # (9, V * J * (m + 1) + 1)
+        rays = terms[:, :-1].reshape((9,) + dirs.shape[:-1])  # a view: each row's rays are contiguous
+        assert np.shares_memory(rays, terms)
+        line_terms(centres[:, None, None], dirs, out=rays)
         ray = (np.concatenate(view_idx) * n_joints + np.concatenate(joint_idx)[:, None, None]) * (m + 1) \
             + np.concatenate(draw_idx)  # (Q, m, K)
         ray[np.concatenate(weights) == 0] = -1
-        summed = terms[:, ray].sum(axis=-1)  # (9, Q, m)
+        ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
+        summed = terms[:, ray[0]]  # (9, Q, m)
+        for slot in ray[1:]:
+            summed += terms[:, slot]
         pp, pj = np.concatenate(rows).T
         out[pp, pj] = solve_line_terms(summed, width)  # (Q, m, 3)
 
