@@ -91,28 +91,27 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
             groups.append((p, first_view[p] + np.flatnonzero(mine[:, key == pattern][:, 0]),
                            np.flatnonzero(key == pattern)))
     width = max((len(cams) for _, cams, _ in groups), default=0)
-    view_idx, draw_idx, weights, joint_idx, rows = [], [], [], [], []
+    view_idx, draw_idx, joint_idx, rows = [], [], [], []
     for p, cams, joints in groups:
         if len(cams) >= 2:
-            cam_of, draw, weight = _plan(len(cams), m, config.peak_hypotheses, width)  # (m, K) each
+            cam_of, draw = _plan(len(cams), m, config.peak_hypotheses, width)  # (m, K) each
             shape = (len(joints), m, width)
             view_idx.append(np.broadcast_to(cams[cam_of], shape))
             draw_idx.append(np.broadcast_to(draw, shape))
-            weights.append(np.broadcast_to(weight, shape))
             joint_idx.append(joints)
             rows.append(np.stack([np.full(len(joints), p), joints], axis=1))
     out = np.full((len(people), n_joints, m, 3), np.nan)
     if rows:
-        # each ray's share of the normal equations once, then per hypothesis the weighted sum of
-        # its rays' shares: one gather and one solve for the whole frame
-        # the last column is no ray at all (zeros): where a subset is padded to K cameras
+        # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
+        # shares and one solve for the whole frame; the last column is no ray at all (zeros), for
+        # the slots where a subset is padded to K cameras
         terms = np.zeros((9, dirs[..., 0].size + 1))
         rays = terms[:, :-1].reshape((9,) + dirs.shape[:-1])  # a view: each row's rays are contiguous
         assert np.shares_memory(rays, terms)
         line_terms(centres[:, None, None], dirs, out=rays)
-        ray = (np.concatenate(view_idx) * n_joints + np.concatenate(joint_idx)[:, None, None]) * (m + 1) \
-            + np.concatenate(draw_idx)  # (Q, m, K)
-        ray[np.concatenate(weights) == 0] = -1
+        draw = np.concatenate(draw_idx)  # (Q, m, K)
+        ray = (np.concatenate(view_idx) * n_joints + np.concatenate(joint_idx)[:, None, None]) * (m + 1) + draw
+        ray[draw < 0] = -1
         ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
         summed = terms[:, ray[0]]  # (9, Q, m)
         for slot in ray[1:]:
@@ -141,12 +140,11 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
 
 
 @functools.lru_cache(maxsize=256)
-def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Which rays make each of the m hypotheses of a joint seen by cameras 0..n_cams-1: camera
-    (m, K) and draw (m, K) indices (draw m is the peak's ray) and weights (m, K), 0 where a
-    subset smaller than K = width (>= n_cams) is padded. First one peak triangulation per subset (when they
-    fit in m), then the m - peaks draws shared evenly over the subsets, each camera's draws used
-    once."""
+    (m, K) and draw (m, K) indices (draw m is the peak's ray; -1 where a subset smaller than
+    K = width (>= n_cams) is padded). First one peak triangulation per subset (when they fit in
+    m), then the m - peaks draws shared evenly over the subsets, each camera's draws used once."""
     subsets = camera_subsets(range(n_cams))
     n_peaks = len(subsets) if with_peaks and len(subsets) <= m else 0
     rows = [(s, [m] * len(s)) for s in subsets[:n_peaks]]
@@ -156,10 +154,8 @@ def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray
         for c in subset:
             used[c] += n
     cam_of = np.zeros((m, width), dtype=np.intp)
-    draw = np.zeros((m, width), dtype=np.intp)
-    weight = np.zeros((m, width))
+    draw = np.full((m, width), -1, dtype=np.intp)
     for i, (subset, draws) in enumerate(rows):
         cam_of[i, :len(subset)] = subset
         draw[i, :len(subset)] = draws
-        weight[i, :len(subset)] = 1.0
-    return cam_of, draw, weight
+    return cam_of, draw
