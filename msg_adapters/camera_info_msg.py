@@ -8,7 +8,7 @@ import numpy as np
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
-from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera
 
 DISTORTION_MODEL = 'plumb_bob'  # k1, k2, p1, p2, k3: OpenCV's order, as Camera.dist
 PROBE_DEPTH_M = 1.0  # depth of the points the distortion check projects (any depth works)

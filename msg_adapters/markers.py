@@ -11,7 +11,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.skeleton_msg import check_skeletons
-from mvpose_ros.core.body import BONES
+from mvpose_ros.core.geometry.body import BONES
 
 JOINT_DIAMETER_M = 0.06
 BONE_WIDTH_M = 0.03

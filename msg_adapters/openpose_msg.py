@@ -7,7 +7,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.records import UINT16_MAX, from_cloud, to_cloud
-from mvpose_ros.core.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
+from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 
 OPENPOSE_DTYPE = np.dtype([
     ('kind', 'u1'), ('part', 'u1'), ('a', '<u2'), ('b', '<u2'),

@@ -9,7 +9,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.records import UINT16_MAX, UINT32_MAX, from_cloud, to_cloud
-from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
+from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.person2d import Person2D
 

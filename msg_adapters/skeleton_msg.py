@@ -7,7 +7,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.records import UINT32_MAX, from_cloud, to_cloud
-from mvpose_ros.core.body import NUM_JOINTS
+from mvpose_ros.core.geometry.body import NUM_JOINTS
 
 SKELETON_DTYPE = np.dtype([('x', '<f4'), ('y', '<f4'), ('z', '<f4'), ('person', '<u4'),
                            ('joint', 'u1')])

@@ -3,7 +3,7 @@ namespace, `ip netns exec <ns> python test/skeleton_recorder.py ...`) that recor
 
 It waits until every endpoint the graph needs before playback is visible (graph.config
 expected_connections), then creates the --ready file. Every /skeletons message is appended to
---predictions as it arrives, as a predictions line (mvpose_ros.core.predictions), duplicates
+--predictions as it arrives, as a predictions line (mvpose_ros.core.evaluation.predictions), duplicates
 included. With --measure it also records the serialized size of every message the nodes
 publish. It exits 0 once every input stamp of --bag has its output and --drain s have
 passed (to catch duplicates), 1 after --timeout s without a new output; --stats is written either
@@ -32,8 +32,8 @@ from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import header_stamp_ns
-from mvpose_ros.core.predictions import frame_line
-from mvpose_ros.core.window import FrameResult
+from mvpose_ros.core.evaluation.predictions import frame_line
+from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
 from mvpose_ros.nodes.runtime import DATA_QOS
 

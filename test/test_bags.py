@@ -24,9 +24,9 @@ from mvpose_ros.bags import recipes
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag, typestore, write_bag
 from mvpose_ros.bags.recipes import campus_image, campus_recipe, shelf_recipe
 from mvpose_ros.cli.make_bag import main as make_bag
-from mvpose_ros.core.camera import load_rig
-from mvpose_ros.core.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir
-from mvpose_ros.core.openpose import read_body25
+from mvpose_ros.core.geometry.camera import load_rig
+from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.detection.openpose import read_body25
 
 S = 1_000_000_000
 FRAME_NS = 40_000_000

@@ -15,14 +15,14 @@ from mvpose_ros.bench.plot import Series, line_plot, nice_ticks
 from mvpose_ros.bench.scene import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene, scene_people,
                                     triangulate)
 from mvpose_ros.cli import bench
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.camera import Camera, load_rig
-from mvpose_ros.core.datasets import dataset_dir
-from mvpose_ros.core.openpose import read_body25
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.pipeline import Inference3D, StageConfig
-from mvpose_ros.core.window import InferenceConfig
+from mvpose_ros.core.inference.solver import Inference3D, StageConfig
+from mvpose_ros.core.inference.window import InferenceConfig
 
 REPO = Path(__file__).resolve().parents[1]
 N_JOINTS = 16

@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from mvpose_ros.core.bp import ChainBP, Messages, PairwiseGroup, loopy_bp
+from mvpose_ros.core.inference.bp import ChainBP, Messages, PairwiseGroup, loopy_bp
 
 
 def brute_force(data, temporal, groups):

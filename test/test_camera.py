@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from mvpose_ros.core.camera import Camera, closest_point_to_rays, load_rig, ray_ray_distance
-from mvpose_ros.core.datasets import (SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
+from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, load_rig, ray_ray_distance
+from mvpose_ros.core.evaluation.datasets import (SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
                                       load_actors_gt_2d)
 
 SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]

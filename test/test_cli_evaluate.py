@@ -7,9 +7,9 @@ import json
 import pytest
 
 from mvpose_ros.cli.evaluate import build_parser, main, run
-from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation import evaluate
-from mvpose_ros.core.predictions import read_predictions
+from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.pcp import evaluate
+from mvpose_ros.core.evaluation.predictions import read_predictions
 
 
 @pytest.fixture(scope='module')

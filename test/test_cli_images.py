@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from mvpose_ros.cli import images
-from mvpose_ros.core.datasets import dataset_dir
+from mvpose_ros.core.evaluation.datasets import dataset_dir
 
 SHELF = dataset_dir('shelf')
 FRAMES = [str(SHELF / 'frames' / f'cam{c}_000572.png') for c in range(5)]

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core import datasets
-from mvpose_ros.core.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, data_root, dataset_dir,
+from mvpose_ros.core.evaluation import datasets
+from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, data_root, dataset_dir,
                                       load_actors_gt, load_actors_gt_2d)
 
 
@@ -39,7 +39,7 @@ def test_data_root_missing_names_what_was_tried(monkeypatch, tmp_path):
     # Neither beside a (fake) checkout nor beside the cwd.
     monkeypatch.delenv(datasets.DATA_ROOT_ENV)
     checkout = tmp_path / 'checkout'
-    monkeypatch.setattr(datasets, '__file__', str(checkout / 'mvpose_ros' / 'core' / 'datasets.py'))
+    monkeypatch.setattr(datasets, '__file__', str(checkout / 'mvpose_ros' / 'core' / 'evaluation' / 'datasets.py'))
     (tmp_path / 'a' / 'cwd').mkdir(parents=True)
     monkeypatch.chdir(tmp_path / 'a' / 'cwd')
     with pytest.raises(FileNotFoundError) as info:

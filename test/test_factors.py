@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.factors import (TEMPORAL_FORMS, FactorConfig, collision_table, limb_table,
+from mvpose_ros.core.inference.factors import (TEMPORAL_FORMS, FactorConfig, collision_table, limb_table,
                                      pair_distances, temporal_table)
 
 

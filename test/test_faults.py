@@ -16,11 +16,11 @@ from std_msgs.msg import Header
 from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.camera import load_rig
-from mvpose_ros.core.datasets import dataset_dir
-from mvpose_ros.core.openpose import read_body25
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.geometry.camera import load_rig
+from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 

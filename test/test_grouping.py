@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from mvpose_ros.core.datasets import data_root, load_actors_gt_2d
-from mvpose_ros.core.grouping import BODY25_REDUNDANT_LIMBS, group_body25
-from mvpose_ros.core.openpose import BODY25_PAF_PAIRS, OpenPoseFrame, read_body25
+from mvpose_ros.core.evaluation.datasets import data_root, load_actors_gt_2d
+from mvpose_ros.core.detection.grouping import BODY25_REDUNDANT_LIMBS, group_body25
+from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame, read_body25
 
 SHELF = data_root() / 'data' / 'shelf'
 FRAME, LINE = 572, 272  # actorsGT frame and its index in the detection files

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.camera import load_rig
-from mvpose_ros.core.datasets import dataset_dir, load_actors_gt
-from mvpose_ros.core.factors import data_term
+from mvpose_ros.core.geometry.camera import load_rig
+from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
+from mvpose_ros.core.inference.factors import data_term
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
-from mvpose_ros.core.hypotheses import (SamplingConfig, camera_subsets, sample_hypotheses,
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_hypotheses,
                                         split_draws)
 
 SIGMA, STRIDE = 1.5, 1.0

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.letterbox import letterbox, whole_image
+from mvpose_ros.core.detection.letterbox import letterbox, whole_image
 
 # (width, height, region u0, v0, u1, v1 in pixel-centre coordinates, input side)
 CASES = [

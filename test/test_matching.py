@@ -8,13 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.body import NUM_INFERENCE_JOINTS, TOP_HEAD
-from mvpose_ros.core.camera import Camera, load_rig
-from mvpose_ros.core.datasets import dataset_dir, load_actors_gt
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, TOP_HEAD
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
-from mvpose_ros.core.identity import IdentityKeeper
-from mvpose_ros.core.matching import MatchingConfig, cluster_views, view_distance
+from mvpose_ros.core.association.identity import IdentityKeeper
+from mvpose_ros.core.association.matching import MatchingConfig, cluster_views, view_distance
 from mvpose_ros.core.person2d import Person2D
 
 SHELF = dataset_dir('shelf')

@@ -13,8 +13,8 @@ from std_msgs.msg import Header
 from msg_adapters.camera_info_msg import camera_to_info, check_info, info_to_intrinsics
 from msg_adapters.image_msg import image_to_msg, msg_to_image
 from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
-from mvpose_ros.core.camera import load_rig
-from mvpose_ros.core.datasets import dataset_dir
+from mvpose_ros.core.geometry.camera import load_rig
+from mvpose_ros.core.evaluation.datasets import dataset_dir
 
 
 @pytest.fixture(scope='module')

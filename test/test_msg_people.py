@@ -11,10 +11,10 @@ from std_msgs.msg import Header
 from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles, msg_to_people,
                                      people_dtype, people_to_msg)
 from msg_adapters.records import from_cloud, to_cloud
-from mvpose_ros.core.datasets import dataset_dir
+from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.openpose import read_body25
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.person2d import Person2D
 
 TOL = 0.5 / 255 + 1e-7  # quantisation to 1/255 steps, plus float32 rounding

@@ -11,7 +11,7 @@ from msg_adapters.openpose_msg import msg_to_openpose, openpose_to_msg
 from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, msg_to_people, people_to_msg
 from msg_adapters.records import fields_of, from_cloud, to_cloud
 from msg_adapters.skeleton_msg import msg_to_skeletons, skeletons_to_msg
-from mvpose_ros.core.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
+from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.person2d import Person2D
 
 DTYPE = np.dtype([('kind', 'u1'), ('xyz', '<f4', (3,)), ('id', '<u4'), ('grid', '<u2', (2, 2)),

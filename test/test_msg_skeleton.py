@@ -14,7 +14,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from msg_adapters.markers import person_colour, skeleton_markers
 from msg_adapters.records import from_cloud, to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
-from mvpose_ros.core.body import BONES
+from mvpose_ros.core.geometry.body import BONES
 
 WORLD = Header(frame_id='world')
 

@@ -34,8 +34,8 @@ from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import read_bag, write_bag
 from mvpose_ros.bags.recipes import shelf_recipe
-from mvpose_ros.core.datasets import dataset_dir
-from mvpose_ros.core.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
+from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.graph.config import graph_nodes, node_command
 from mvpose_ros.graph.processes import ProcessGroup
 

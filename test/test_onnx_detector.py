@@ -9,10 +9,10 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_ros.core.body import L_EAR, NUM_INFERENCE_JOINTS, R_EAR
-from mvpose_ros.core.datasets import data_root, dataset_dir, load_actors_gt_2d
-from mvpose_ros.core.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
-from mvpose_ros.core.onnx_models import EFFICIENTPOSE, MULTIPOSE, ModelError
+from mvpose_ros.core.geometry.body import L_EAR, NUM_INFERENCE_JOINTS, R_EAR
+from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt_2d
+from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_models import EFFICIENTPOSE, MULTIPOSE, ModelError
 
 MODELS = data_root() / 'models'
 FRAME, CAMERA = 572, 4

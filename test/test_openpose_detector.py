@@ -6,12 +6,12 @@ import time
 import numpy as np
 import pytest
 
-from mvpose_ros.core.body import (BODY25_INFERENCE_JOINTS, HEAD, INFERENCE_MIRROR, L_EAR, NECK,
+from mvpose_ros.core.geometry.body import (BODY25_INFERENCE_JOINTS, HEAD, INFERENCE_MIRROR, L_EAR, NECK,
                                   NUM_INFERENCE_JOINTS, R_EAR)
-from mvpose_ros.core.datasets import data_root
-from mvpose_ros.core.grouping import group_body25
-from mvpose_ros.core.openpose import read_body25
-from mvpose_ros.core.openpose_detector import (OpenPoseDetectorConfig, detect_people,
+from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.detection.grouping import group_body25
+from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose_detector import (OpenPoseDetectorConfig, detect_people,
                                                grouped_keypoints)
 
 LINE = 272  # actorsGT frame 572

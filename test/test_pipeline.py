@@ -2,14 +2,14 @@
 it included: one result per frame, in order."""
 from __future__ import annotations
 
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.camera import load_rig
-from mvpose_ros.core.datasets import dataset_dir
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.geometry.camera import load_rig
+from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.heatmap import HeatmapStack
-from mvpose_ros.core.openpose import read_body25
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.pipeline import Inference3D, StageConfig
-from mvpose_ros.core.window import InferenceConfig
+from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.inference.solver import Inference3D, StageConfig
+from mvpose_ros.core.inference.window import InferenceConfig
 
 
 def test_a_frame_with_nobody_is_output_empty_and_the_others_go_on():

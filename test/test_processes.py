@@ -19,7 +19,7 @@ from sensor_msgs.msg import PointCloud2
 from mvpose_ros.bags.io import read_bag, write_bag
 from mvpose_ros.bags.replay import group_frames, looped
 from mvpose_ros.cli import graph
-from mvpose_ros.core.predictions import read_predictions
+from mvpose_ros.core.evaluation.predictions import read_predictions
 from mvpose_ros.graph.processes import ProcessGroup
 
 DOMAIN_ID = 171

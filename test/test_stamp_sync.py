@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from mvpose_ros.core.stamp_sync import StampSync
+from mvpose_ros.core.association.stamp_sync import StampSync
 
 
 def test_a_frame_is_released_when_every_camera_delivered_it():

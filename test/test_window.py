@@ -14,9 +14,9 @@ import re
 import numpy as np
 import pytest
 
-from mvpose_ros.core.body import BONES, NUM_INFERENCE_JOINTS, SYMMETRIC_PAIRS
-from mvpose_ros.core.predictions import frame_line, read_predictions, write_predictions
-from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+from mvpose_ros.core.geometry.body import BONES, NUM_INFERENCE_JOINTS, SYMMETRIC_PAIRS
+from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions, write_predictions
+from mvpose_ros.core.inference.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
 J = NUM_INFERENCE_JOINTS
 M = 10

@@ -26,10 +26,10 @@ from msg_adapters.image_msg import image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
-from mvpose_ros.core.camera import load_rig
-from mvpose_ros.core.image_file import read_image
-from mvpose_ros.core.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
-from mvpose_ros.core.openpose import read_body25
+from mvpose_ros.core.geometry.camera import load_rig
+from mvpose_ros.core.detection.image_file import read_image
+from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+from mvpose_ros.core.detection.openpose import read_body25
 
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
 # so bags made by older code count as out of date.

@@ -13,13 +13,13 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Sequence
 
-from mvpose_ros.core.association import Associator
-from mvpose_ros.core.camera import Camera
-from mvpose_ros.core.openpose import OpenPoseFrame
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.pipeline import Inference3D, StageConfig
+from mvpose_ros.core.association.associator import Associator
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.detection.openpose import OpenPoseFrame
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.inference.solver import Inference3D, StageConfig
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.window import FrameResult
+from mvpose_ros.core.inference.window import FrameResult
 
 GROUPING = 'grouping and heatmaps'
 

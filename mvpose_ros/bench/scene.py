@@ -26,8 +26,8 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.camera import Camera, closest_point_to_rays
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.person2d import Person2D
 

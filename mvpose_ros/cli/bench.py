@@ -139,11 +139,11 @@ def _shelf_2d(root: str | None, detector, frames: Sequence[int], n_cameras: int,
     """The 2D people of the first n_cameras Shelf cameras: core.offline.shelf_openpose, or the
     same steps for a camera subset (so that grouping is only timed for the cameras used) or
     with a profiler (enabled around grouping only, not around reading the files)."""
-    from mvpose_ros.core.camera import load_rig
-    from mvpose_ros.core.datasets import SHELF_TEST_FRAMES, dataset_dir
-    from mvpose_ros.core.offline import Sequence2D, shelf_openpose
-    from mvpose_ros.core.openpose import read_body25
-    from mvpose_ros.core.openpose_detector import detect_people
+    from mvpose_ros.core.geometry.camera import load_rig
+    from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
+    from mvpose_ros.core.evaluation.offline import Sequence2D, shelf_openpose
+    from mvpose_ros.core.detection.openpose import read_body25
+    from mvpose_ros.core.detection.openpose_detector import detect_people
     shelf = dataset_dir('shelf', root)
     cameras = load_rig(shelf / 'calibration' / 'calibration_shelf.json')
     if n_cameras >= len(cameras) and profiler is None:
@@ -165,14 +165,14 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
     """Run one configuration in this process; every figure as a JSON-able dict. profiler: enabled
     around the stage's work only (grouping, then tracking onward), not around reading files."""
     from mvpose_ros.bench.scene import multiply_scene
-    from mvpose_ros.core.association import Associator
-    from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
-    from mvpose_ros.core.evaluation import evaluate
-    from mvpose_ros.core.hypotheses import SamplingConfig
-    from mvpose_ros.core.offline import as_predictions
-    from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
-    from mvpose_ros.core.pipeline import Inference3D, StageConfig
-    from mvpose_ros.core.window import InferenceConfig
+    from mvpose_ros.core.association.associator import Associator
+    from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+    from mvpose_ros.core.evaluation.pcp import evaluate
+    from mvpose_ros.core.inference.hypotheses import SamplingConfig
+    from mvpose_ros.core.evaluation.offline import as_predictions
+    from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
+    from mvpose_ros.core.inference.solver import Inference3D, StageConfig
+    from mvpose_ros.core.inference.window import InferenceConfig
 
     rss_start = _rss_kib()
     frames = SHELF_TEST_FRAMES[:config.frames]
@@ -495,7 +495,7 @@ def plan(args: argparse.Namespace, base: RunConfig) -> list[RunConfig]:
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
     out = out or sys.stdout
     err = err or sys.stderr
-    from mvpose_ros.core.datasets import dataset_dir
+    from mvpose_ros.core.evaluation.datasets import dataset_dir
     shelf = dataset_dir('shelf', args.data_root)
     if not (shelf / 'openpose_body25').is_dir():
         raise FileNotFoundError(f'Shelf OpenPose detections not found under {shelf}')
@@ -557,15 +557,15 @@ def two_processes(config: RunConfig, data_root: str | None, repeat: int) -> dict
     """The whole 3D stage of `config` pipelined over two processes (bench.pipelined): the fastest
     of `repeat` runs' wall time per frame and frame rate, each half's stage times, and the PCP."""
     from mvpose_ros.bench.pipelined import run_two_processes
-    from mvpose_ros.core.camera import load_rig
-    from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
-    from mvpose_ros.core.evaluation import evaluate
-    from mvpose_ros.core.hypotheses import SamplingConfig
-    from mvpose_ros.core.offline import as_predictions
-    from mvpose_ros.core.openpose import read_body25
-    from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
-    from mvpose_ros.core.pipeline import StageConfig
-    from mvpose_ros.core.window import InferenceConfig
+    from mvpose_ros.core.geometry.camera import load_rig
+    from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+    from mvpose_ros.core.evaluation.pcp import evaluate
+    from mvpose_ros.core.inference.hypotheses import SamplingConfig
+    from mvpose_ros.core.evaluation.offline import as_predictions
+    from mvpose_ros.core.detection.openpose import read_body25
+    from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
+    from mvpose_ros.core.inference.solver import StageConfig
+    from mvpose_ros.core.inference.window import InferenceConfig
     shelf = dataset_dir('shelf', data_root)
     cameras = load_rig(shelf / 'calibration' / 'calibration_shelf.json')[:config.cameras]
     files = [read_body25(shelf / 'openpose_body25' / f'{c}.txt', cam.width, cam.height) for c, cam in enumerate(cameras)]

@@ -14,21 +14,21 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Sequence, TextIO
 
-from mvpose_ros.core.association import AssociationConfig
-from mvpose_ros.core.body import HEAD_MODELS
-from mvpose_ros.core.campus import campus_sequence
-from mvpose_ros.core.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir,
+from mvpose_ros.core.association.associator import AssociationConfig
+from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.evaluation.campus import campus_sequence
+from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir,
                                       load_actors_gt)
-from mvpose_ros.core.evaluation import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
-from mvpose_ros.core.factors import FactorConfig
-from mvpose_ros.core.hypotheses import SamplingConfig
-from mvpose_ros.core.matching import MatchingConfig
-from mvpose_ros.core.offline import Prepared, Sequence2D, as_predictions, infer, prepare, shelf_openpose
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.pipeline import StageConfig
+from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
+from mvpose_ros.core.inference.factors import FactorConfig
+from mvpose_ros.core.inference.hypotheses import SamplingConfig
+from mvpose_ros.core.association.matching import MatchingConfig
+from mvpose_ros.core.evaluation.offline import Prepared, Sequence2D, as_predictions, infer, prepare, shelf_openpose
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
+from mvpose_ros.core.inference.solver import StageConfig
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.predictions import read_predictions, write_predictions
-from mvpose_ros.core.window import TERMS, InferenceConfig
+from mvpose_ros.core.evaluation.predictions import read_predictions, write_predictions
+from mvpose_ros.core.inference.window import TERMS, InferenceConfig
 
 # The paper's ablation rows (its "all terms" is data + temporal + collision).
 ABLATION = (('data only', ('data',)), ('+temporal', ('data', 'temp')), ('+collision', ('data', 'col')),

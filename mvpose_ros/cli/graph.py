@@ -42,10 +42,10 @@ from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import loop_offset_ns
-from mvpose_ros.core.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, data_root, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation import PAPER_SHELF_PCP, evaluate, format_table
-from mvpose_ros.core.predictions import read_predictions, write_predictions
-from mvpose_ros.core.window import FrameResult
+from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
+from mvpose_ros.core.evaluation.predictions import read_predictions, write_predictions
+from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, detector_backend, expected_connections, graph_nodes,
                                      graph_settings, load_params, node_command, unknown_nodes)
 from mvpose_ros.graph.memory import MemoryLog

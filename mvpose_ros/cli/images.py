@@ -22,17 +22,17 @@ import cv2
 import numpy as np
 
 from msg_adapters.markers import person_colour
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.body import HEAD_MODELS
-from mvpose_ros.core.camera import Camera, load_rig
-from mvpose_ros.core.datasets import data_root, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation import FORMS, evaluate, format_table
-from mvpose_ros.core.image_file import read_image
-from mvpose_ros.core.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
-from mvpose_ros.core.overlay import overlay
-from mvpose_ros.core.pipeline import Inference3D, StageConfig
-from mvpose_ros.core.predictions import frame_line
-from mvpose_ros.core.window import FrameResult, InferenceConfig
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
+from mvpose_ros.core.detection.image_file import read_image
+from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.evaluation.overlay import overlay
+from mvpose_ros.core.inference.solver import Inference3D, StageConfig
+from mvpose_ros.core.evaluation.predictions import frame_line
+from mvpose_ros.core.inference.window import FrameResult, InferenceConfig
 
 PROG = 'mvpose-images'
 DEFAULTS = OnnxDetectorConfig(model_dir=Path())

@@ -17,9 +17,9 @@ from std_msgs.msg import Header
 
 from msg_adapters.people_msg import bundles_to_msg, msg_to_people
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
-from mvpose_ros.core.association import AssociationConfig, Associator
-from mvpose_ros.core.matching import MatchingConfig
-from mvpose_ros.core.stamp_sync import StampSync, SyncedFrame
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.association.matching import MatchingConfig
+from mvpose_ros.core.association.stamp_sync import StampSync, SyncedFrame
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
 
 EXPIRE_PERIOD_S = 0.05

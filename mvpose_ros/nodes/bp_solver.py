@@ -23,10 +23,10 @@ from msg_adapters.markers import skeleton_markers
 from msg_adapters.people_msg import msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
-from mvpose_ros.core.body import HEAD_MODELS
-from mvpose_ros.core.hypotheses import SamplingConfig
-from mvpose_ros.core.pipeline import Inference3D, StageConfig
-from mvpose_ros.core.window import TERMS, FrameResult, InferenceConfig
+from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.inference.hypotheses import SamplingConfig
+from mvpose_ros.core.inference.solver import Inference3D, StageConfig
+from mvpose_ros.core.inference.window import TERMS, FrameResult, InferenceConfig
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
 
 IDLE_CHECK_S = 0.1

@@ -22,9 +22,9 @@ from msg_adapters.image_msg import msg_to_image
 from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.stamp import stamp_ns
-from mvpose_ros.core.datasets import data_root
-from mvpose_ros.core.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
 
 # backend -> its input topic (relative to the camera namespace)

@@ -13,8 +13,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from mvpose_ros.core.camera import Camera, load_rig
-from mvpose_ros.core.datasets import data_root
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.evaluation.datasets import data_root
 
 # Reliable and keep-all: a node that falls behind queues frames (and in the end slows its
 # publishers down) rather than dropping them; no frame may be lost silently.

@@ -6,10 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mvpose_ros.core.body import BODY25_INFERENCE_JOINTS, INFERENCE_MIRROR, to_inference
-from mvpose_ros.core.grouping import group_body25
+from mvpose_ros.core.geometry.body import BODY25_INFERENCE_JOINTS, INFERENCE_MIRROR, to_inference
+from mvpose_ros.core.detection.grouping import group_body25
 from mvpose_ros.core.heatmap import render_heatmaps
-from mvpose_ros.core.openpose import OpenPoseFrame
+from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.person2d import Person2D
 
 @dataclass

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_ros.core.body import NUM_INFERENCE_JOINTS, to_inference
-from mvpose_ros.core.camera import Camera, load_rig
-from mvpose_ros.core.datasets import CAMPUS_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
-from mvpose_ros.core.offline import Sequence2D
+from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, to_inference
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.offline import Sequence2D
 from mvpose_ros.core.person2d import Person2D
 
 DETECTIONS_FILE = 'pred_campus_maskrcnn_hrnet_coco.pkl'

@@ -12,7 +12,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from mvpose_ros.core.datasets import N_JOINTS, GroundTruth
+from mvpose_ros.core.evaluation.datasets import N_JOINTS, GroundTruth
 
 FORMS = ('strict', 'lenient')
 GROUPS = ('Head', 'Torso', 'Upper arm', 'Forearm', 'Thigh', 'Shin', 'All')

@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.camera import Camera, ray_ray_distance
+from mvpose_ros.core.geometry.camera import Camera, ray_ray_distance
 from mvpose_ros.core.person2d import Person2D
 
 

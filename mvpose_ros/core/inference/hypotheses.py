@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.camera import Camera, line_terms, solve_line_terms
+from mvpose_ros.core.geometry.camera import Camera, line_terms, solve_line_terms
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera
 
 
 def read_image(path: str | Path, camera: Camera) -> np.ndarray:

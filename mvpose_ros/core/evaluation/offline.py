@@ -12,16 +12,16 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.body import BONES, SYMMETRIC_PAIRS, finalize_head
-from mvpose_ros.core.camera import Camera, load_rig
-from mvpose_ros.core.datasets import SHELF_TEST_FRAMES, dataset_dir
-from mvpose_ros.core.openpose import read_body25
-from mvpose_ros.core.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.pipeline import StageConfig, person_frames
+from mvpose_ros.core.inference.solver import StageConfig, person_frames
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.association import Associator
-from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+from mvpose_ros.core.association.associator import Associator
+from mvpose_ros.core.inference.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
 
 @dataclass

@@ -11,15 +11,15 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.association import AssociationConfig
-from mvpose_ros.core.body import BONES, SYMMETRIC_PAIRS, finalize_head
-from mvpose_ros.core.camera import Camera
-from mvpose_ros.core.factors import data_terms
+from mvpose_ros.core.association.associator import AssociationConfig
+from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import HeatmapStack
-from mvpose_ros.core.hypotheses import SamplingConfig, sample_people
+from mvpose_ros.core.inference.hypotheses import SamplingConfig, sample_people
 from mvpose_ros.core.person2d import Person2D
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+from mvpose_ros.core.inference.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
 
 
 @dataclass(frozen=True)

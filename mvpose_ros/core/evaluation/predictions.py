@@ -12,7 +12,7 @@ from typing import IO, Iterable
 
 import numpy as np
 
-from mvpose_ros.core.window import FrameResult
+from mvpose_ros.core.inference.window import FrameResult
 
 N_JOINTS = 14
 

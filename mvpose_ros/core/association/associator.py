@@ -10,11 +10,11 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.camera import Camera, closest_point_to_rays
-from mvpose_ros.core.identity import IdentityKeeper
-from mvpose_ros.core.matching import MatchingConfig, cluster_views
+from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
+from mvpose_ros.core.association.identity import IdentityKeeper
+from mvpose_ros.core.association.matching import MatchingConfig, cluster_views
 from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.tracking import IouTracker
+from mvpose_ros.core.association.tracking import IouTracker
 
 
 @dataclass(frozen=True)

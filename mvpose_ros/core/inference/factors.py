@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 TEMPORAL_FORMS = ('laplace', 'gauss')

@@ -7,8 +7,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from mvpose_ros.core.body import BONES, NUM_JOINTS
-from mvpose_ros.core.camera import Camera
+from mvpose_ros.core.geometry.body import BONES, NUM_JOINTS
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.person2d import Person2D
 
 DETECTION_BGR = (255, 255, 255)

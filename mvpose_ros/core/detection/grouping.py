@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mvpose_ros.core.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
+from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 
 
 # Shoulder-ear limbs (2, 17) and (5, 18) close loops over the kinematic tree the other 24 limbs

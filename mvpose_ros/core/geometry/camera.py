@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-from mvpose_ros.core.datasets import IMAGE_SIZES
+from mvpose_ros.core.evaluation.datasets import IMAGE_SIZES
 
 # Newton steps for undistortion; quadratic convergence makes this exact to float precision for
 # any lens whose distortion map is monotone over the image.

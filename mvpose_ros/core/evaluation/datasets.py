@@ -39,7 +39,7 @@ def data_root(override: str | None = None) -> Path:
     elif os.environ.get(DATA_ROOT_ENV):
         tried = [Path(os.environ[DATA_ROOT_ENV]).expanduser()]
     else:
-        checkout = Path(__file__).resolve().parents[2]
+        checkout = Path(__file__).resolve().parents[3]
         tried = [checkout.parent / 'shared', Path.cwd().parent / 'shared']
     for path in tried:
         if path.is_dir():

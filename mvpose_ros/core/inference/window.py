@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mvpose_ros.core.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
-from mvpose_ros.core.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
+from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
+from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
+from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
 
 TERMS = ('data', 'temp', 'col', 'limb')

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_ros.core.body import COCO17_NAMES, L_EAR, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX, to_inference
+from mvpose_ros.core.geometry.body import COCO17_NAMES, L_EAR, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX, to_inference
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap
-from mvpose_ros.core.letterbox import Letterbox, letterbox, whole_image
-from mvpose_ros.core.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
+from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
+from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
                                          load_session)
 from mvpose_ros.core.person2d import Person2D
 

@@ -1,0 +1,1 @@
+"""Geometry: the camera model and the body model (joints, bones, head models)."""

@@ -1,0 +1,1 @@
+"""3D inference: hypotheses, CRF factors, belief propagation, the sliding window and the solver."""
