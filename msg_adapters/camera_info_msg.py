@@ -23,18 +23,24 @@ def camera_to_info(camera: Camera, header: Header) -> CameraInfo:
 
 
 def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """K (3, 3), dist (5,) k1, k2, p1, p2, k3, width, height of a plumb_bob CameraInfo."""
+    """K (3, 3) pixels, dist (5,) plumb_bob k1, k2, p1, p2, k3, width, height (pixels) of a
+    CameraInfo, as RigCamera.with_info takes them. An empty d is no distortion. ValueError of one
+    line for another distortion model, a K that is not finite, upper-triangular with fx, fy > 0
+    (an uncalibrated driver publishes zeros), or a size below 1x1."""
     if msg.distortion_model != DISTORTION_MODEL:
-        raise ValueError(f'CameraInfo distortion_model: expected {DISTORTION_MODEL!r}, '
+        raise ValueError(f'CameraInfo distortion_model: expected {DISTORTION_MODEL!r} (k1 k2 p1 p2 k3), '
                          f'got {msg.distortion_model!r}')
     dist = np.array(msg.d, dtype=np.float64)
+    if dist.size == 0:
+        dist = np.zeros(5)
     if dist.shape != (5,) or not np.isfinite(dist).all():
         raise ValueError(f'CameraInfo d: expected 5 finite values, got {dist.tolist()}')
     K = np.array(msg.k, dtype=np.float64).reshape(3, 3)
     if not (np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0
             and (K[1, 0], K[2, 0], K[2, 1], K[2, 2]) == (0, 0, 0, 1)):
+        hint = ' (all zeros: the camera is not calibrated)' if not K.any() else ''
         raise ValueError(f'CameraInfo k: expected a finite upper-triangular K with fx, fy > 0 and '
-                         f'K[2, 2] = 1, got {K.ravel().tolist()}')
+                         f'K[2, 2] = 1, got {K.ravel().tolist()}{hint}')
     if msg.width < 1 or msg.height < 1:
         raise ValueError(f'CameraInfo size: expected width, height >= 1, got '
                          f'{msg.width}x{msg.height}')

@@ -11,7 +11,7 @@ from std_msgs.msg import Header
 from msg_adapters.records import UINT16_MAX, UINT32_MAX, from_cloud, to_cloud
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 J = NUM_INFERENCE_JOINTS  # 16 keypoints and maps per person
 BUNDLE_KEYS = [('person', '<u4'), ('camera', '<u2')]

@@ -1,30 +1,105 @@
-"""Test harness for nodes as separate processes: an in-test rclpy probe node and node
-processes, all on one private DDS domain confined to this machine."""
+"""Test harness for nodes as separate processes: a private DDS domain per test, confined to this
+machine (`ros_domain`, `ros_env`), an in-test rclpy probe node, node processes, and waits on events
+(a message seen, a reader or writer matched), never on elapsed time."""
 from __future__ import annotations
 
+import fcntl
+import itertools
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator, Mapping
 
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from std_msgs.msg import Empty
+
+from mvpose_ros.nodes.bag_player import START_QOS
 
 REPO = Path(__file__).resolve().parents[1]
-
-
 FASTDDS_PROFILE = REPO / 'config' / 'fastdds.xml'
+PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')  # Fast DDS 2 and 3
+# Domains 1..101: valid with the default port mapping on Linux (0 is everybody's default: never).
+DOMAINS = range(1, 102)
+_LOCK_DIR = Path(tempfile.gettempdir()) / 'mvpose_ros_test_domains'
+_held: dict[int, int] = {}  # domain -> file descriptor of its lock
+_counter = itertools.count()
+
+
+def _try_lock(domain: int) -> int | None:
+    _LOCK_DIR.mkdir(exist_ok=True)
+    fd = os.open(_LOCK_DIR / f'{domain}.lock', os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def acquire_domain() -> int:
+    """A ROS_DOMAIN_ID no other process on this machine holds (a lock file per domain, released by
+    `release_domain` or when this process ends), so that tests and concurrently running suites
+    never see each other's nodes. The search starts from this process's pid and a counter."""
+    start = os.getpid() * 7 + next(_counter)
+    for k in range(len(DOMAINS)):
+        domain = DOMAINS[(start + k) % len(DOMAINS)]
+        if domain in _held:
+            continue
+        fd = _try_lock(domain)
+        if fd is not None:
+            _held[domain] = fd
+            return domain
+    raise RuntimeError(f'every ROS domain {DOMAINS.start}..{DOMAINS.stop - 1} is in use by a test')
+
+
+def release_domain(domain: int) -> None:
+    """Give `domain` back (its nodes must be gone)."""
+    fd = _held.pop(domain, None)
+    if fd is not None:
+        os.close(fd)
+
+
+def ros_env(domain: int, profile: Path | None = FASTDDS_PROFILE, base: Mapping[str, str] | None = None,
+            **extra: str) -> dict[str, str]:
+    """The environment of a node process (and of this one) on `domain`, discovery on localhost only,
+    this checkout importable, one BLAS thread, the Fast DDS profile `profile` (None: Fast DDS's
+    defaults); `extra` on top."""
+    env = {k: v for k, v in (os.environ if base is None else base).items()
+           if k not in ('ROS_STATIC_PEERS', 'ROS_LOCALHOST_ONLY', *PROFILE_VARS)}
+    env |= {'PYTHONPATH': str(REPO), 'ROS_DOMAIN_ID': str(domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+            'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'PYTHONUNBUFFERED': '1'}
+    if profile is not None:
+        env |= {var: str(profile) for var in PROFILE_VARS}
+    return env | extra
+
+
+@contextmanager
+def ros_domain(monkeypatch=None, profile: Path | None = FASTDDS_PROFILE) -> Iterator[int]:
+    """A fresh domain for one test; with pytest's `monkeypatch`, this process's environment is set
+    to `ros_env(domain, profile)` (for rclpy contexts and child processes made in the test)."""
+    domain = acquire_domain()
+    try:
+        if monkeypatch is not None:
+            for var in PROFILE_VARS:
+                monkeypatch.delenv(var, raising=False)
+            for key, value in ros_env(domain, profile, base={}).items():
+                if key != 'PYTHONPATH':
+                    monkeypatch.setenv(key, value)
+        yield domain
+    finally:
+        release_domain(domain)
 
 
 def node_env(domain_id: int) -> dict[str, str]:
-    return dict(os.environ, PYTHONPATH=str(REPO), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-                ROS_DOMAIN_ID=str(domain_id), FASTRTPS_DEFAULT_PROFILES_FILE=str(FASTDDS_PROFILE),
-                OMP_NUM_THREADS='1', OPENBLAS_NUM_THREADS='1')
+    """`ros_env` with the shared-memory profile (kept for callers that name it so)."""
+    return ros_env(domain_id)
 
 
 @contextmanager
@@ -45,21 +120,41 @@ def probe(domain_id: int, name: str) -> Iterator[tuple[Node, SingleThreadedExecu
         context.try_shutdown()
 
 
-def start_node(module: str, domain_id: int, log: Path, *ros_args: str) -> subprocess.Popen:
-    """`python -m mvpose_ros.nodes.<module> --ros-args ...` with stderr to log."""
+def start_node(module: str, domain_id: int, log: Path, *ros_args: str,
+               env: Mapping[str, str] | None = None) -> subprocess.Popen:
+    """`python -m mvpose_ros.nodes.<module> --ros-args ...` with stdout and stderr to log."""
     with open(log, 'w') as err:
         return subprocess.Popen([sys.executable, '-m', f'mvpose_ros.nodes.{module}', '--ros-args', *ros_args],
-                                env=node_env(domain_id), stdout=err, stderr=subprocess.STDOUT, cwd=REPO)
+                                env=dict(env) if env is not None else node_env(domain_id), stdout=err,
+                                stderr=subprocess.STDOUT, cwd=REPO)
 
 
 def spin_until(executor: SingleThreadedExecutor, done: Callable[[], bool], timeout: float = 20.0) -> bool:
+    """Spin until done() (an event: a message, a match) or timeout s (a bound for failures only)."""
     deadline = time.monotonic() + timeout
     while not done() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.02)
     return done()
 
 
+def matched(endpoints: Iterable) -> bool:
+    """Every publisher has a matched reader and every subscription a matched writer (as each of
+    them sees it: a reader that has matched a writer no longer drops what it sends)."""
+    return all((e.get_subscription_count() if hasattr(e, 'get_subscription_count') else e.get_publisher_count()) > 0
+               for e in endpoints)
+
+
+def open_start_gate(node: Node, topic: str = 'bag_player/start'):
+    """Let a bag_player started with `start_topic:=<topic>` play: a latched message it gets once
+    its reader matches, whenever that is. Call it once this side's readers have matched the
+    player's writers (`matched`). Returns the publisher (keep it until the player is done)."""
+    gate = node.create_publisher(Empty, topic, START_QOS)
+    gate.publish(Empty())
+    return gate
+
+
 def stop(proc: subprocess.Popen) -> None:
+    """SIGINT, then SIGKILL after 5 s."""
     if proc.poll() is None:
         proc.send_signal(subprocess.signal.SIGINT)
         try:

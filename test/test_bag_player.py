@@ -1,6 +1,7 @@
 """The bag_player node as a process, observed by an in-test rclpy node: every frame once, in
-stamp order, at no more than the recorded speed; rate 0 held back by acknowledgements; loops
-with increasing stamps; bad bags and parameters fail with one line and exit code 2."""
+stamp order, at no more than the recorded speed; nothing before its readers have matched and the
+start signal has come; rate 0 held back by acknowledgements; loops with increasing stamps;
+relative topics under a namespace; bad bags and parameters fail with one line and exit code 2."""
 from __future__ import annotations
 
 import os
@@ -21,8 +22,9 @@ from std_msgs.msg import Header
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.nodes.runtime import DATA_QOS
+from ros_harness import matched, open_start_gate, ros_domain, ros_env
 
-DOMAIN_ID = 142
+START = 'bag_player/start'
 REPO = Path(__file__).resolve().parents[1]
 S = 1_000_000_000
 # The player ends by waiting until subscribers confirm receipt; with Fast DDS's default 3 s
@@ -54,12 +56,17 @@ def _make_bag(path: Path, frames: range, cameras: int = 2, camera_info: bool = T
 
 
 @pytest.fixture
-def probe(monkeypatch):
-    """An rclpy node on this test's domain, its executor, and what it received."""
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(DOMAIN_ID))
+def domain(monkeypatch):
+    """A ROS domain of this test's own, set in this process's environment."""
+    with ros_domain(monkeypatch, profile=None) as domain_id:
+        yield domain_id
+
+
+@pytest.fixture
+def probe(domain):
+    """An rclpy node on this test's domain and its executor."""
     context = Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
+    rclpy.init(context=context, domain_id=domain)
     node = Node('bag_player_probe', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -69,40 +76,47 @@ def probe(monkeypatch):
     context.try_shutdown()
 
 
-def _listen(node: Node, topic: str, msg_type, received: list) -> None:
-    """Append (topic, stamp ns, message, monotonic receipt time) for every message on topic."""
+def _listen(node: Node, topic: str, msg_type, received: list):
+    """Append (topic, stamp ns, message, monotonic receipt time) for every message on topic;
+    returns the subscription."""
     def on_message(msg):
         stamp = msg.clock if msg_type is Clock else msg.header.stamp
         received.append((topic, stamp_ns(stamp), msg, time.monotonic()))
-    node.create_subscription(msg_type, topic, on_message, DATA_QOS)
+    return node.create_subscription(msg_type, topic, on_message, DATA_QOS)
 
 
-def _player(tmp_path: Path, *params: str) -> tuple[subprocess.Popen, Path]:
+def _player(tmp_path: Path, *params: str, ros_args: tuple[str, ...] = ()) -> tuple[subprocess.Popen, Path]:
     profile = tmp_path / 'fastdds.xml'
     profile.write_text(FAST_HEARTBEAT)
-    env = dict(os.environ, PYTHONPATH=str(REPO), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               ROS_DOMAIN_ID=str(DOMAIN_ID), FASTRTPS_DEFAULT_PROFILES_FILE=str(profile))
+    env = ros_env(int(os.environ['ROS_DOMAIN_ID']), profile)
     log = tmp_path / f'player{len(list(tmp_path.glob("player*.log")))}.log'
     args = [x for p in params for x in ('-p', p)]
     with open(log, 'w') as err:
-        proc = subprocess.Popen([sys.executable, '-m', 'mvpose_ros.nodes.bag_player', '--ros-args', *args],
+        proc = subprocess.Popen([sys.executable, '-m', 'mvpose_ros.nodes.bag_player', '--ros-args', *ros_args, *args],
                                 env=env, stdout=subprocess.DEVNULL, stderr=err, cwd=tmp_path)
     return proc, log
 
 
-def _spin_until(executor, done, timeout: float = 15.0) -> None:
+def _spin_until(executor, done, timeout: float = 15.0) -> bool:
     deadline = time.monotonic() + timeout
     while not done() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.02)
+    return done()
 
 
-def _run_to_end(executor, proc: subprocess.Popen, timeout: float = 15.0) -> int:
-    """Spin until the player exits, then a little longer for callbacks already queued."""
+def _start_when_matched(node, executor, proc: subprocess.Popen, log: Path, subscriptions) -> None:
+    """Once every reader of the probe has matched the player's writer, give the start signal."""
+    assert _spin_until(executor, lambda: matched(subscriptions) or proc.poll() is not None), log.read_text()
+    open_start_gate(node, START)
+
+
+def _run_to_end(executor, proc: subprocess.Popen, done, timeout: float = 15.0) -> int:
+    """Spin until the player exits and done() (every message expected has been taken)."""
     _spin_until(executor, lambda: proc.poll() is not None, timeout)
     if proc.poll() is None:
         proc.kill()
         pytest.fail('bag_player did not finish')
-    _spin_until(executor, lambda: False, 0.3)
+    _spin_until(executor, done, 5.0)
     return proc.returncode
 
 
@@ -118,11 +132,11 @@ def test_every_frame_once_in_order_at_no_more_than_the_recorded_speed(probe, tmp
     frames = range(300, 326)  # 25 frame periods: 1.0 s recorded
     bag = _make_bag(tmp_path / 'bag', frames)
     received = []
-    for topic, msg_type in (('/cam0/camera_info', CameraInfo), ('/cam0/openpose', PointCloud2),
-                            ('/cam1/openpose', PointCloud2)):
-        _listen(node, topic, msg_type, received)
-    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=1.0', 'wait_subscribers:=10.0')
-    assert _run_to_end(executor, proc) == 0, log.read_text()
+    subs = [_listen(node, topic, msg_type, received) for topic, msg_type in (
+        ('/cam0/camera_info', CameraInfo), ('/cam0/openpose', PointCloud2), ('/cam1/openpose', PointCloud2))]
+    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=1.0', 'wait_subscribers:=10.0', f'start_topic:={START}')
+    _start_when_matched(node, executor, proc, log, subs)
+    assert _run_to_end(executor, proc, lambda: len(received) >= 3 * len(frames)) == 0, log.read_text()
 
     expected = [f * S // 25 for f in frames]
     by_topic = _by_topic(received)
@@ -146,11 +160,11 @@ def test_loops_shift_stamps_on_and_clock_follows(probe, tmp_path):
     frames = range(300, 306)
     bag = _make_bag(tmp_path / 'bag', frames, cameras=1)
     received = []
-    _listen(node, '/cam0/openpose', PointCloud2, received)
-    _listen(node, '/cam0/camera_info', CameraInfo, received)
-    _listen(node, '/clock', Clock, received)
-    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=4.0', 'loops:=2', 'clock:=true')
-    assert _run_to_end(executor, proc) == 0, log.read_text()
+    subs = [_listen(node, '/cam0/openpose', PointCloud2, received),
+            _listen(node, '/cam0/camera_info', CameraInfo, received), _listen(node, '/clock', Clock, received)]
+    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=4.0', 'loops:=2', 'clock:=true', f'start_topic:={START}')
+    _start_when_matched(node, executor, proc, log, subs)
+    assert _run_to_end(executor, proc, lambda: len(received) >= 3 * 12) == 0, log.read_text()
 
     # loop 1 continues one frame period after loop 0's last frame: frames 306..311
     expected = [f * S // 25 for f in range(300, 312)]
@@ -168,29 +182,35 @@ def test_rate_zero_runs_at_most_max_in_flight_frames_ahead_of_acks(probe, tmp_pa
     frames = range(300, 310)
     bag = _make_bag(tmp_path / 'bag', frames, cameras=1, camera_info=False)
     received = []
-    _listen(node, '/cam0/openpose', PointCloud2, received)
+    sub = _listen(node, '/cam0/openpose', PointCloud2, received)
     ack = node.create_publisher(PointCloud2, '/test_ack', DATA_QOS)
-    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=0.0', 'max_in_flight:=3', 'ack_topic:=/test_ack')
+    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=0.0', 'max_in_flight:=3', 'ack_topic:=/test_ack',
+                        f'start_topic:={START}')
+    _start_when_matched(node, executor, proc, log, [sub, ack])
 
-    def acknowledge(frame: int) -> None:
-        ack.publish(PointCloud2(header=Header(stamp=stamp_of_frame(frame), frame_id='world')))
+    def acknowledge_until(frame: int, done) -> bool:
+        """Acknowledge `frame` until done(): an ack sent before the player's reader matched the
+        probe's writer is lost; acknowledging a frame again releases nothing more."""
+        deadline = time.monotonic() + 15
+        while not done() and time.monotonic() < deadline:
+            ack.publish(PointCloud2(header=Header(stamp=stamp_of_frame(frame), frame_id='world')))
+            _spin_until(executor, done, 0.1)
+        return done()
 
-    _spin_until(executor, lambda: len(received) >= 3 and ack.get_subscription_count() > 0)
-    _spin_until(executor, lambda: False, 0.5)
+    assert _spin_until(executor, lambda: len(received) >= 3), log.read_text()
+    _spin_until(executor, lambda: len(received) > 3, 0.5)  # a window for a 4th frame to (wrongly) come
     assert len(received) == 3  # no acknowledgement yet: held at max_in_flight
-    acknowledge(301)  # frames 300 and 301 are done downstream
-    _spin_until(executor, lambda: len(received) >= 5)
-    _spin_until(executor, lambda: False, 0.5)
+    assert acknowledge_until(301, lambda: len(received) >= 5)  # frames 300 and 301 are done downstream
+    _spin_until(executor, lambda: len(received) > 5, 0.5)
     assert len(received) == 5
-    deadline = time.monotonic() + 15
-    while proc.poll() is None and time.monotonic() < deadline:
-        acknowledge(round(received[-1][1] * 25 / S))
-        _spin_until(executor, lambda: False, 0.05)
-    assert _run_to_end(executor, proc) == 0, log.read_text()
+    while len(received) < len(frames):  # acknowledging the last frame seen releases up to 3 more
+        seen = len(received)
+        assert acknowledge_until(round(received[-1][1] * 25 / S), lambda: len(received) > seen), log.read_text()
+    assert _run_to_end(executor, proc, lambda: True) == 0, log.read_text()
     assert [stamp for _, stamp, _, _ in received] == [f * S // 25 for f in frames]
 
 
-def test_bad_bag_or_parameter_is_one_line_and_exit_2(tmp_path):
+def test_bad_bag_or_parameter_is_one_line_and_exit_2(domain, tmp_path):
     damaged = _make_bag(tmp_path / 'damaged', range(300, 302))
     for mcap in damaged.glob('*.mcap'):
         mcap.write_bytes(b'junk' * 100)
@@ -201,3 +221,26 @@ def test_bad_bag_or_parameter_is_one_line_and_exit_2(tmp_path):
         assert proc.wait(timeout=20) == 2
         lines = [line for line in log.read_text().splitlines() if line.strip()]
         assert len(lines) == 1 and needle in lines[0] and 'FATAL' in lines[0], lines
+
+
+def test_waits_for_readers_and_the_start_signal_and_publishes_relative_topics(probe, tmp_path):
+    """Under a namespace the bag's /cam0/openpose goes out as <ns>/cam0/openpose; nothing goes out
+    before a reader has matched and the start signal has come."""
+    node, executor = probe
+    frames = range(300, 303)
+    bag = _make_bag(tmp_path / 'bag', frames, cameras=1, camera_info=False)
+    received = []
+    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=0.0', 'ack_topic:=skeletons', f'start_topic:={START}',
+                        'wait_subscribers:=60.0', ros_args=('-r', '__ns:=/rig1'))
+    # no reader yet, then a reader but no start signal: the player has no reason to play yet;
+    # its own endpoints (its start signal reader) show that it is up.
+    assert _spin_until(executor, lambda: node.count_subscribers(f'/rig1/{START}') > 0), log.read_text()
+    sub = _listen(node, '/rig1/cam0/openpose', PointCloud2, received)
+    assert _spin_until(executor, lambda: matched([sub])), log.read_text()
+    _spin_until(executor, lambda: bool(received), 0.5)  # a window for a frame to (wrongly) come
+    assert received == [] and proc.poll() is None
+    open_start_gate(node, f'/rig1/{START}')
+    assert _spin_until(executor, lambda: len(received) >= 1), log.read_text()
+    assert received[0][1] == stamp_ns(stamp_of_frame(300))
+    proc.kill()
+    proc.wait()

@@ -20,11 +20,11 @@ from msg_adapters.camera_info_msg import check_info
 from msg_adapters.image_msg import msg_to_image
 from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.skeleton_msg import msg_to_skeletons
+from mvpose_ros.core.evaluation.datasets import shelf_cameras, dataset_cameras, calibration_file
 from mvpose_ros.bags import recipes
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag, typestore, write_bag
 from mvpose_ros.bags.recipes import campus_image, campus_recipe, shelf_recipe
 from mvpose_ros.cli.make_bag import main as make_bag
-from mvpose_ros.core.geometry.camera import load_rig
 from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir
 from mvpose_ros.core.detection.openpose import read_body25
 
@@ -138,7 +138,7 @@ def test_shelf_bag_has_every_test_frame_of_every_camera(shelf_bag, shelf_message
 
 
 def test_shelf_openpose_messages_are_the_real_detections(shelf_messages):
-    rig = load_rig(SHELF / 'calibration' / 'calibration_shelf.json')
+    rig = shelf_cameras()
     for c, cam in enumerate(rig):
         frames = read_body25(SHELF / 'openpose_body25' / f'{c}.txt', cam.width, cam.height)
         messages = shelf_messages[f'/cam{c}/openpose']
@@ -157,7 +157,7 @@ def test_shelf_openpose_messages_are_the_real_detections(shelf_messages):
 
 
 def test_shelf_camera_info_and_images(shelf_messages):
-    rig = load_rig(SHELF / 'calibration' / 'calibration_shelf.json')
+    rig = shelf_cameras()
     for c, cam in enumerate(rig):
         for _, stamp, cdr in shelf_messages[f'/cam{c}/camera_info'][::50]:
             info = deserialize_message(cdr, CameraInfo)
@@ -220,7 +220,7 @@ def campus_dir(tmp_path_factory):
             poses[f, a] = rng.uniform(-2, 2, (14, 3))
             actor3d[0, a][f, 0] = poses[f, a]
     scipy.io.savemat(root / 'actorsGT.mat', {'actor3D': actor3d, 'actor2D': actor2d})
-    calibration = dataset_dir('campus') / 'calibration' / 'calibration_campus.json'
+    calibration = calibration_file('campus')
     shutil.copy(calibration, root / 'calibration_campus.json')
     return root, poses
 
@@ -237,7 +237,7 @@ def test_campus_recipe_gives_images_camera_info_and_ground_truth(campus_dir, tmp
         **{f'/cam{c}/image_raw': ('sensor_msgs/msg/Image', sum(c in cams for cams in CAMPUS_IMAGES.values()))
            for c in range(3)},
         '/ground_truth/skeletons': ('sensor_msgs/msg/PointCloud2', 4)}
-    rig = load_rig(root / 'calibration_campus.json')
+    rig = dataset_cameras('campus', calibration=root / 'calibration_campus.json')
     gt = [(stamp, deserialize_message(cdr, PointCloud2))
           for _, _, stamp, cdr in read_bag(path, ['/ground_truth/skeletons'])]
     assert [stamp for stamp, _ in gt] == [f * FRAME_NS for f in frames]

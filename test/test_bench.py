@@ -10,19 +10,22 @@ import cv2
 import numpy as np
 import pytest
 
+from mvpose_ros.core.evaluation.datasets import shelf_cameras
 from mvpose_ros.bench.pipelined import run_two_processes
 from mvpose_ros.bench.plot import Series, line_plot, nice_ticks
 from mvpose_ros.bench.scene import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene, scene_people,
                                     triangulate)
 from mvpose_ros.cli import bench
+from mvpose_ros.graph.config import load_params
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.inference.solver import Inference3D, StageConfig
-from mvpose_ros.core.inference.window import InferenceConfig
+from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.stage import Stage3D, StageConfig
+from mvpose_ros.bench import runs as bench_runs
+from mvpose_ros.bench import report as bench_report
 
 REPO = Path(__file__).resolve().parents[1]
 N_JOINTS = 16
@@ -163,23 +166,28 @@ def test_nice_ticks_are_round_and_cover_the_range():
     assert ticks[1] in (5, 10)
 
 
+GRAPH = bench_runs.default_graph_config()
+
+
 def test_the_default_row_is_the_graph_config():
-    assert bench.graph_config_from(REPO / 'config' / 'shelf.yaml') == bench.GRAPH
+    params = load_params(REPO / 'config' / 'shelf.yaml')['bp_solver']
+    assert GRAPH.stage() == StageConfig.from_params(params)
+    assert (GRAPH.window, GRAPH.lag) == (params['window'], params['lag'])
+    assert bench_runs.OFFLINE.stage() == StageConfig()
 
 
 def test_plan_measures_each_setting_once():
-    args = bench.build_parser().parse_args(['--frames', '100', '--scaling', 'quick', '--people', '3,10'])
-    runs = bench.plan(args, bench.GRAPH)
-    assert runs[0] == replace(bench.GRAPH, frames=100) and runs[1].name.startswith('offline')
-    sweeps = {s: [r for r in runs if r.sweep == s] for s in bench.SWEEPS}
+    runs = bench_runs.plan(GRAPH, 100, 'quick', {'people': (3, 10)})
+    assert runs[0] == replace(GRAPH, frames=100) and runs[1].name.startswith('offline')
+    sweeps = {s: [r for r in runs if r.sweep == s] for s in bench_runs.SWEEPS}
     assert [r.cameras for r in sweeps['cameras']] == [1, 2, 3, 4, 5]
     assert [r.people for r in sweeps['people']] == [None, 10.0]
-    assert all(r.frames == bench.QUICK_FRAMES for s in sweeps.values() for r in s)
+    assert all(r.frames == bench_runs.QUICK_FRAMES for s in sweeps.values() for r in s)
     assert len({r.key() for r in runs}) < len(runs)  # cameras=5, people~3, window=8, M=64: one run
 
 
 def test_one_camera_gives_no_people_and_no_crash():
-    result = bench.run_config(replace(bench.GRAPH, frames=3, cameras=1))
+    result = bench_runs.run_config(replace(GRAPH, frames=3, cameras=1))
     assert result['people_3d'] == 0 and result['frames_out'] == 3 and result['pcp']['strict_frame_weighted'] == 0
 
 
@@ -201,18 +209,17 @@ def test_smoke_prints_every_stage_and_the_frame_rates(tmp_path, capsys):
 
 def test_two_processes_give_the_results_of_one():
     shelf = dataset_dir('shelf')
-    cameras = load_rig(shelf / 'calibration' / 'calibration_shelf.json')
+    cameras = shelf_cameras()
     files = [read_body25(shelf / 'openpose_body25' / f'{c}.txt')[:20] for c in range(len(cameras))]
     frames = list(range(300, 320))
     raw = [[f[k] for f in files] for k in range(len(frames))]
     detector = OpenPoseDetectorConfig(stride=8.0)
-    config = StageConfig(inference=InferenceConfig(window=6, lag=3, bp_hypotheses=16, slide_iterations=1))
+    config = StageConfig.from_params({'window': 6, 'lag': 3})
     two = run_two_processes(cameras, frames, raw, detector, config)
-    associator, solver, one = Associator(cameras, config.association), Inference3D(cameras, config), []
+    stage, one = Stage3D(cameras, config), []
     for frame, per_camera in zip(frames, raw):
-        observations = associator.update(frame, [detect_people(f, detector) for f in per_camera])
-        one += solver.push(frame, [(o.person_id, o.views) for o in observations])
-    one += solver.flush()
+        one += stage.push(frame, [detect_people(f, detector) for f in per_camera])
+    one += stage.flush()
     assert [r.frame for r in two.results] == frames == [r.frame for r in one]
     for a, b in zip(two.results, one):
         assert a.person_ids == b.person_ids and len(a.person_ids) >= 2
@@ -222,12 +229,12 @@ def test_two_processes_give_the_results_of_one():
 
 def test_plots_of_the_sweeps(tmp_path):
     def fake(sweep, value, people, ms):
-        config = replace(bench.GRAPH, sweep=sweep, cameras=value if sweep == 'cameras' else 5)
+        config = replace(GRAPH, sweep=sweep, cameras=value if sweep == 'cameras' else 5)
         stages = {'grouping and heatmaps': ms / 4000, 'association': ms / 4000, 'sampling': ms / 2000}
         return {'config': asdict(config), 'frames': 1, 'cameras': config.cameras, 'people_3d': people,
                 'stages_s': stages}
     results = [fake('cameras', k, 3.0 if k > 1 else 0.0, 5.0 * k) for k in (1, 2, 3)]
     results += [fake('people', 0, p, 3.0 * p) for p in (3.1, 9.0, 17.5)]
-    paths = bench.write_plots(results, tmp_path)
+    paths = bench_report.write_plots(results, tmp_path)
     assert sorted(p.name for p in paths) == ['time_vs_cameras.png', 'time_vs_people.png']
     assert all(cv2.imread(str(p)).shape == (620, 1000, 3) for p in paths)

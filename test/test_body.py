@@ -70,7 +70,7 @@ def test_bones_form_one_tree_plus_torso_loops():
     reached = {0}
     for _ in range(14):
         reached |= {b for a, b in body.BONES if a in reached} | {a for a, b in body.BONES
-                                                                if b in reached}
+                                                                 if b in reached}
     assert reached == set(range(14))
 
 

@@ -10,8 +10,8 @@ import pytest
 import scipy.optimize
 
 from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, load_rig, ray_ray_distance
-from mvpose_ros.core.evaluation.datasets import (SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
-                                      load_actors_gt_2d)
+from mvpose_ros.core.evaluation.datasets import (IMAGE_SIZES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
+                                                 load_actors_gt_2d)
 
 SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]
 
@@ -29,10 +29,15 @@ def _gt(dataset: str):
     return load_actors_gt(mat, frames).poses, load_actors_gt_2d(mat, frames)
 
 
+def _load(path, dataset: str = 'shelf') -> list[Camera]:
+    """load_rig at the dataset's image size (the calibration files do not record it)."""
+    return load_rig(path, *IMAGE_SIZES[dataset])
+
+
 def _rigs(dataset: str) -> dict[str, list[Camera]]:
     calib = _calibration(dataset)
-    p_form = [load_rig(f)[0] for f in sorted(calib.glob('P*.txt'))]
-    return {'json': load_rig(calib / f'calibration_{dataset}.json'), 'P': p_form}
+    p_form = [_load(f, dataset)[0] for f in sorted(calib.glob('P*.txt'))]
+    return {'json': _load(calib / f'calibration_{dataset}.json', dataset), 'P': p_form}
 
 
 @pytest.fixture(scope='module', params=['shelf', 'campus'])
@@ -41,7 +46,7 @@ def dataset(request):
 
 
 def test_load_rig_shapes_and_sizes():
-    shelf, campus = load_rig(_calibration('shelf')), load_rig(_calibration('campus'))
+    shelf, campus = _load(_calibration('shelf'), 'shelf'), _load(_calibration('campus'), 'campus')
     assert [c.name for c in shelf] == ['0', '1', '2', '3', '4']
     assert {(c.width, c.height) for c in shelf} == {(1032, 776)}
     assert [c.name for c in campus] == ['0', '1', '2']
@@ -108,7 +113,7 @@ def _points_in_front(cam: Camera, rng: np.random.Generator, n: int) -> np.ndarra
 
 def test_ray_round_trip_real_cameras(dataset):
     rng = np.random.default_rng(1)
-    for cam in load_rig(_calibration(dataset)):
+    for cam in _load(_calibration(dataset), dataset):
         X = _points_in_front(cam, rng, 500)
         o, d = cam.rays(cam.project(X))
         np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0)
@@ -118,7 +123,7 @@ def test_ray_round_trip_real_cameras(dataset):
 
 
 def test_behind_camera_is_nan():
-    cam = load_rig(_calibration('shelf'))[0]
+    cam = _load(_calibration('shelf'))[0]
     rng = np.random.default_rng(2)
     X = _points_in_front(cam, rng, 10)
     behind = 2 * cam.centre - X  # mirrored through the optical centre
@@ -132,7 +137,7 @@ DIST = np.array([-0.28, 0.09, 0.0012, -0.0017, -0.015])
 
 
 def _distorted_camera() -> Camera:
-    cam = load_rig(_calibration('shelf'))[1]
+    cam = _load(_calibration('shelf'))[1]
     return dataclasses.replace(cam, dist=DIST)
 
 
@@ -166,7 +171,7 @@ def test_distortion_round_trip():
 
 
 def test_rays_vectorised_shapes():
-    cam = load_rig(_calibration('shelf'))[0]
+    cam = _load(_calibration('shelf'))[0]
     o, d = cam.rays(np.zeros((4, 7, 2)))
     assert o.shape == d.shape == (4, 7, 3)
 
@@ -248,7 +253,7 @@ def _broken_calibration(tmp_path, change) -> str:
 def test_bad_calibration_is_a_clear_error_naming_file_camera_and_field(tmp_path, change, problem):
     path = _broken_calibration(tmp_path, change)
     with pytest.raises(ValueError) as err:
-        load_rig(path)
+        _load(path)
     assert str(err.value).startswith(path) and problem in str(err.value) and '\n' not in str(err.value)
 
 
@@ -256,4 +261,20 @@ def test_calibration_that_is_not_json(tmp_path):
     path = tmp_path / 'calibration_x.json'
     path.write_text('{"0": {"R": [1, 2')
     with pytest.raises(ValueError, match=r'calibration_x.json: not valid JSON'):
-        load_rig(path)
+        _load(path)
+
+
+@pytest.mark.parametrize('size', [(None, None), (1032, None), (None, 776)])
+def test_image_size_is_never_guessed(size):
+    """Calibration files do not record the image size: without one, a clear error naming the
+    file, not a size guessed from the file name ("shelf") or from 2 cx, 2 cy."""
+    for path in (_calibration('shelf') / 'calibration_shelf.json', _calibration('shelf') / 'P0.txt',
+                 _calibration('campus')):
+        with pytest.raises(ValueError, match=r'image size unknown: .* give width and height') as err:
+            load_rig(path, *size)
+        assert str(err.value).startswith(str(path)) and '\n' not in str(err.value)
+
+
+def test_image_size_must_be_positive():
+    with pytest.raises(ValueError, match='image size must be at least 1x1 pixels, got 0x776'):
+        load_rig(_calibration('shelf'), 0, 776)

@@ -8,12 +8,13 @@ import re
 import cv2
 import numpy as np
 
+from mvpose_ros.core.evaluation.datasets import calibration_file
 from mvpose_ros.cli import images
 from mvpose_ros.core.evaluation.datasets import dataset_dir
 
 SHELF = dataset_dir('shelf')
 FRAMES = [str(SHELF / 'frames' / f'cam{c}_000572.png') for c in range(5)]
-CALIBRATION = str(SHELF / 'calibration' / 'calibration_shelf.json')
+CALIBRATION = str(calibration_file('shelf'))
 # Measured with the defaults (EfficientPose RT, anatomical head model, seed 0): actor 1 65.6 mm,
 # actor 3 60.4 mm, actor 4 134.2 mm (cut by the image edge or half hidden in three views). 200 mm
 # stays a sane "this is that actor's skeleton" bound.

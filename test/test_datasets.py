@@ -6,7 +6,7 @@ import pytest
 
 from mvpose_ros.core.evaluation import datasets
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, data_root, dataset_dir,
-                                      load_actors_gt, load_actors_gt_2d)
+                                                 load_actors_gt, load_actors_gt_2d)
 
 
 @pytest.fixture(scope='module')

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.evaluation.datasets import (SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth, dataset_dir,
-                                      load_actors_gt)
+                                                 load_actors_gt)
 from mvpose_ros.core.evaluation.pcp import (FORMS, GROUPS, LIMBS, PAPER_SHELF_PCP, evaluate,
-                                        format_table)
+                                            format_table)
 
 
 @pytest.fixture(scope='module')

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.inference.factors import (TEMPORAL_FORMS, FactorConfig, collision_table, limb_table,
-                                     pair_distances, temporal_table)
+                                               pair_distances, temporal_table)
 
 
 def _reference_temporal(prev, cur, nxt, config) -> np.ndarray:

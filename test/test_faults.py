@@ -16,8 +16,8 @@ from std_msgs.msg import Header
 from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
+from mvpose_ros.core.evaluation.datasets import calibration_file
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.geometry.camera import load_rig
 from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
@@ -31,11 +31,9 @@ SOLVER_ARGS = ('-p', f'window:={WINDOW}', '-p', f'lag:={LAG}', '-p', 'idle_flush
 
 
 @pytest.fixture(scope='module')
-def bundles() -> dict[int, PointCloud2]:
+def bundles(shelf_openpose) -> dict[int, PointCloud2]:
     """Bundle messages (encoding C) of Shelf frames 300..359, from the core's association."""
-    root = dataset_dir('shelf')
-    cameras = load_rig(root / 'calibration' / 'calibration_shelf.json')
-    raw = [read_body25(root / 'openpose_body25' / f'{c}.txt')[:N_FRAMES] for c in range(len(cameras))]
+    cameras, raw = shelf_openpose
     associator = Associator(cameras, AssociationConfig())
     out = {}
     for k in range(N_FRAMES):
@@ -58,14 +56,14 @@ def _readers(node) -> set[bytes]:
     return {bytes(info.endpoint_gid) for info in node.get_subscriptions_info_by_topic('/people/bundles')}
 
 
-def test_burst_gap_late_and_duplicate_frames(bundles, tmp_path):
+def test_burst_gap_late_and_duplicate_frames(domain, bundles, tmp_path):
     burst = list(range(300, 330))  # 30 frames published back to back: > 100 x the 25 Hz rate
     after_gap = list(range(340, 350))  # frames 330..339 never come
     log = tmp_path / 'bp.log'
-    with probe(191, 'fault_probe') as (node, executor):
+    with probe(domain, 'fault_probe') as (node, executor):
         got = _outputs(node)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
-        proc = start_node('bp_solver', 191, log, *SOLVER_ARGS)
+        proc = start_node('bp_solver', domain, log, *SOLVER_ARGS)
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
             for f in burst:
@@ -89,12 +87,12 @@ def test_burst_gap_late_and_duplicate_frames(bundles, tmp_path):
     assert 'frame 310) came after frame 344: late or duplicate, dropped' in text
 
 
-def test_killed_and_restarted_solver_resumes_within_a_window(bundles, tmp_path):
+def test_killed_and_restarted_solver_resumes_within_a_window(domain, bundles, tmp_path):
     first, second = list(range(300, 320)), list(range(320, 360))
-    with probe(192, 'restart_probe') as (node, executor):
+    with probe(domain, 'restart_probe') as (node, executor):
         got = _outputs(node)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
-        proc = start_node('bp_solver', 192, tmp_path / 'bp1.log', *SOLVER_ARGS)
+        proc = start_node('bp_solver', domain, tmp_path / 'bp1.log', *SOLVER_ARGS)
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0)
             for f in first:
@@ -103,7 +101,7 @@ def test_killed_and_restarted_solver_resumes_within_a_window(bundles, tmp_path):
             old = _readers(node)
             proc.send_signal(signal.SIGKILL)  # a crash: no flush, the pending frames are lost
             proc.wait(5)
-            proc = start_node('bp_solver', 192, tmp_path / 'bp2.log', *SOLVER_ARGS)
+            proc = start_node('bp_solver', domain, tmp_path / 'bp2.log', *SOLVER_ARGS)
             # the dead reader stays discovered until its lease ends: wait for the new one, then
             # give DDS a moment to match both ways (the node's own start is what is measured)
             assert spin_until(executor, lambda: _readers(node) - old)
@@ -129,15 +127,15 @@ def test_killed_and_restarted_solver_resumes_within_a_window(bundles, tmp_path):
     ('bp_solver:\n  ros__parameters:\n    window: [1, 2\n', "Couldn't parse params file"),
     ('bp_solver:\n  ros__parameters:\n    calibration: CALIBRATION\n', "camera '1': missing fx"),
 ])
-def test_bad_parameter_or_calibration_file_is_one_fatal_line_and_exit_2(tmp_path, content, problem):
+def test_bad_parameter_or_calibration_file_is_one_fatal_line_and_exit_2(domain, tmp_path, content, problem):
     calibration = tmp_path / 'calibration_shelf.json'
-    entries = json.loads((dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json').read_text())
+    entries = json.loads((calibration_file('shelf')).read_text())
     del entries['1']['fx']
     calibration.write_text(json.dumps(entries))
     params = tmp_path / 'params.yaml'
     params.write_text(content.replace('CALIBRATION', str(calibration)))
     log = tmp_path / 'bp.log'
-    proc = start_node('bp_solver', 193, log, '--params-file', str(params))
+    proc = start_node('bp_solver', domain, log, '--params-file', str(params))
     assert proc.wait(30) == 2
     text = log.read_text()
     fatal = [line for line in text.splitlines() if '[FATAL]' in line]
@@ -145,19 +143,19 @@ def test_bad_parameter_or_calibration_file_is_one_fatal_line_and_exit_2(tmp_path
     assert 'Traceback' not in text
 
 
-def test_association_with_a_camera_gone_for_good_and_stamps_out_of_order_or_repeated(tmp_path):
+def test_association_with_a_camera_gone_for_good_and_stamps_out_of_order_or_repeated(domain, tmp_path):
     root = dataset_dir('shelf')
     raw = [read_body25(root / 'openpose_body25' / f'{c}.txt')[:12] for c in range(5)]
     frames = range(300, 312)
     people = {f: [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig(stride=8.0)) for c in range(5)]
               for f in frames}
     log = tmp_path / 'association.log'
-    with probe(194, 'association_faults') as (node, executor):
+    with probe(domain, 'association_faults') as (node, executor):
         got: dict[int, list] = {}
         node.create_subscription(PointCloud2, '/people/bundles',
                                  lambda m: got.setdefault(frame_of_stamp(m.header.stamp), []).append(m), DATA_QOS)
         pubs = [node.create_publisher(PointCloud2, f'/cam{c}/people2d', DATA_QOS) for c in range(5)]
-        proc = start_node('association', 194, log, '-p', 'sync_timeout:=0.3')
+        proc = start_node('association', domain, log, '-p', 'sync_timeout:=0.3')
         try:
             assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)), log.read_text()
 

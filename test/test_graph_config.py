@@ -16,11 +16,11 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 
 from mvpose_ros.bags.io import write_bag
-from mvpose_ros.cli.graph import Outcome, frame_ranges, latency_ms, report
 from mvpose_ros.graph.config import (RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections, graph_nodes,
                                      graph_settings, load_params, node_command, unknown_nodes)
+from mvpose_ros.graph.report import frame_ranges, latency_ms, report
+from ros_harness import ros_domain
 
-DOMAIN_ID = 173
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'shelf.yaml'
 SECTIONS = {'bag_player': 'bag_player', 'heatmap_detector': '/**/heatmap_detector',
             'association': 'association', 'bp_solver': 'bp_solver'}
@@ -41,15 +41,18 @@ def test_real_nodes_take_every_value_of_the_file(tmp_path, monkeypatch):
     parameter it declares (ROS silently ignores others) and arrives with the file's value and type
     (a double written as `1` would stop the node), the per-process overrides after it, and the
     namespace from the remap."""
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(DOMAIN_ID))
     bag = tmp_path / '2024'  # a name ROS would read as an integer unless quoted
     write_bag(bag, [('/cam0/openpose', PointCloud2(), 12_000_000_000)])
     params = load_params(CONFIG)
-    nodes = graph_nodes(5, str(bag), 0.5)
+    nodes = graph_nodes(5, str(bag), 0.5, start_topic='bag_player/start')
     assert [n.name for n in nodes] == [*(f'cam{c}/heatmap_detector' for c in range(5)), 'association',
                                        'bp_solver', 'bag_player']
-    for spec in nodes[3:]:  # cam3, cam4 and every other node
+    with ros_domain(monkeypatch):
+        _check_nodes(nodes[3:], params)  # cam3, cam4 and every other node
+
+
+def _check_nodes(nodes, params):
+    for spec in nodes:
         cmd = node_command(spec, CONFIG, python='python')
         assert cmd[:4] == ['python', '-m', f'mvpose_ros.nodes.{spec.executable}', '--ros-args']
         node_class = getattr(importlib.import_module(f'mvpose_ros.nodes.{spec.executable}'),
@@ -79,12 +82,17 @@ def test_command_puts_overrides_after_the_file():
     assert cmd == ['py', '-m', 'mvpose_ros.nodes.heatmap_detector', '--ros-args', '-r', '__ns:=/cam3',
                    '--params-file', '/p.yaml', '-p', 'camera:=3', '-p', 'data_root:="true"']
     assert [n.parameters.get('data_root') for n in graph_nodes(2, 'b', 1.0, data_root='/d')] == ['/d'] * 4 + [None]
+    # the player waits for a start signal only when asked to
+    assert 'start_topic' not in graph_nodes(2, 'b', 1.0)[-1].parameters
+    assert graph_nodes(2, 'b', 1.0, start_topic='bag_player/start')[-1].parameters['start_topic'] == 'bag_player/start'
 
 
 def test_expected_connections_and_unknown_sections():
     links = expected_connections(2)
-    assert links == {'/cam0/openpose': ('sub',), '/cam0/people2d': ('pub', 'sub'), '/cam1/openpose': ('sub',),
-                     '/cam1/people2d': ('pub', 'sub'), '/people/bundles': ('pub', 'sub'), '/skeletons': ('pub',)}
+    assert links == {'cam0/openpose': ('sub',), 'cam0/people2d': ('pub', 'sub'), 'cam1/openpose': ('sub',),
+                     'cam1/people2d': ('pub', 'sub'), 'people/bundles': ('pub', 'sub'), 'skeletons': ('pub',)}
+    assert expected_connections(1, 'image_raw') == {'cam0/image_raw': ('sub',), 'cam0/people2d': ('pub', 'sub'),
+                                                    'people/bundles': ('pub', 'sub'), 'skeletons': ('pub',)}
     nodes = graph_nodes(5, 'b', 1.0)
     params = {'bag_player': {}, '/**/heatmap_detector': {}, '/cam1/heatmap_detector': {}, '/**/heatmap_detectr': {},
               'association': {}, 'bpsolver': {}, RUNNER_SECTION: {}}
@@ -159,7 +167,7 @@ def test_report_counts_missing_duplicate_unexpected_and_bad_outputs():
         received=Counter({**{s: 1 for s in ns[:2] + ns[4:] + [stray]}, ns[1]: 3}),
         bad=['12040000000 ns: person 0 has 13 joints'])
     out = io.StringIO()
-    problems = report(Outcome(ns), node, RUNNER_DEFAULTS, out)
+    problems = report(ns, node, RUNNER_DEFAULTS, out)
     lines = out.getvalue().splitlines()
     assert lines[0] == 'frames in 6 (seen on /cam0/camera_info: 6), frames out 4'
     assert lines[1] == 'missing 2: 302-303; duplicate 1: 301; unexpected 1: 400'

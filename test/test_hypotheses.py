@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.geometry.camera import load_rig
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.inference.factors import data_term
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_hypotheses,
-                                        split_draws)
+                                                  split_draws)
 
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
@@ -18,8 +17,8 @@ SAMPLE_RADIUS_PX = np.sqrt(2) * (MARGIN_SIGMAS * SIGMA + STRIDE)
 
 
 @pytest.fixture(scope='module')
-def rig():
-    return load_rig(dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json')
+def rig(shelf_rig):
+    return shelf_rig
 
 
 @pytest.fixture(scope='module')

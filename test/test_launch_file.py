@@ -47,8 +47,8 @@ def launched_nodes() -> list[dict[str, object]]:
         var, values = in_comprehension.get(id(call), (None, [None]))
         for value in values:
             names = {**consts, var: value} if var else consts
-            nodes.append({kw.arg: (_evaluate(kw.value, names) if kw.arg in ('package', 'executable', 'name',
-                                                                             'namespace') else kw.value)
+            evaluated = ('package', 'executable', 'name', 'namespace')
+            nodes.append({kw.arg: (_evaluate(kw.value, names) if kw.arg in evaluated else kw.value)
                           for kw in call.keywords})
     return nodes
 

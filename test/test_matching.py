@@ -10,12 +10,12 @@ import pytest
 
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, TOP_HEAD
-from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
 from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, cluster_views, view_distance
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 SHELF = dataset_dir('shelf')
 FRAMES = range(576, 594)  # Shelf frames where actors 0, 1 and 2 are all annotated
@@ -25,8 +25,8 @@ R_SHOULDER, L_SHOULDER = 8, 9
 
 
 @pytest.fixture(scope='module')
-def rig() -> list[Camera]:
-    return load_rig(SHELF / 'calibration' / 'calibration_shelf.json')
+def rig(shelf_rig):
+    return shelf_rig
 
 
 @pytest.fixture(scope='module')

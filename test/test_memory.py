@@ -2,13 +2,19 @@
 from __future__ import annotations
 
 import os
+import resource
 import subprocess
 import sys
 
-from mvpose_ros.graph.memory import MemoryLog, resident_bytes
+import pytest
+
+from mvpose_ros.graph import memory
+from mvpose_ros.graph.memory import MemoryLog, rss_kib
+
+GONE = 2 ** 22 + 12345  # beyond pid_max: no such process
 
 
-def test_resident_bytes_of_a_process_and_of_none():
+def test_rss_of_a_process_of_this_one_and_of_none():
     # a fresh process that makes 128 MiB resident (this one may reuse memory it already holds)
     child = subprocess.Popen([sys.executable, '-c', 'import sys, time\n'
                               'block = bytearray(128 * 2 ** 20)\n'
@@ -17,13 +23,26 @@ def test_resident_bytes_of_a_process_and_of_none():
                               'time.sleep(30)'], stdout=subprocess.PIPE, text=True)
     try:
         assert child.stdout.readline().strip() == 'ready'
-        assert resident_bytes(child.pid) > 128 * 2 ** 20
-        assert 0 < resident_bytes(os.getpid())
+        assert rss_kib(child.pid) > 128 * 2 ** 10
+        assert 0 < rss_kib()
+        assert 0 < rss_kib(os.getpid())
     finally:
         child.kill()
         child.wait()
-    assert resident_bytes(child.pid) is None  # gone
-    assert resident_bytes(2 ** 22 + 12345) is None  # beyond pid_max: no such process
+    with pytest.raises(ProcessLookupError):
+        rss_kib(child.pid)  # gone
+    with pytest.raises(ProcessLookupError):
+        rss_kib(GONE)
+
+
+def test_this_process_falls_back_to_its_peak_without_proc(monkeypatch):
+    def no_proc(*args, **kwargs):
+        raise FileNotFoundError('/proc')
+
+    monkeypatch.setattr(memory, 'open', no_proc, raising=False)
+    assert rss_kib() == resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(ProcessLookupError):
+        rss_kib(os.getpid())
 
 
 def test_growth_is_measured_from_the_first_loop():
@@ -35,5 +54,5 @@ def test_growth_is_measured_from_the_first_loop():
     log.last['a'] = int(base * 1.05)  # as if it had grown 5%
     assert abs(log.growth()['a'] - 0.05) < 1e-6
     assert log.lines()[0].startswith('a: ') and log.lines()[0].endswith('+5.0%')
-    log.sample({'gone': 2 ** 22 + 12345}, outputs=200)
+    log.sample({'gone': GONE}, outputs=200)
     assert 'gone' not in log.baseline

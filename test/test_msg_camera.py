@@ -13,13 +13,12 @@ from std_msgs.msg import Header
 from msg_adapters.camera_info_msg import camera_to_info, check_info, info_to_intrinsics
 from msg_adapters.image_msg import image_to_msg, msg_to_image
 from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
-from mvpose_ros.core.geometry.camera import load_rig
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.geometry.rig import RigCamera
 
 
 @pytest.fixture(scope='module')
-def rig():
-    return load_rig(dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json')
+def rig(shelf_rig):
+    return shelf_rig
 
 
 def test_camera_info_round_trip(rig):
@@ -75,6 +74,43 @@ def test_info_to_intrinsics_rejects(rig):
         info_to_intrinsics(msg)
 
 
+@pytest.mark.parametrize('change, problem', [
+    (dict(distortion_model='rational_polynomial', d=[0.0] * 8),
+     "CameraInfo distortion_model: expected 'plumb_bob' (k1 k2 p1 p2 k3), got 'rational_polynomial'"),
+    (dict(distortion_model='equidistant', d=[0.0] * 4), "got 'equidistant'"),
+    (dict(k=[0.0] * 9), 'fx, fy > 0 and K[2, 2] = 1, got [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] (all zeros: '
+                        'the camera is not calibrated)'),
+    (dict(k=[float('nan')] + [0.0] * 7 + [1.0]), 'CameraInfo k: expected a finite'),
+    (dict(k=[-500.0, 0, 320, 0, 500, 240, 0, 0, 1]), 'CameraInfo k: expected a finite upper-triangular K with fx'),
+    (dict(width=0), 'CameraInfo size: expected width, height >= 1, got 0x776'),
+    (dict(height=0), 'CameraInfo size: expected width, height >= 1, got 1032x0'),
+    (dict(d=[0.0, float('inf'), 0, 0, 0]), 'CameraInfo d: expected 5 finite values'),
+])
+def test_info_to_intrinsics_errors_are_one_line(rig, change, problem):
+    msg = camera_to_info(rig[0], Header())
+    for field, value in change.items():
+        setattr(msg, field, value)
+    with pytest.raises(ValueError) as err:
+        info_to_intrinsics(msg)
+    assert str(err.value).startswith('CameraInfo ') and problem in str(err.value) and '\n' not in str(err.value)
+
+
+def test_camera_info_completes_a_rig_camera(rig):
+    """A rig camera with extrinsics only, completed from CameraInfo, is the calibrated camera; an
+    empty d (a driver without distortion) is no distortion."""
+    X = np.random.default_rng(0).uniform([-2, -2, 0], [2, 2, 2], (200, 3))
+    for cam in rig:
+        rc = RigCamera(f'cam{cam.name}', 'image_raw', 'camera_info', f'cam{cam.name}', cam.R, cam.t)
+        msg = deserialize_message(serialize_message(camera_to_info(cam, Header())), CameraInfo)
+        ours = rc.with_info(*info_to_intrinsics(msg))
+        assert (ours.width, ours.height) == (1032, 776)
+        np.testing.assert_allclose(ours.project(X), cam.project(X), atol=1e-9)
+    msg = camera_to_info(rig[0], Header())
+    msg.d = []
+    K, dist, width, height = info_to_intrinsics(msg)
+    assert dist.tolist() == [0.0] * 5 and (width, height) == (1032, 776)
+
+
 def _image(h: int = 6, w: int = 7) -> np.ndarray:
     return np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
 
@@ -99,8 +135,8 @@ def test_image_rgb8_and_padded_step():
 
 def test_image_rejects():
     msg = image_to_msg(_image(), Header())
-    msg.encoding = 'mono8'
-    with pytest.raises(ValueError, match="encoding: expected one of .* got 'mono8'"):
+    msg.encoding = 'bgr9'
+    with pytest.raises(ValueError, match="encoding: expected one of .* got 'bgr9'"):
         msg_to_image(msg)
     msg = image_to_msg(_image(), Header())
     msg.height = 7

@@ -11,21 +11,21 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import DISTORTION_MODEL, camera_to_info, check_info, info_to_intrinsics
-from msg_adapters.image_msg import image_to_msg, msg_to_image
+from msg_adapters.image_msg import (ENCODINGS, compressed_to_image, image_to_compressed_msg, image_to_msg,
+                                    msg_to_image)
 from msg_adapters.openpose_msg import OPENPOSE_DTYPE, msg_to_openpose, openpose_to_msg
 from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles, msg_to_people,
                                      people_dtype, people_to_msg)
 from msg_adapters.records import to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
-from mvpose_ros.core.geometry.camera import load_rig
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.evaluation.datasets import shelf_cameras
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 HEADER = Header(frame_id='cam0')
@@ -253,15 +253,38 @@ def test_skeleton_round_trip(ids, data):
 # --- images and camera infos ---------------------------------------------------------------
 
 @FUZZ
-@given(st.sampled_from(['bgr8', 'rgb8', 'mono8', '', 'bgra8']), st.integers(0, 5), st.integers(0, 5),
-       st.integers(0, 20), st.binary(max_size=120))
-def test_image_decoder_on_random_fields(encoding, width, height, step, data):
+@given(st.sampled_from([*ENCODINGS, '', 'xyz', '8UC3']), st.integers(0, 5), st.integers(0, 5),
+       st.integers(0, 30), st.booleans(), st.binary(max_size=120))
+def test_image_decoder_on_random_fields(encoding, width, height, step, bigendian, data):
     msg = Image(header=HEADER, encoding=encoding, width=width, height=height, step=step,
-                data=array.array('B', data))
+                is_bigendian=int(bigendian), data=array.array('B', data))
     bgr = _decodes_or_value_error(msg_to_image, msg)
     if bgr is not None:
         assert bgr.shape == (height, width, 3) and bgr.dtype == np.uint8
         np.testing.assert_array_equal(msg_to_image(image_to_msg(bgr, HEADER)), bgr)
+
+
+@FUZZ
+@given(st.sampled_from(['jpeg', 'png', 'bgr8; jpeg compressed bgr8', 'tiff']), st.sampled_from(['jpeg', 'png']),
+       st.integers(0, 400), st.integers(0, 255), st.integers(0, 64), st.binary(max_size=64))
+def test_compressed_decoder_on_damaged_data(fmt, kind, position, value, cut, junk):
+    """A real small jpeg or png with one byte changed, its end cut off or junk appended decodes to
+    an image of the declared size or raises ValueError, never anything else."""
+    data = bytearray(image_to_compressed_msg(np.full((12, 16, 3), 90, np.uint8), HEADER, kind).data)
+    data[position % len(data)] = value
+    msg = CompressedImage(header=HEADER, format=fmt, data=array.array('B', bytes(data[:len(data) - cut]) + junk))
+    bgr = _decodes_or_value_error(compressed_to_image, msg)
+    if bgr is not None:
+        assert bgr.dtype == np.uint8 and bgr.ndim == 3 and bgr.shape[2] == 3
+
+
+@FUZZ
+@given(st.sampled_from(['jpeg', 'png']), st.binary(max_size=200))
+def test_compressed_decoder_on_random_bytes(fmt, data):
+    for head in (b'', b'\x89PNG\r\n\x1a\n', b'\xff\xd8'):
+        msg = CompressedImage(header=HEADER, format=fmt, data=array.array('B', head + data))
+        bgr = _decodes_or_value_error(compressed_to_image, msg)
+        assert bgr is None or (bgr.dtype == np.uint8 and bgr.shape[2] == 3)
 
 
 @FUZZ
@@ -283,7 +306,7 @@ def test_camera_info_decoder_on_random_fields(model, d, k, width, height):
 def test_camera_info_check_on_plausible_changes(scale_error, shift_px, size_error):
     """A CameraInfo made from the rig's own camera passes, one changed beyond tolerance fails with
     the name of what changed: never another exception."""
-    camera = load_rig(dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json')[0]
+    camera = shelf_cameras()[0]
     changed = dataclasses.replace(camera, K=camera.K + [[scale_error, 0, shift_px], [0, 0, 0], [0, 0, 0]],
                                   width=camera.width + size_error)
     try:

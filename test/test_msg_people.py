@@ -15,7 +15,7 @@ from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 TOL = 0.5 / 255 + 1e-7  # quantisation to 1/255 steps, plus float32 rounding
 
@@ -102,7 +102,7 @@ def test_bundles_round_trip():
     # records in any order decode the same
     shuffled = to_cloud(records[::-1], _header('world'))
     assert [(pid, sorted(v)) for pid, v in msg_to_bundles(shuffled)] == [(2, [4]), (7, [0, 3]),
-                                                                          (4_000_000_000, [1])]
+                                                                         (4_000_000_000, [1])]
 
 
 def test_zero_bundles():

@@ -12,7 +12,7 @@ from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, msg_to_peopl
 from msg_adapters.records import fields_of, from_cloud, to_cloud
 from msg_adapters.skeleton_msg import msg_to_skeletons, skeletons_to_msg
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 DTYPE = np.dtype([('kind', 'u1'), ('xyz', '<f4', (3,)), ('id', '<u4'), ('grid', '<u2', (2, 2)),
                   ('w', '<f8'), ('s', '<i2')])

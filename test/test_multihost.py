@@ -12,6 +12,10 @@ still match a remote reader seconds later (Fast DDS's periodic announcements), a
 publishes before that is lost (the data topics are volatile), so a few empty frames, one a second,
 go through first. The graph counts as connected once the last one's output has come: association
 released it, so every camera delivered it (or sync_timeout ran out), and bp_solver answered it.
+(The player waits until its own writers have matched and the recorder's readers wait for theirs,
+but whether a detector's people2d writer has matched association's reader on the other host is
+visible only inside those two processes: the warm-up frames are what shows it from outside.)
+The recorder is mvpose_ros.graph.recorder, the runner's own, as a process of its own.
 """
 from __future__ import annotations
 
@@ -30,6 +34,7 @@ import pytest
 from std_msgs.msg import Header
 
 import netns
+import ros_harness
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import read_bag, write_bag
@@ -43,15 +48,13 @@ REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / 'config' / 'shelf.yaml'
 SHM_PROFILE = REPO / 'config' / 'fastdds.xml'
 UDP_PROFILE = REPO / 'config' / 'fastdds_udp.xml'
-RECORDER = Path(__file__).resolve().with_name('skeleton_recorder.py')
-PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')  # Fast DDS 2 and 3
+RECORDER = [sys.executable, '-m', 'mvpose_ros.graph.recorder']
+PROFILE_VARS = ros_harness.PROFILE_VARS
 DDS_NS = 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'
 
 CAMERAS = 5
 FRAMES = range(300, 340)
 WARMUP_FRAMES = range(200, 300, 25)  # one a second at the recorded rate
-ONE_HOST_DOMAIN = 182
-MULTIHOST_DOMAIN = 181
 CAMERA_NODES = ('heatmap_detector', 'bag_player')  # the rest (association, bp_solver) is compute
 # Settings that keep the output independent of timing: association never gives up on a camera
 # that is merely late, bp_solver does not flush its window while the graph is still busy.
@@ -155,7 +158,7 @@ def run_graph(warmup: Path, bag: Path, camera: Site, compute: Site, out: Path, m
     specs = [replace(s, parameters={**s.parameters, **OVERRIDES.get(s.executable, {})})
              for s in graph_nodes(CAMERAS, str(bag), 1.0)]
     player = specs.pop()
-    recorder = [sys.executable, str(RECORDER), '--bag', str(bag), '--predictions',
+    recorder = [*RECORDER, '--bag', str(bag), '--predictions',
                 str(predictions), '--ready', str(ready), '--stats', str(stats), '--cameras', str(CAMERAS),
                 '--timeout', str(RUN_TIMEOUT_S), *(['--measure'] if measure else [])]
     with ProcessGroup(out / 'logs', base_env()) as group:
@@ -201,6 +204,15 @@ def _warmup_bag(path: Path) -> Path:
 
 
 @pytest.fixture(scope='module')
+def domains() -> Iterator[tuple[int, int]]:
+    """The ROS domains of the one-host reference and of the multi-host runs: this module's own."""
+    one, multi = ros_harness.acquire_domain(), ros_harness.acquire_domain()
+    yield one, multi
+    ros_harness.release_domain(one)
+    ros_harness.release_domain(multi)
+
+
+@pytest.fixture(scope='module')
 def link() -> Iterator[tuple[netns.Host, netns.Host]]:
     """The camera host and the compute host, deleted after the module even when a test fails."""
     reason = netns.unavailable()
@@ -217,11 +229,11 @@ def bags(link, tmp_path_factory) -> tuple[Path, Path]:
 
 
 @pytest.fixture(scope='module')
-def one_host(link, bags, tmp_path_factory) -> GraphRun:
+def one_host(link, bags, domains, tmp_path_factory) -> GraphRun:
     """The reference: every node on one host (the camera host: a namespace of its own, so that no
     other run on this machine can join) as mvpose-graph runs them, shared memory and discovery on
     localhost; it also records the size of every message the nodes publish."""
-    here = Site(link[0], dds_env(ONE_HOST_DOMAIN, SHM_PROFILE, 'LOCALHOST'))
+    here = Site(link[0], dds_env(domains[0], SHM_PROFILE, 'LOCALHOST'))
     return run_graph(*bags, here, here, tmp_path_factory.mktemp('one_host') / 'run', measure=True)
 
 
@@ -230,24 +242,24 @@ def _people(line: dict) -> tuple[list[int], np.ndarray]:
     return [p['id'] for p in people], np.array([p['joints'] for p in people], dtype=float).reshape(-1, 14, 3)
 
 
-def multihost_site(host: netns.Host, other: netns.Host, discovery: str, folder: Path) -> Site:
+def multihost_site(host: netns.Host, other: netns.Host, discovery: str, folder: Path, domain: int) -> Site:
     """`host`'s DDS settings. 'subnet': multicast discovery (the ROS default range), UDP on the
     link's address only. 'static_peers': no multicast at all, discovery by unicast to the other
     host's address; the white list then needs loopback too: with the link's address alone, two
     nodes of one host never found each other in this mode."""
     if discovery == 'subnet':
-        return Site(host, dds_env(MULTIHOST_DOMAIN, udp_profile(folder / f'{host.namespace}.xml', [host.address]),
+        return Site(host, dds_env(domain, udp_profile(folder / f'{host.namespace}.xml', [host.address]),
                                   'SUBNET'))
     profile = udp_profile(folder / f'{host.namespace}.xml', [host.address, '127.0.0.1'])
-    return Site(host, dds_env(MULTIHOST_DOMAIN, profile, 'LOCALHOST', peers=[other.address]))
+    return Site(host, dds_env(domain, profile, 'LOCALHOST', peers=[other.address]))
 
 
 @pytest.mark.parametrize('discovery', ['subnet', 'static_peers'])
-def test_graph_across_two_hosts_gives_the_one_host_output(link, bags, one_host, tmp_path, discovery):
+def test_graph_across_two_hosts_gives_the_one_host_output(link, bags, domains, one_host, tmp_path, discovery):
     """Same frames, people and joints as on one host, with the 2D people over the link."""
     camera_host, compute_host = link
-    sites = [multihost_site(camera_host, compute_host, discovery, tmp_path),
-             multihost_site(compute_host, camera_host, discovery, tmp_path)]
+    sites = [multihost_site(camera_host, compute_host, discovery, tmp_path, domains[1]),
+             multihost_site(compute_host, camera_host, discovery, tmp_path, domains[1])]
     run = run_graph(*bags, *sites, tmp_path / 'run')
 
     # every input frame exactly once, nothing else (warm-up frames lost before discovery ended

@@ -17,13 +17,9 @@ from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, msg_to_peopl
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.geometry.camera import load_rig
-from mvpose_ros.core.evaluation.datasets import dataset_dir
-from mvpose_ros.core.inference.hypotheses import SamplingConfig
-from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.inference.solver import Inference3D, StageConfig
-from mvpose_ros.core.inference.window import InferenceConfig
+from mvpose_ros.core.inference.solver import Inference3D
+from mvpose_ros.core.stage import StageConfig
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 
@@ -31,11 +27,9 @@ FIRST = 300  # first frame of the OpenPose files
 
 
 @pytest.fixture(scope='module')
-def shelf():
-    root = dataset_dir('shelf')
-    cameras = load_rig(root / 'calibration' / 'calibration_shelf.json')
-    raw = [read_body25(root / 'openpose_body25' / f'{c}.txt')[:16] for c in range(len(cameras))]
-    return cameras, raw
+def shelf(shelf_openpose):
+    cameras, raw = shelf_openpose
+    return cameras, [frames[:16] for frames in raw]
 
 
 def _header(frame: int, frame_id: str) -> Header:
@@ -49,15 +43,15 @@ def _collect(node, topic: str, msg_type, into: dict) -> None:
                                                                         []).append(m), DATA_QOS)
 
 
-def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(shelf, tmp_path):
+def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(domain, shelf, tmp_path):
     cameras, raw = shelf
     log = tmp_path / 'detector.log'
-    with probe(161, 'detector_probe') as (node, executor):
+    with probe(domain, 'detector_probe') as (node, executor):
         out: dict[int, list] = {}
         _collect(node, '/cam1/people2d', PointCloud2, out)
         pub = node.create_publisher(PointCloud2, '/cam1/openpose', DATA_QOS)
         info = node.create_publisher(CameraInfo, '/cam1/camera_info', DATA_QOS)
-        proc = start_node('heatmap_detector', 161, log, '-r', '__ns:=/cam1', '-p', 'camera:=1')
+        proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/cam1', '-p', 'camera:=1')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
             assert spin_until(executor, lambda: info.get_subscription_count() > 0), log.read_text()
@@ -91,24 +85,24 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(she
     assert 'camera_info stamp 12040000000 ns' in text and 'camera_info stamp 12000000000' not in text
 
 
-def test_heatmap_detector_with_a_bad_parameter_exits_2_with_one_line(tmp_path):
+def test_heatmap_detector_with_a_bad_parameter_exits_2_with_one_line(domain, tmp_path):
     log = tmp_path / 'bad.log'
-    proc = start_node('heatmap_detector', 161, log, '-p', 'camera:=9')
+    proc = start_node('heatmap_detector', domain, log, '-p', 'camera:=9')
     assert proc.wait(30) == 2
     assert 'parameter camera: 9 is not in 0..4' in log.read_text()
     assert 'Traceback' not in log.read_text()
 
 
-def test_association_bundles_every_stamp_and_goes_on_without_a_missing_camera(shelf, tmp_path):
+def test_association_bundles_every_stamp_and_goes_on_without_a_missing_camera(domain, shelf, tmp_path):
     cameras, raw = shelf
     frames = range(300, 306)
     people = {f: [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)] for f in frames}
     log = tmp_path / 'association.log'
-    with probe(162, 'association_probe') as (node, executor):
+    with probe(domain, 'association_probe') as (node, executor):
         out: dict[int, list] = {}
         _collect(node, '/people/bundles', PointCloud2, out)
         pubs = [node.create_publisher(PointCloud2, f'/cam{c}/people2d', DATA_QOS) for c in range(5)]
-        proc = start_node('association', 162, log, '-p', 'sync_timeout:=5.0')  # cam3 moving on releases 302
+        proc = start_node('association', domain, log, '-p', 'sync_timeout:=5.0')  # cam3 moving on releases 302
         try:
             assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)), log.read_text()
             for f in frames:
@@ -134,7 +128,7 @@ def test_association_bundles_every_stamp_and_goes_on_without_a_missing_camera(sh
     assert 'stamp 12080000000 ns (frame 302): no data from cam3; going on without' in log.read_text()
 
 
-def test_bp_solver_publishes_one_skeleton_message_per_frame_equal_to_the_core(shelf, tmp_path):
+def test_bp_solver_publishes_one_skeleton_message_per_frame_equal_to_the_core(domain, shelf, tmp_path):
     cameras, raw = shelf
     frames = range(300, 312)
     associator = Associator(cameras, AssociationConfig())
@@ -143,20 +137,18 @@ def test_bp_solver_publishes_one_skeleton_message_per_frame_equal_to_the_core(sh
         people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
         bundles = [(o.person_id, o.views) for o in associator.update(f, people)]
         wire[f] = bundles_to_msg(bundles, _header(f, 'world'))
-    config = StageConfig(sampling=SamplingConfig(hypotheses=64),
-                         inference=InferenceConfig(window=6, lag=2, bp_hypotheses=16, slide_iterations=1))
-    core = Inference3D(cameras, config)
+    core = Inference3D(cameras, StageConfig.from_params({'window': 6, 'lag': 2}).solver)
     expected = {r.frame: r for f in frames for r in core.push(f, msg_to_bundles(wire[f]))}
     expected.update({r.frame: r for r in core.flush()})
 
     log = tmp_path / 'bp.log'
-    with probe(163, 'bp_probe') as (node, executor):
+    with probe(domain, 'bp_probe') as (node, executor):
         skeletons: dict[int, list] = {}
         markers: dict[int, list] = {}
         _collect(node, '/skeletons', PointCloud2, skeletons)
         _collect(node, '/skeletons/markers', MarkerArray, markers)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
-        proc = start_node('bp_solver', 163, log, '-p', 'window:=6', '-p', 'lag:=2', '-p', 'idle_flush:=0.3')
+        proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=2', '-p', 'idle_flush:=0.3')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
             for f in frames:

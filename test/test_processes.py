@@ -20,9 +20,11 @@ from mvpose_ros.bags.io import read_bag, write_bag
 from mvpose_ros.bags.replay import group_frames, looped
 from mvpose_ros.cli import graph
 from mvpose_ros.core.evaluation.predictions import read_predictions
+from mvpose_ros.graph import runner
 from mvpose_ros.graph.processes import ProcessGroup
+from mvpose_ros.graph.recorder import SkeletonRecorder
+from ros_harness import ros_domain
 
-DOMAIN_ID = 171
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -121,13 +123,15 @@ def test_context_manager_stops_on_exception(tmp_path):
 def test_supervisor_sigterm_stops_children(tmp_path):
     """The supervisor's own SIGTERM unwinds its `with` block, which stops every child."""
     script = f'''
-        import subprocess, sys
+        import sys, time
         from mvpose_ros.graph.processes import Interrupted, ProcessGroup
         try:
             with ProcessGroup({str(tmp_path / 'logs')!r}, grace=0.5) as group:
                 group.start('parent', ['sh', '-c', 'sleep 60 & echo $!; wait'])
                 print(group.procs['parent'].pid, flush=True)
-                subprocess.run(['sleep', '60'])
+                # Blocked in this process itself: a child of its own (not in the group) would keep
+                # the test's pipe open after the supervisor exits.
+                time.sleep(60)
         except Interrupted as exc:
             print(exc, flush=True)
             sys.exit(128 + exc.signum)
@@ -150,29 +154,36 @@ def test_supervisor_sigterm_stops_children(tmp_path):
 
 
 def test_runner_names_the_crashed_node_and_stops_the_rest(tmp_path, monkeypatch, capsys):
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(DOMAIN_ID))
-    monkeypatch.delenv('FASTRTPS_DEFAULT_PROFILES_FILE', raising=False)  # the runner sets it: undo after
+    with ros_domain(monkeypatch, profile=None) as domain:  # the runner sets the profile: undone after
+        _crash(tmp_path, monkeypatch, capsys, domain)
+
+
+def _crash(tmp_path, monkeypatch, capsys, domain):
     bag = tmp_path / 'bag'
     write_bag(bag, [('/cam0/openpose', PointCloud2(), int(f * 1e9) // 25) for f in range(300, 303)])
     pids = tmp_path / 'pids'
     pids.mkdir()
 
     def dummy_node(spec, params_file, python=sys.executable):
-        # Every dummy records its pid; cam2's detector fails at start-up like a bad parameter would.
+        # Every dummy records its pid (written beside and renamed: whole when seen); cam2's
+        # detector fails at start-up like a bad parameter would, once the 7 processes have
+        # recorded theirs.
         name = spec.name.replace('/', '_')
         crash = spec.name == 'cam2/heatmap_detector'
         return py(f'''
             import os, sys, time
-            open('{pids}/{name}', 'w').write(str(os.getpid()))
-            time.sleep(0.5 if {crash} else 60)
+            open('{pids}/{name}.tmp', 'w').write(str(os.getpid()))
+            os.replace('{pids}/{name}.tmp', '{pids}/{name}')
+            while {crash} and len([n for n in os.listdir('{pids}') if not n.endswith('.tmp')]) < 7:
+                time.sleep(0.01)
             if {crash}:
-                sys.exit('[FATAL] [heatmap_detector]: calibration not found: /nowhere.json')''')
+                sys.exit('[FATAL] [heatmap_detector]: calibration not found: /nowhere.json')
+            time.sleep(60)''')
 
-    monkeypatch.setattr(graph, 'node_command', dummy_node)
+    monkeypatch.setattr(runner, 'node_command', dummy_node)
     t0 = time.monotonic()
     code = graph.main(['--config', str(REPO / 'config' / 'shelf.yaml'), '--bag', str(bag),
-                       '--predictions', str(tmp_path / 'out' / 'p.jsonl'), '--domain-id', str(DOMAIN_ID)])
+                       '--predictions', str(tmp_path / 'out' / 'p.jsonl'), '--domain-id', str(domain)])
     err = capsys.readouterr().err
     assert code == 1
     assert time.monotonic() - t0 < 15
@@ -188,20 +199,27 @@ def test_runner_names_the_crashed_node_and_stops_the_rest(tmp_path, monkeypatch,
 
 # A stand-in for the real nodes with the same topics, so that the runner's whole path (wait for
 # the connections, play, collect, stop, write, score) is tested on its own. The player publishes
-# frames FAKE_FRAMES; the solver answers each /cam0/camera_info once.
-FAKE_NODE = '''
-import os, sys, time
+# frames FAKE_FRAMES (then, with FAKE_HOLD, stays without ending); the solver answers each
+# cam0/camera_info once. Nothing is sent before its readers are there, both ways: the player
+# waits until its writers have matched, for the runner's start signal and for the solver's (a
+# latched message once the solver's camera_info reader and skeletons writer have matched).
+FAKE_NODE = """
+import os, sys
 import numpy as np
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, PointCloud2
+from std_msgs.msg import Empty
+from visualization_msgs.msg import MarkerArray
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
+from mvpose_ros.nodes.bag_player import START_QOS
 
 QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100)
 CAMERAS = range(int(os.environ['FAKE_CAMERAS']))
-role = sys.argv[1]
+SOLVER_READY = 'fake/solver_ready'
+role, start_topic = sys.argv[1:3]
 rclpy.init(args=sys.argv)
 node = Node(role)
 open(os.path.join(os.environ['FAKE_PIDS'], node.get_fully_qualified_name().strip('/').replace('/', '_')),
@@ -210,23 +228,34 @@ if role == 'heatmap_detector':
     pub = node.create_publisher(PointCloud2, 'people2d', QOS)
     node.create_subscription(PointCloud2, 'openpose', lambda m: pub.publish(PointCloud2(header=m.header)), QOS)
 elif role == 'association':
-    node.create_publisher(PointCloud2, '/people/bundles', QOS)
+    node.create_publisher(PointCloud2, 'people/bundles', QOS)
     for c in CAMERAS:
-        node.create_subscription(PointCloud2, f'/cam{c}/people2d', lambda m: None, QOS)
+        node.create_subscription(PointCloud2, f'cam{c}/people2d', lambda m: None, QOS)
 elif role == 'bp_solver':
-    pub = node.create_publisher(PointCloud2, '/skeletons', QOS)
-    node.create_subscription(PointCloud2, '/people/bundles', lambda m: None, QOS)
+    pub = node.create_publisher(PointCloud2, 'skeletons', QOS)
+    node.create_publisher(MarkerArray, 'skeletons/markers', QOS)  # never sends: nobody to draw
+    node.create_subscription(PointCloud2, 'people/bundles', lambda m: None, QOS)
     def answer(info):
         frame = frame_of_stamp(info.header.stamp)
         joints = np.full((1, 14, 3), frame / 1000.0)
         pub.publish(skeletons_to_msg(np.array([7]), joints, info.header))
-    node.create_subscription(CameraInfo, '/cam0/camera_info', answer, QOS)
+    info = node.create_subscription(CameraInfo, 'cam0/camera_info', answer, QOS)
+    ready = node.create_publisher(Empty, SOLVER_READY, START_QOS)
+    def check():
+        if info.get_publisher_count() and pub.get_subscription_count():
+            ready.publish(Empty())
+            timer.cancel()
+    timer = node.create_timer(0.02, check)
 elif role == 'bag_player':
-    openpose = [node.create_publisher(PointCloud2, f'/cam{c}/openpose', QOS) for c in CAMERAS]
-    info = node.create_publisher(CameraInfo, '/cam0/camera_info', QOS)
-    # The runner and the solver both listen to the camera info: wait until both are matched.
-    while any(p.get_subscription_count() == 0 for p in openpose) or info.get_subscription_count() < 2:
-        time.sleep(0.02)
+    openpose = [node.create_publisher(PointCloud2, f'cam{c}/openpose', QOS) for c in CAMERAS]
+    info = node.create_publisher(CameraInfo, 'cam0/camera_info', QOS)
+    signals = set()
+    node.create_subscription(Empty, start_topic, lambda m: signals.add('runner'), START_QOS)
+    node.create_subscription(Empty, SOLVER_READY, lambda m: signals.add('solver'), START_QOS)
+    # The runner and the solver both listen to the camera info.
+    while (any(p.get_subscription_count() == 0 for p in openpose) or info.get_subscription_count() < 2
+           or signals != {'runner', 'solver'}):
+        rclpy.spin_once(node, timeout_sec=0.02)
     first, end = map(int, os.environ['FAKE_FRAMES'].split(':'))
     for frame in range(first, end):
         header = CameraInfo().header
@@ -234,23 +263,26 @@ elif role == 'bag_player':
         for p in openpose:
             p.publish(PointCloud2(header=header))
         info.publish(CameraInfo(header=header))
-        with open(os.path.join(os.environ['FAKE_PIDS'], os.pardir, 'played'), 'w') as f:
-            f.write(str(frame))
-        time.sleep(0.01)
-    sys.exit(0)
+    if not os.environ.get('FAKE_HOLD'):
+        for p in [*openpose, info]:
+            p.wait_for_all_acked()
+        sys.exit(0)
 try:
     rclpy.spin(node)
 except KeyboardInterrupt:
     pass
-'''
+"""
 
 
 @pytest.fixture
 def fake_graph(tmp_path, monkeypatch):
-    """Runner arguments for a 2-camera fake graph over frames 300..319 (timeout 2 s: a failure ends fast)."""
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(DOMAIN_ID))
-    monkeypatch.delenv('FASTRTPS_DEFAULT_PROFILES_FILE', raising=False)  # the runner sets it: undo after
+    """Runner arguments for a 2-camera fake graph over frames 300..319 on a domain of its own
+    (timeout 2 s: a failure ends fast)."""
+    with ros_domain(monkeypatch, profile=None):  # the runner sets the profile: undone after
+        yield from _fake_graph(tmp_path, monkeypatch, timeout=2.0)
+
+
+def _fake_graph(tmp_path, monkeypatch, timeout):
     frames = range(300, 320)
     monkeypatch.setenv('FAKE_CAMERAS', '2')
     monkeypatch.setenv('FAKE_FRAMES', f'{frames.start}:{frames.stop}')
@@ -263,16 +295,16 @@ def fake_graph(tmp_path, monkeypatch):
     config = tmp_path / 'graph.yaml'
     (tmp_path / 'fastdds.xml').write_text((REPO / 'config' / 'fastdds.xml').read_text())
     config.write_text((REPO / 'config' / 'shelf.yaml').read_text().replace('cameras: 5', 'cameras: 2')
-                      .replace('timeout: 120.0', 'timeout: 2.0'))
+                      .replace('timeout: 120.0', f'timeout: {timeout!r}'))
 
     def fake_command(spec, params_file, python=sys.executable):
         assert Path(params_file) == config.resolve()
-        return [python, str(script), spec.executable, '--ros-args', *(['-r', f'__ns:=/{spec.namespace}']
-                                                                      if spec.namespace else [])]
+        return [python, str(script), spec.executable, str(spec.parameters.get('start_topic', '-')), '--ros-args',
+                *(['-r', f'__ns:=/{spec.namespace}'] if spec.namespace else [])]
 
-    monkeypatch.setattr(graph, 'node_command', fake_command)
+    monkeypatch.setattr(runner, 'node_command', fake_command)
     predictions = tmp_path / 'out' / 'p.jsonl'
-    return ['--config', str(config), '--bag', str(bag), '--predictions', str(predictions)], predictions, frames
+    yield ['--config', str(config), '--bag', str(bag), '--predictions', str(predictions)], predictions, frames
 
 
 def test_runner_plays_collects_and_scores(fake_graph, tmp_path, monkeypatch, capsys):
@@ -280,13 +312,11 @@ def test_runner_plays_collects_and_scores(fake_graph, tmp_path, monkeypatch, cap
     code = graph.main(args)
     out, err = capsys.readouterr()
     assert code == 0, err
-    # A reader may match the player a moment after the player matched it (DDS discovery is not
-    # symmetric in time), so the first camera infos can be lost: latency covers those seen.
-    counts = re.search(r'frames in (\d+) \(seen on /cam0/camera_info: (\d+)\), frames out (\d+)', out)
-    assert counts and int(counts[1]) == int(counts[3]) == len(frames) and 1 <= int(counts[2]) <= len(frames)
+    # Every frame's camera info too: the player waited for the runner's reader to match.
+    assert f'frames in {len(frames)} (seen on /cam0/camera_info: {len(frames)}), frames out {len(frames)}' in out
     assert 'missing 0: none; duplicate 0: none; unexpected 0: none' in out
     assert re.search(r'latency /cam0/camera_info -> /skeletons: p50 [0-9.]+ ms, p95 [0-9.]+ ms, max [0-9.]+ ms '
-                     rf'\({counts[2]} frames\)', out)
+                     rf'\({len(frames)} frames\)', out)
     lines = [json.loads(line) for line in predictions.read_text().splitlines()]
     assert [r['frame'] for r in lines] == list(frames)
     assert all(r['people'][0]['id'] == 7 and r['people'][0]['joints'][0] == [r['frame'] / 1000] * 3 for r in lines)
@@ -300,29 +330,39 @@ def test_runner_plays_collects_and_scores(fake_graph, tmp_path, monkeypatch, cap
 
 def test_runner_interrupted_stops_everything_and_writes_what_it_has(fake_graph, tmp_path, monkeypatch, capsys):
     args, predictions, _ = fake_graph
-    frames = range(300, 700)  # ~4 s of playing: long enough to be interrupted in the middle
-    monkeypatch.setenv('FAKE_FRAMES', f'{frames.start}:{frames.stop}')
+    # The player sends frames 300..349 of a 400-frame bag and then holds: the run cannot end
+    # before the interrupt, which comes once the runner has received 20 outputs.
+    frames = range(300, 700)
+    monkeypatch.setenv('FAKE_FRAMES', '300:350')
+    monkeypatch.setenv('FAKE_HOLD', '1')
     bag = tmp_path / 'long_bag'
     write_bag(bag, [('/cam0/openpose', PointCloud2(), f * 1_000_000_000 // 25) for f in frames])
     args = [a if a != args[args.index('--bag') + 1] else str(bag) for a in args]
+    config = Path(args[args.index('--config') + 1])
+    config.write_text(config.read_text().replace('timeout: 2.0', 'timeout: 120.0'))  # no stall before it
     predictions.parent.mkdir(parents=True, exist_ok=True)
     predictions.write_text('an older run\n')
+    some_outputs = threading.Event()
 
-    def ctrl_c_once_playing():
-        played = tmp_path / 'played'
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (played.exists() and played.read_text()
-                                                   and int(played.read_text()) >= 400):
-            time.sleep(0.05)
-        os.kill(os.getpid(), signal.SIGINT)
+    class Watched(SkeletonRecorder):
+        def _on_skeletons(self, cdr, info):
+            super()._on_skeletons(cdr, info)
+            if len(self.outputs) >= 20:
+                some_outputs.set()
 
-    threading.Thread(target=ctrl_c_once_playing, daemon=True).start()
+    def ctrl_c_once_collecting():
+        if some_outputs.wait(60):
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(graph, 'SkeletonRecorder', Watched)
+    threading.Thread(target=ctrl_c_once_collecting, daemon=True).start()
     code = graph.main(args)
     err = capsys.readouterr().err
+    assert some_outputs.is_set(), err
     assert code == 128 + signal.SIGINT, err
     assert 'interrupted by SIGINT; every node stopped' in err
     written = read_predictions(predictions)  # a whole, valid file: not the older run, not cut short
-    assert 0 < len(written) < len(frames)
+    assert 20 <= len(written) <= 50
     assert list(written) == list(range(300, 300 + len(written)))
     assert not predictions.with_name(predictions.name + '.partial').exists()
     started = {p.name: int(p.read_text().split('\n')[0]) for p in (tmp_path / 'pids').iterdir()}
@@ -333,7 +373,7 @@ def test_runner_expects_the_stamps_of_every_loop_as_the_player_sends_them(tmp_pa
     frames = range(300, 310)
     bag = tmp_path / 'bag'
     write_bag(bag, [('/cam0/openpose', PointCloud2(), f * 1_000_000_000 // 25) for f in frames])
-    stamps = graph.input_stamps(bag, '/cam0/openpose', loops=3)
+    stamps = runner.input_stamps(bag, '/cam0/openpose', loops=3)
     player = [frame.stamp_ns + offset for _, offset, frame in
               looped(lambda: group_frames(read_bag(bag, ['/cam0/openpose'])), 3)]
     assert stamps == player and len(set(stamps)) == 30

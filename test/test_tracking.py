@@ -6,7 +6,7 @@ import pytest
 
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker, box_iou
 
 EMPTY_MAPS = PersonHeatmap(np.zeros((NUM_INFERENCE_JOINTS, 1, 1), np.float32), np.zeros(2), 1.0)

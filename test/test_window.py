@@ -16,7 +16,8 @@ import pytest
 
 from mvpose_ros.core.geometry.body import BONES, NUM_INFERENCE_JOINTS, SYMMETRIC_PAIRS
 from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions, write_predictions
-from mvpose_ros.core.inference.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
+from mvpose_ros.core.types import FrameResult, PersonFrame
 
 J = NUM_INFERENCE_JOINTS
 M = 10
@@ -71,7 +72,9 @@ def _clip(seed: int = 0, n_frames: int = T, absent: dict[int, set[int]] | None =
 
 
 def _window(**kwargs) -> SlidingWindow:
-    return SlidingWindow(InferenceConfig(**kwargs), np.array(SYMMETRIC_PAIRS), np.array(BONES))
+    """The reference schedule (every hypothesis, windows re-solved) unless kwargs say otherwise."""
+    config = InferenceConfig(**{'bp_hypotheses': None, 'slide_iterations': None, **kwargs})
+    return SlidingWindow(config, np.array(SYMMETRIC_PAIRS), np.array(BONES))
 
 
 def _run(window: SlidingWindow, frames: list[list[PersonFrame]]) -> tuple[list[list[FrameResult]], list[FrameResult]]:

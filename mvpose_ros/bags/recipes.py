@@ -26,9 +26,9 @@ from msg_adapters.image_msg import image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
-from mvpose_ros.core.geometry.camera import load_rig
 from mvpose_ros.core.detection.image_file import read_image
-from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
+                                                 load_actors_gt)
 from mvpose_ros.core.detection.openpose import read_body25
 
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
@@ -85,7 +85,7 @@ def shelf_recipe(shelf: Path, images_only: bool = False) -> Recipe:
     """The `shelf` bag (or `shelf_images` with images_only) from the Shelf folder `shelf`."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
     _require(calibration)
-    rig = load_rig(calibration)
+    rig = dataset_cameras('shelf', calibration=calibration)
     images = {(f, c): shelf / 'frames' / f'cam{c}_{f:06d}.png'
               for f in SHELF_IMAGE_FRAMES for c in range(len(rig))}
     detections = [] if images_only else [shelf / 'openpose_body25' / f'{c}.txt' for c in range(len(rig))]
@@ -126,7 +126,7 @@ def campus_recipe(campus_dir: str | Path) -> Recipe:
         raise FileNotFoundError(f'CampusSeq1 folder not found: {campus_dir}')
     gt_path, calibration = campus_dir / 'actorsGT.mat', campus_dir / 'calibration_campus.json'
     _require(gt_path, calibration)
-    rig = load_rig(calibration)
+    rig = dataset_cameras('campus', calibration=calibration)
     present = {f: [c for c in range(len(rig)) if campus_image(campus_dir, c, f).is_file()]
                for f in CAMPUS_TEST_FRAMES}
     frames = [f for f in CAMPUS_TEST_FRAMES if present[f]]

@@ -1,1 +1,2 @@
-"""Benchmark helpers (ROS-free): scaled scenes (bench.scene) and OpenCV line plots (bench.plot)."""
+"""The benchmark (ROS-free): runs (bench.runs), their report (bench.report), scenes multiplied by
+shifted copies (bench.scene), the two-process run (bench.pipelined) and OpenCV line plots (bench.plot)."""

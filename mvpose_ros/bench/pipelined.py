@@ -13,15 +13,13 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Sequence
 
-from mvpose_ros.core.association.associator import Associator
-from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.inference.solver import Inference3D, StageConfig
-from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.inference.window import FrameResult
-
-GROUPING = 'grouping and heatmaps'
+from mvpose_ros.core.evaluation.offline import GROUPING
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.inference.solver import Inference3D, SolverConfig
+from mvpose_ros.core.stage import Stage3D, StageConfig
+from mvpose_ros.core.types import FrameResult
 
 
 @dataclass
@@ -34,7 +32,7 @@ class PipelinedRun:
     seconds: dict[str, float]
 
 
-def _solver(cameras: Sequence[Camera], config: StageConfig, inbox: Connection, outbox: Connection) -> None:
+def _solver(cameras: Sequence[Camera], config: SolverConfig, inbox: Connection, outbox: Connection) -> None:
     """Worker: (frame, bundles) in, each call's results out; None flushes, sends the timer, ends."""
     solver = Inference3D(cameras, config)
     while (item := inbox.recv()) is not None:
@@ -49,19 +47,18 @@ def run_two_processes(cameras: Sequence[Camera], frames: Sequence[int], raw: Seq
     ctx = mp.get_context('fork')  # the worker starts warm, with the modules already imported
     to_solver, solver_in = ctx.Pipe()
     solver_out, from_solver = ctx.Pipe()
-    worker = ctx.Process(target=_solver, args=(cameras, config, solver_in, solver_out), daemon=True)
+    worker = ctx.Process(target=_solver, args=(cameras, config.solver, solver_in, solver_out), daemon=True)
     worker.start()
-    associator = Associator(cameras, config.association)
-    timer = StageTimer()
+    stage = Stage3D(cameras, config)  # only its association half runs here
+    timer = stage.timer
     results: list[FrameResult] = []
     try:
         t_start = time.perf_counter()
         for frame, per_camera in zip(frames, raw):
             t0 = time.perf_counter()
             people = [detect_people(f, detector) for f in per_camera]
-            t0 = timer.add(GROUPING, t0)
-            bundles = [(o.person_id, o.views) for o in associator.update(frame, people)]
-            timer.add('association', t0)
+            timer.add(GROUPING, t0)
+            bundles = stage.associate(frame, people)
             to_solver.send((frame, bundles))
             while from_solver.poll():  # keep the return pipe from filling up
                 results += from_solver.recv()

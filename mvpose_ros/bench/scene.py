@@ -29,7 +29,7 @@ import numpy as np
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 Frame2D = Sequence[Sequence[Person2D] | None]  # per camera, its 2D people (None: camera missing)
 

@@ -14,21 +14,18 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Sequence, TextIO
 
-from mvpose_ros.core.association.associator import AssociationConfig
-from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
 from mvpose_ros.core.evaluation.campus import campus_sequence
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir,
-                                      load_actors_gt)
+                                                 load_actors_gt)
+from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, infer, prepare, shelf_openpose
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
-from mvpose_ros.core.inference.factors import FactorConfig
-from mvpose_ros.core.inference.hypotheses import SamplingConfig
-from mvpose_ros.core.association.matching import MatchingConfig
-from mvpose_ros.core.evaluation.offline import Prepared, Sequence2D, as_predictions, infer, prepare, shelf_openpose
-from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.inference.solver import StageConfig
-from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.evaluation.predictions import read_predictions, write_predictions
-from mvpose_ros.core.inference.window import TERMS, InferenceConfig
+from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.inference.window import TERMS
+from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig
+from mvpose_ros.core.timing import StageTimer
+from mvpose_ros.core.types import Sequence2D
 
 # The paper's ablation rows (its "all terms" is data + temporal + collision).
 ABLATION = (('data only', ('data',)), ('+temporal', ('data', 'temp')), ('+collision', ('data', 'col')),
@@ -46,44 +43,33 @@ def _terms(text: str) -> tuple[str, ...]:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    d = StageConfig().to_params()
     p = argparse.ArgumentParser(prog='mvpose-eval', description=__doc__.split('\n')[0])
     p.add_argument('dataset', choices=('shelf', 'campus'))
     p.add_argument('--data-root', help='folder holding data/ and models/ (default: $MVPOSE_DATA_ROOT or ../shared)')
-    p.add_argument('--terms', type=_terms, default=('data', 'temp', 'col'),
-                   help='CRF terms, comma separated from data,temp,col,limb (default: data,temp,col)')
-    p.add_argument('--window', type=int, help='sliding window length in frames (default: whole clip)')
-    p.add_argument('--lag', type=int, default=7, help='output lag in frames with --window (default: 7)')
-    p.add_argument('--iterations', type=int, default=5, help='BP iterations (paper: 5)')
-    p.add_argument('--slide-iterations', type=int, default=1,
-                   help='with --window: warm-start each slide from the last with this many iterations '
-                        '(default: 1; 0: re-solve every window from scratch with --iterations)')
-    p.add_argument('--hypotheses', type=int, default=64, help='hypotheses M per joint (paper: 64)')
-    p.add_argument('--bp-hypotheses', type=int, default=16,
-                   help='hypotheses kept per joint inside BP, best data term first (0: all M)')
-    p.add_argument('--head-model', choices=HEAD_MODELS, default='anatomical')
+    p.add_argument('--terms', type=_terms, default=tuple(d['terms']),
+                   help=f'CRF terms, comma separated from {",".join(TERMS)} (default: {",".join(d["terms"])})')
+    p.add_argument('--window', type=int, default=0,
+                   help='sliding window length in frames (default: 0, the whole clip at once, as the paper)')
+    p.add_argument('--lag', type=int, default=d['lag'], help=f'{SOLVER_PARAMETERS["lag"]}, with --window')
+    p.add_argument('--iterations', type=int, default=d['iterations'], help=SOLVER_PARAMETERS['iterations'])
+    p.add_argument('--slide-iterations', type=int, default=d['slide_iterations'],
+                   help=f'with --window: {SOLVER_PARAMETERS["slide_iterations"]}')
+    p.add_argument('--hypotheses', type=int, default=d['hypotheses'], help=SOLVER_PARAMETERS['hypotheses'])
+    p.add_argument('--bp-hypotheses', type=int, default=d['bp_hypotheses'], help=SOLVER_PARAMETERS['bp_hypotheses'])
+    p.add_argument('--head-model', choices=HEAD_MODELS, default=d['head_model'])
     p.add_argument('--heatmap-stride', type=float, default=OpenPoseDetectorConfig.stride,
-                   help='heatmap cell size in pixels (default: 4; the ROS graph config uses 8)')
-    p.add_argument('--match-distance', type=float, default=MatchingConfig.max_distance,
+                   help='heatmap cell size in pixels (the ROS graph config uses 8)')
+    p.add_argument('--match-distance', type=float, default=d['match_distance'],
                    help='cross-view matching threshold, metres of mean ray distance')
-    p.add_argument('--collision-centre', type=float, default=FactorConfig.collision_centre)
-    p.add_argument('--collision-width', type=float, default=FactorConfig.collision_width)
-    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--collision-centre', type=float, default=d['collision_centre'])
+    p.add_argument('--collision-width', type=float, default=d['collision_width'])
+    p.add_argument('--seed', type=int, default=d['seed'])
     p.add_argument('--predictions', type=Path, help='write the predictions here (JSON lines)')
     p.add_argument('--score', type=Path, help='only score this predictions file')
     p.add_argument('--no-ablation', action='store_true', help='skip the ablation table')
     p.add_argument('--campus-dir', type=Path, help='a full CampusSeq1 folder (campus only)')
     return p
-
-
-def _stage_config(args: argparse.Namespace) -> StageConfig:
-    factors = FactorConfig(collision_centre=args.collision_centre, collision_width=args.collision_width)
-    inference = InferenceConfig(terms=args.terms, window=args.window, lag=args.lag if args.window else 0,
-                                iterations=args.iterations, bp_hypotheses=args.bp_hypotheses or None,
-                                slide_iterations=(args.slide_iterations or None) if args.window else None,
-                                factors=factors)
-    return StageConfig(association=AssociationConfig(matching=MatchingConfig(max_distance=args.match_distance)),
-                       sampling=SamplingConfig(hypotheses=args.hypotheses), inference=inference,
-                       head_model=args.head_model, seed=args.seed)
 
 
 def _summary(ev) -> str:
@@ -94,7 +80,7 @@ def _summary(ev) -> str:
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
-    config = _stage_config(args)
+    config = StageConfig.from_params(vars(args))
     if args.dataset == 'shelf':
         gt = load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', SHELF_TEST_FRAMES)
         actors, reference = SHELF_ACTORS, PAPER_SHELF_PCP
@@ -113,14 +99,14 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if args.campus_dir is None:
             print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
-        config = replace(config, head_model=head_model)
+        config = replace(config, solver=replace(config.solver, head_model=head_model))
     prepared = prepare(seq, config)
     bp_timer = StageTimer()
-    results = infer(prepared, config.inference, config.head_model, bp_timer)
+    results = infer(prepared, config.solver.inference, config.solver.head_model, bp_timer)
     ev = evaluate(as_predictions(results), gt, actors)
     mode = f'window {args.window}, lag {args.lag}' if args.window else 'whole clip'
     print(f'{args.dataset}: {len(seq.frames)} frames, {len(seq.cameras)} cameras, terms {",".join(args.terms)}, '
-          f'{mode}, M={args.hypotheses}, head model {config.head_model}', file=out)
+          f'{mode}, M={args.hypotheses}, head model {config.solver.head_model}', file=out)
     print(format_table(ev, reference), file=out)
     print(_summary(ev), file=out)
     if args.dataset == 'campus':
@@ -152,7 +138,7 @@ def _print_ablation(prepared: Prepared, config: StageConfig, gt, actors: Sequenc
     header = f'{"terms":22s} ' + ' '.join(f'A{a + 1:d} str  A{a + 1:d} len' for a in actors)
     print(header + '   avg-fw str/len   avg-act str/len' + ('   paper A1/A2/A3' if paper else ''), file=out)
     for name, terms in ABLATION:
-        results = infer(prepared, replace(config.inference, terms=terms), config.head_model)
+        results = infer(prepared, replace(config.solver.inference, terms=terms), config.solver.head_model)
         ev = evaluate(as_predictions(results), gt, actors)
         cells = ' '.join(f'{ev.pcp("strict", a):6.2f} {ev.pcp("lenient", a):6.2f}' for a in actors)
         row = (f'{name:22s} {cells}   {ev.frame_weighted("strict"):6.2f}/{ev.frame_weighted("lenient"):6.2f}'

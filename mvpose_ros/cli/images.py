@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence, TextIO
 
@@ -22,17 +23,16 @@ import cv2
 import numpy as np
 
 from msg_adapters.markers import person_colour
-from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.geometry.body import HEAD_MODELS, NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
 from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.evaluation.overlay import overlay
-from mvpose_ros.core.inference.solver import Inference3D, StageConfig
+from mvpose_ros.core.stage import StageConfig, Stage3D
 from mvpose_ros.core.evaluation.predictions import frame_line
-from mvpose_ros.core.inference.window import FrameResult, InferenceConfig
+from mvpose_ros.core.types import FrameResult
 
 PROG = 'mvpose-images'
 DEFAULTS = OnnxDetectorConfig(model_dir=Path())
@@ -64,10 +64,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _read_images(paths: Sequence[Path], cameras: Sequence[Camera]) -> list[np.ndarray]:
+def _rig_and_images(calibration: Path, paths: Sequence[Path]) -> tuple[list[Camera], list[np.ndarray]]:
+    """The calibrated cameras, each at the size of its image (the calibration does not record
+    it), and the images."""
+    images = [read_image(path) for path in paths]
+    height, width = images[0].shape[:2]
+    cameras = load_rig(calibration, width, height)
     if len(paths) != len(cameras):
         raise ValueError(f'--images: {len(paths)} images for {len(cameras)} calibrated cameras')
-    return [read_image(path, cam) for path, cam in zip(paths, cameras)]
+    return [replace(cam, width=im.shape[1], height=im.shape[0]) for cam, im in zip(cameras, images)], images
 
 
 def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
@@ -89,8 +94,7 @@ def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
-    cameras = load_rig(args.calibration)
-    images = _read_images(args.images, cameras)
+    cameras, images = _rig_and_images(args.calibration, args.images)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
                                                    input_size=args.input_size, stride=args.stride, ears=args.ears))
@@ -105,11 +109,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         print(f'  cam{c}: {t.people} people; MultiPose {1e3 * t.multipose:6.1f} ms, EfficientPose '
               f'{t.people} crops {1e3 * t.efficientpose:6.1f} ms, total {1e3 * t.total:6.1f} ms', file=out)
     detected = time.perf_counter()
-    observations = Associator(cameras, AssociationConfig()).update(args.frame, people)
-    stage = Inference3D(cameras, StageConfig(inference=InferenceConfig(window=None, lag=0, bp_hypotheses=16),
-                                             head_model=args.head_model))
-    results = stage.push(args.frame, [(o.person_id, o.views) for o in observations]) + stage.flush()
-    result = results[0] if results else FrameResult(args.frame, [], np.zeros((0, 14, 3)))
+    stage = Stage3D(cameras, StageConfig.from_params({'window': 0, 'head_model': args.head_model}))
+    results = stage.push(args.frame, people) + stage.flush()
+    result = results[0] if results else FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)))
     end = time.perf_counter()
     print(f'frame: 2D detection {1e3 * (detected - start):.0f} ms ({len(cameras)} cameras), association and 3D '
           f'{1e3 * (end - detected):.0f} ms, total {1e3 * (end - start):.0f} ms; '

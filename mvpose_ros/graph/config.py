@@ -15,6 +15,8 @@ from typing import Mapping, Sequence, get_type_hints
 
 import yaml
 
+from mvpose_ros.topics import BUNDLES, OPENPOSE, PEOPLE2D, SKELETONS, camera_namespace, camera_topic
+
 RUNNER_SECTION = 'mvpose_graph'
 PARAMS_KEY = 'ros__parameters'
 NODE_PACKAGE = 'mvpose_ros.nodes'
@@ -107,15 +109,19 @@ def graph_settings(path: str | Path) -> GraphSettings:
         raise ValueError(f'{path}: {RUNNER_SECTION}: {exc}') from None
 
 
-def graph_nodes(cameras: int, bag: str, rate: float, data_root: str | None = None, loops: int = 1) -> list[NodeSpec]:
+def graph_nodes(cameras: int, bag: str, rate: float, data_root: str | None = None, loops: int = 1,
+                start_topic: str = '') -> list[NodeSpec]:
     """The Shelf graph in start order: a heatmap_detector per camera (namespace cam{c}),
     association, bp_solver, then bag_player (`loops` passes; the runner expects one output per
-    stamp of every pass)."""
+    stamp of every pass; with `start_topic`, it plays once a message comes there)."""
     data = {'data_root': data_root} if data_root is not None else {}
-    return [*(NodeSpec('heatmap_detector', f'cam{c}', {'camera': c, **data}) for c in range(cameras)),
+    player: dict[str, bool | int | float | str] = {'bag': bag, 'rate': float(rate), 'loops': int(loops)}
+    if start_topic:
+        player['start_topic'] = start_topic
+    return [*(NodeSpec('heatmap_detector', camera_namespace(c), {'camera': c, **data}) for c in range(cameras)),
             NodeSpec('association', '', dict(data)),
             NodeSpec('bp_solver', '', dict(data)),
-            NodeSpec('bag_player', '', {'bag': bag, 'rate': float(rate), 'loops': int(loops)})]
+            NodeSpec('bag_player', '', player)]
 
 
 def _ros_value(value: bool | int | float | str) -> str:
@@ -150,15 +156,15 @@ def detector_backend(params: Mapping[str, Mapping[str, object]]) -> str:
     return backends.pop() if backends else 'openpose'
 
 
-def expected_connections(cameras: int, input_topic: str = 'openpose') -> dict[str, Sequence[str]]:
-    """Topic -> endpoints ('pub', 'sub') that must exist before the player may start; each
-    detector reads /cam<c>/<input_topic>."""
+def expected_connections(cameras: int, input_topic: str = OPENPOSE) -> dict[str, Sequence[str]]:
+    """Topic (relative to the rig's namespace) -> endpoints ('pub', 'sub') that must exist before
+    the player may start; each detector reads cam<c>/<input_topic>."""
     topics: dict[str, Sequence[str]] = {}
     for c in range(cameras):
-        topics[f'/cam{c}/{input_topic}'] = ('sub',)
-        topics[f'/cam{c}/people2d'] = ('pub', 'sub')
-    topics['/people/bundles'] = ('pub', 'sub')
-    topics['/skeletons'] = ('pub',)
+        topics[camera_topic(c, input_topic)] = ('sub',)
+        topics[camera_topic(c, PEOPLE2D)] = ('pub', 'sub')
+    topics[BUNDLES] = ('pub', 'sub')
+    topics[SKELETONS] = ('pub',)
     return topics
 
 

@@ -1,26 +1,34 @@
-"""Resident memory of the graph's processes over a run, for soak runs: is any node growing?"""
+"""Resident memory of processes (Linux /proc), and its log over a soak run: is any node growing?"""
 from __future__ import annotations
 
+import resource
 from dataclasses import dataclass, field
 from typing import Mapping
 
 
-def resident_bytes(pid: int) -> int | None:
-    """Resident set size of process pid (Linux /proc), None when it is gone or unreadable."""
+def rss_kib(pid: int | None = None) -> int:
+    """Current resident set size (VmRSS) in KiB of process `pid`; None = this process.
+
+    Where /proc cannot be read, this process falls back to its peak so far (ru_maxrss); another
+    process that is gone, a zombie or unreadable is a ProcessLookupError.
+    """
+    path = '/proc/self/status' if pid is None else f'/proc/{int(pid)}/status'
     try:
-        with open(f'/proc/{pid}/status', encoding='ascii') as f:
+        with open(path, encoding='ascii') as f:
             for line in f:
                 if line.startswith('VmRSS:'):
-                    return int(line.split()[1]) * 1024
+                    return int(line.split()[1])
     except (OSError, ValueError, IndexError):
-        return None
-    return None
+        pass
+    if pid is None:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    raise ProcessLookupError(f'no resident size for process {pid}')
 
 
 @dataclass
 class MemoryLog:
-    """Per process, its resident size when the first `baseline_after` outputs had arrived (the
-    first loop of a soak: caches and DDS buffers are warm by then), the largest and the last."""
+    """Per process, its resident size (bytes) when the first `baseline_after` outputs had arrived
+    (the first loop of a soak: caches and DDS buffers are warm by then), the largest and the last."""
 
     baseline_after: int
     baseline: dict[str, int] = field(default_factory=dict)
@@ -30,8 +38,9 @@ class MemoryLog:
     def sample(self, pids: Mapping[str, int], outputs: int) -> None:
         """Record every live process's size; outputs: frames output so far."""
         for name, pid in pids.items():
-            rss = resident_bytes(pid)
-            if rss is None:
+            try:
+                rss = rss_kib(pid) * 1024
+            except ProcessLookupError:
                 continue
             self.last[name] = rss
             self.peak[name] = max(rss, self.peak.get(name, 0))

@@ -1,6 +1,6 @@
 """The association node: gathers every camera's 2D people of a stamp, tracks them per camera,
 matches them across views and publishes the people seen by at least two cameras, each with a
-stable 3D id, as one bundle message per stamp (/people/bundles, PointCloud2 encoding C).
+stable 3D id, as one bundle message per stamp (people/bundles, PointCloud2 encoding C).
 
 A camera missing from a stamp is waited for at most `sync_timeout` seconds; the frame then goes
 on without it (logged). Every stamp that arrives yields exactly one bundle message, empty when
@@ -17,39 +17,41 @@ from std_msgs.msg import Header
 
 from msg_adapters.people_msg import bundles_to_msg, msg_to_people
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
-from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.association.matching import MatchingConfig
+from mvpose_ros import topics
+from mvpose_ros.core.association.associator import Associator
 from mvpose_ros.core.association.stamp_sync import StampSync, SyncedFrame
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, StageConfig, parameter_specs
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
 
 EXPIRE_PERIOD_S = 0.05
 
 
 class AssociationNode(Node):
-    """/cam<c>/people2d of every camera in, /people/bundles out."""
+    """cam<c>/people2d of every camera in, people/bundles out (names relative: see topics)."""
 
     def __init__(self) -> None:
         super().__init__('association')
-        defaults = AssociationConfig()
         p = declare(self, [
-            *rig_parameters('data/shelf/calibration/calibration_shelf.json'),
+            *rig_parameters(),
             ('sync_timeout', 0.5, 's to wait for a camera missing from a stamp before going on without it'),
-            ('track_iou', defaults.track_iou, 'per-camera tracking: minimum box IoU (paper: 0.7)'),
-            ('match_distance', defaults.matching.max_distance,
-             'cross-view matching: maximum mean ray-to-ray distance between two views of a person, metres'),
-            ('frame_rate', 25.0, 'frames per second of the stamp timeline (frame = stamp * rate)'),
+            *parameter_specs(ASSOCIATION_PARAMETERS),
+            ('frame_rate', FRAME_RATE, 'frames per second of the stamp timeline (frame = stamp * rate)'),
         ])
         self._cameras = load_rig_parameter(p)
-        if not (p['sync_timeout'] > 0 and p['frame_rate'] > 0 and p['match_distance'] > 0):
-            raise StartupError('parameters sync_timeout, frame_rate, match_distance: must be > 0')
+        if not (p['sync_timeout'] > 0 and p['frame_rate'] > 0):
+            raise StartupError('parameters sync_timeout, frame_rate: must be > 0')
+        try:
+            config = StageConfig.from_params(p).association
+        except ValueError as exc:
+            raise StartupError(f'parameters: {exc}') from None
         self._rate = p['frame_rate']
-        config = AssociationConfig(track_iou=p['track_iou'],
-                                   matching=MatchingConfig(max_distance=p['match_distance']))
         self._associator = Associator(self._cameras, config)
         self._sync = StampSync(len(self._cameras), p['sync_timeout'])
-        self._publisher = self.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+        self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
         for c in range(len(self._cameras)):
-            self.create_subscription(PointCloud2, f'/cam{c}/people2d', partial(self._on_people, c), DATA_QOS)
+            self.create_subscription(PointCloud2, topics.camera_topic(c, topics.PEOPLE2D), partial(self._on_people, c),
+                                     DATA_QOS)
         self.create_timer(EXPIRE_PERIOD_S, self._on_timer)
         self._last_frame: int | None = None
         self.get_logger().info(f'{len(self._cameras)} cameras, sync timeout {p["sync_timeout"]} s')

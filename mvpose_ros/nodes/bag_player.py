@@ -5,6 +5,16 @@ times `rate` (wall-clock paced from the first stamp) or, with rate 0, as fast as
 up: at most `max_in_flight` frames ahead of the last stamp seen on `ack_topic`. Messages go out
 as the bag's CDR bytes; for loop k >= 1 only the header stamp bytes are rewritten (pacing and
 stamp arithmetic: mvpose_ros.bags.replay). Optionally publishes /clock with the bag stamp.
+
+Topics are published relative (the bag's '/cam0/openpose' as 'cam0/openpose'), so a namespace
+(`-r __ns:=/rig1`) moves the whole input. Nothing goes out before the readers are there: the player
+waits until each camera's detector input (openpose, else image_raw) has a matched reader and every
+reader visible in the ROS graph on any of its topics has matched its writer (up to
+`wait_subscribers` s, then it plays anyway with a warning). A writer's match does not mean the
+reader has matched it too, and a volatile reader drops what a writer sends before that: a reader
+that must not miss the first frames (a recorder) makes the player wait for it with `start_topic`:
+the player then also waits for one message there (reliable, transient local: START_QOS), which the
+recorder publishes once its own readers have matched the player's writers.
 """
 from __future__ import annotations
 
@@ -20,17 +30,35 @@ from rclpy.duration import Duration
 from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Empty
 
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import (NS, Frame, InFlight, due_s, group_frames, header_stamp_ns, looped,
-                                   with_header_stamp)
+                                    with_header_stamp)
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, run
+from mvpose_ros.topics import IMAGE, OPENPOSE, SKELETONS
+
 LOG_EVERY = 100  # frames between progress lines
 ACK_TIMEOUT_S = 5.0  # at the end, wait this long for subscribers to confirm receipt
 _POLL_S = 0.05  # subscriber polling period while waiting to start
+# The start signal (parameter start_topic): latched, so it arrives whenever the reader matches.
+START_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                       history=HistoryPolicy.KEEP_LAST, depth=1)
+
+
+def relative(topic: str) -> str:
+    """A bag's topic name as the player publishes it: '/cam0/openpose' -> 'cam0/openpose'."""
+    return topic.lstrip('/')
+
+
+def _camera_input(topic: str, name: str) -> bool:
+    """Whether `topic` ('cam<c>/<name>', relative) is a camera's `name` topic."""
+    head, _, tail = relative(topic).partition('/')
+    return head.startswith('cam') and head[3:].isdigit() and tail == name
 
 
 def _message_class(msgtype: str) -> Any:
@@ -67,8 +95,11 @@ class BagPlayerNode(Node):
             ('topics', Parameter.Type.STRING_ARRAY, ParameterType.PARAMETER_STRING_ARRAY,
              'topics to play; empty = all'),
             ('wait_subscribers', 10.0, None,
-             's to wait for a subscriber on every /cam*/openpose (else /cam*/image_raw) topic'),
-            ('ack_topic', '/skeletons', string, 'downstream output whose stamps release frames when rate is 0'),
+             's to wait for a matched reader on every cam*/openpose (else cam*/image_raw) topic and for '
+             'every visible reader to match'),
+            ('start_topic', '', string,
+             'if set, also wait for a message there (std_msgs/Empty, reliable, transient local) before playing'),
+            ('ack_topic', SKELETONS, string, 'downstream output whose stamps release frames when rate is 0'),
             ('max_in_flight', 16, None,
              'rate 0: at most this many frames published but not yet seen on ack_topic'),
         )
@@ -94,13 +125,14 @@ class BagPlayerNode(Node):
             raise StartupError('parameter ack_topic: required with rate 0')
 
         summary = bag_summary(self._bag)
-        wanted = list(p['topics'] or [])
-        unknown = sorted(set(wanted) - set(summary.topics))
+        in_bag = {relative(t): t for t in summary.topics}
+        wanted = [relative(t) for t in p['topics'] or []]
+        unknown = sorted(set(wanted) - set(in_bag))
         if unknown:
             raise StartupError(f'parameter topics: {", ".join(unknown)} not in {self._bag} '
                                f'(it has {", ".join(summary.topics)})')
-        self._topics = wanted or list(summary.topics)
-        self._pubs = {t: self.create_publisher(_message_class(summary.topics[t][0]), t, DATA_QOS)
+        self._topics = [in_bag[t] for t in wanted] if wanted else list(summary.topics)
+        self._pubs = {t: self.create_publisher(_message_class(summary.topics[t][0]), relative(t), DATA_QOS)
                       for t in self._topics}
         self._stamped = {t: has_header(summary.topics[t][0]) for t in self._topics}
         self._clock_pub = self.create_publisher(ClockMsg, '/clock', DATA_QOS) if p['clock'] else None
@@ -108,9 +140,13 @@ class BagPlayerNode(Node):
             self.create_subscription(PointCloud2, p['ack_topic'], self._on_ack, DATA_QOS, raw=True)
 
         # Start when the 2D stage listens: detections if the bag has them, else images.
-        inputs = [t for t in self._topics if t.startswith('/cam') and t.endswith('/openpose')]
-        self._awaited = inputs or [t for t in self._topics if t.startswith('/cam') and t.endswith('/image_raw')]
-        self._wait_until = time.monotonic() + p['wait_subscribers']
+        inputs = [t for t in self._topics if _camera_input(t, OPENPOSE)]
+        self._awaited = inputs or [t for t in self._topics if _camera_input(t, IMAGE)]
+        self._wait_s = p['wait_subscribers']
+        self._wait_until = time.monotonic() + self._wait_s
+        self._started = not p['start_topic']
+        if not self._started:
+            self.create_subscription(Empty, p['start_topic'], self._on_start, START_QOS)
 
         self._frames = looped(lambda: group_frames(read_bag(self._bag, self._topics)), self._loops)
         self._next = None  # the (loop, offset, frame) to publish next
@@ -122,13 +158,31 @@ class BagPlayerNode(Node):
                                f'playing {len(self._topics)} at rate {self._rate:g}, loops {self._loops}')
         self._timer = self.create_timer(_POLL_S, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
+    def _unmatched(self) -> list[str]:
+        """Topics still waiting for readers: an awaited input without a matched reader, or a topic
+        with fewer matched readers than the ROS graph shows."""
+        out = []
+        for topic, pub in self._pubs.items():
+            count = pub.get_subscription_count()
+            if count < max(1 if topic in self._awaited else 0, self.count_subscribers(pub.topic_name)):
+                out.append(pub.topic_name)
+        return out
+
+    def _on_start(self, msg: Empty) -> None:
+        if not self._started:
+            self._started = True
+            self._wait_until = time.monotonic() + self._wait_s  # the readers' wait starts now
+            self.get_logger().info('start signal received')
+
     def _on_timer(self) -> None:
         if not self._playing:
-            idle = [t for t in self._awaited if self._pubs[t].get_subscription_count() == 0]
+            if not self._started:
+                return
+            idle = self._unmatched()
             if idle and time.monotonic() < self._wait_until:
                 return
             if idle:
-                self.get_logger().warning(f'no subscriber on {", ".join(idle)}; playing anyway')
+                self.get_logger().warning(f'readers not all matched on {", ".join(idle)}; playing anyway')
             self._playing = True
             self._start = time.monotonic()
             if not self._advance():

@@ -1,8 +1,8 @@
 """The bp_solver node: per-person 3D hypotheses from the bundles' heatmaps and sliding-window
 belief propagation; publishes every frame's 3D skeletons `lag` frames after it arrives.
 
-Out: /skeletons (PointCloud2 encoding D, frame world: one record per person joint, empty when
-nobody is seen) and /skeletons/markers (MarkerArray for RViz), both with the input frame's
+In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame world: one record per person
+joint, empty when nobody is seen) and skeletons/markers (MarkerArray for RViz), both with the input frame's
 stamp. Every bundle message yields exactly one skeleton message, but for a late one (a frame not
 after the last one taken: a duplicate, or out of order), which is logged and dropped. A gap in
 the frame numbers breaks the temporal chains. With no input for `idle_flush` seconds (the end of
@@ -23,10 +23,12 @@ from msg_adapters.markers import skeleton_markers
 from msg_adapters.people_msg import msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
-from mvpose_ros.core.geometry.body import HEAD_MODELS
-from mvpose_ros.core.inference.hypotheses import SamplingConfig
-from mvpose_ros.core.inference.solver import Inference3D, StageConfig
-from mvpose_ros.core.inference.window import TERMS, FrameResult, InferenceConfig
+from mvpose_ros import topics
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.inference.solver import Inference3D
+from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, parameter_specs
+from mvpose_ros.core.types import FrameResult
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
 
 IDLE_CHECK_S = 0.1
@@ -34,48 +36,36 @@ REPORT_EVERY = 100  # frames between timing lines
 
 
 class BpSolverNode(Node):
-    """/people/bundles in, /skeletons and /skeletons/markers out."""
+    """people/bundles in, skeletons and skeletons/markers out (names relative: see topics)."""
 
     def __init__(self) -> None:
         super().__init__('bp_solver')
         p = declare(self, [
-            *rig_parameters('data/shelf/calibration/calibration_shelf.json'),
-            ('window', 15, 'frames in the sliding window'),
-            ('lag', 7, 'frames between a frame arriving and its output (< window)'),
-            ('iterations', 5, 'BP iterations when a window is solved from scratch (paper: 5)'),
-            ('slide_iterations', 1, 'iterations per new frame, warm-started from the last slide (0: re-solve)'),
-            ('hypotheses', 64, 'hypotheses M per joint (paper: 64)'),
-            ('bp_hypotheses', 16, 'hypotheses kept per joint inside BP, best data term first (0: all)'),
-            ('terms', ['data', 'temp', 'col'], f'CRF terms, from {", ".join(TERMS)}'),
-            ('head_model', 'anatomical', f'head and neck from the detected face: {", ".join(HEAD_MODELS)}'),
-            ('seed', 0, 'seed of the hypothesis sampling'),
-            ('frame_rate', 25.0, 'frames per second of the stamp timeline (frame = stamp * rate)'),
+            *rig_parameters(),
+            *parameter_specs(SOLVER_PARAMETERS),
+            ('frame_rate', FRAME_RATE, 'frames per second of the stamp timeline (frame = stamp * rate)'),
             ('idle_flush', 1.0, 's without input after which every pending frame is output'),
         ])
         cameras = load_rig_parameter(p)
-        if p['head_model'] not in HEAD_MODELS:
-            raise StartupError(f'parameter head_model: {p["head_model"]!r} is not one of {", ".join(HEAD_MODELS)}')
         if not (p['frame_rate'] > 0 and p['idle_flush'] > 0):
             raise StartupError('parameters frame_rate, idle_flush: must be > 0')
         try:
-            inference = InferenceConfig(terms=tuple(p['terms']), window=p['window'], lag=p['lag'],
-                                        iterations=p['iterations'], bp_hypotheses=p['bp_hypotheses'] or None,
-                                        slide_iterations=p['slide_iterations'] or None)
-            config = StageConfig(sampling=SamplingConfig(hypotheses=p['hypotheses']), inference=inference,
-                                 head_model=p['head_model'], seed=p['seed'])
+            config = StageConfig.from_params(p)
         except ValueError as exc:
             raise StartupError(f'parameters: {exc}') from None
+        if config.solver.inference.window is None:
+            raise StartupError('parameter window: must be >= 1 (0, the whole clip, is for offline runs)')
         self._n_cameras = len(cameras)
         self._rate = p['frame_rate']
         self._idle = p['idle_flush']
-        self._inference = Inference3D(cameras, config)
+        self._inference = Inference3D(cameras, config.solver)
         self._stamps: dict[int, Time] = {}  # frames pushed, not yet output
         self._last_frame: int | None = None  # the last frame pushed
         self._last_input = time.monotonic()
         self._frames_out = 0
-        self._skeletons = self.create_publisher(PointCloud2, '/skeletons', DATA_QOS)
-        self._markers = self.create_publisher(MarkerArray, '/skeletons/markers', DATA_QOS)
-        self.create_subscription(PointCloud2, '/people/bundles', self._on_bundles, DATA_QOS)
+        self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
+        self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
+        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS)
         self.create_timer(IDLE_CHECK_S, self._on_timer)
         self.get_logger().info(f'window {p["window"]}, lag {p["lag"]}, terms {",".join(p["terms"])}, '
                                f'M={p["hypotheses"]}, {len(cameras)} cameras')
@@ -99,7 +89,7 @@ class BpSolverNode(Node):
         except ValueError as exc:
             self.get_logger().error(f'bundles stamp {stamp_ns(msg.header.stamp)} ns (frame {frame}): {exc}; '
                                     f'published with no people')
-            self._publish(FrameResult(frame, [], np.zeros((0, 14, 3))), msg.header.stamp)
+            self._publish(FrameResult(frame, [], np.zeros((0, NUM_JOINTS, 3))), msg.header.stamp)
             return
         self._stamps[frame] = msg.header.stamp
         for result in results:

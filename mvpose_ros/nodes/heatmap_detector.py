@@ -61,7 +61,7 @@ class HeatmapDetectorNode(Node):
             ('heatmap_floor', onnx.heatmap_floor, "onnx: heatmap cells below this fraction of their map's peak are 0"),
             ('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
              'needs them)'),
-            *rig_parameters('data/shelf/calibration/calibration_shelf.json'),
+            *rig_parameters(),
         ])
         if p['backend'] not in BACKENDS:
             raise StartupError(f'parameter backend: {p["backend"]!r} is not one of {", ".join(BACKENDS)}')

@@ -14,7 +14,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from mvpose_ros.core.geometry.camera import Camera, load_rig
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.evaluation.datasets import IMAGE_SIZES, calibration_path, data_root
 
 # Reliable and keep-all: a node that falls behind queues frames (and in the end slows its
 # publishers down) rather than dropping them; no frame may be lost silently.
@@ -44,20 +44,25 @@ def declare(node: Node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:
     return {name: node.get_parameter(name).value for name, *_ in specs}
 
 
-def rig_parameters(default_calibration: str) -> list[ParameterSpec]:
+def rig_parameters() -> list[ParameterSpec]:
+    """The parameters naming the rig: its calibration and image size (Shelf's by default)."""
+    width, height = IMAGE_SIZES['shelf']
     return [
         ('data_root', '', "folder holding data/ and models/ ('' = $MVPOSE_DATA_ROOT or ../shared)"),
-        ('calibration', default_calibration, 'calibration json (Shelf layout); relative paths are under data_root'),
+        ('calibration', str(calibration_path('shelf')),
+         'calibration json (Shelf layout); relative paths are under data_root'),
+        ('image_width', width, "the calibrated cameras' image width, pixels"),
+        ('image_height', height, "the calibrated cameras' image height, pixels"),
     ]
 
 
 def load_rig_parameter(values: dict[str, Any]) -> list[Camera]:
-    """The rig named by the `calibration` and `data_root` parameter values."""
+    """The rig named by the `calibration`, `image_width`, `image_height` and `data_root` values."""
     path = Path(values['calibration'])
     try:
         if not path.is_absolute():
             path = data_root(values['data_root'] or None) / path
-        return load_rig(path)
+        return load_rig(path, values['image_width'], values['image_height'])
     except (OSError, ValueError, KeyError) as exc:
         raise StartupError(f'parameter calibration: {" ".join(str(exc).split())}') from None
 

@@ -13,7 +13,7 @@ import numpy as np
 from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
 from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, cluster_views
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker
 
 
@@ -25,6 +25,12 @@ class AssociationConfig:
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     max_jump: float = 0.5
     max_age: int = 25
+
+    def __post_init__(self) -> None:
+        if not 0 < self.track_iou <= 1:
+            raise ValueError(f'track_iou must be in (0, 1], got {self.track_iou}')
+        if not (self.max_jump > 0 and self.max_age >= 0):
+            raise ValueError(f'max_jump must be > 0 and max_age >= 0, got {self.max_jump}, {self.max_age}')
 
 
 @dataclass

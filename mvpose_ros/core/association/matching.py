@@ -13,7 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.geometry.camera import Camera, ray_ray_distance
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 
 @dataclass(frozen=True)
@@ -23,6 +23,12 @@ class MatchingConfig:
     max_distance: float = 0.15
     min_shared: int = 4
     min_score: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not self.max_distance > 0:
+            raise ValueError(f'match_distance must be > 0, got {self.max_distance}')
+        if self.min_shared < 1:
+            raise ValueError(f'min_shared must be >= 1, got {self.min_shared}')
 
 
 def view_distance(cam_a: Camera, people_a: Sequence[Person2D], cam_b: Camera, people_b: Sequence[Person2D],

@@ -6,7 +6,7 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:

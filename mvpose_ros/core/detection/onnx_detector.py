@@ -28,8 +28,8 @@ from mvpose_ros.core.geometry.body import COCO17_NAMES, L_EAR, NUM_INFERENCE_JOI
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap
 from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
 from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
-                                         load_session)
-from mvpose_ros.core.person2d import Person2D
+                                                   load_session)
+from mvpose_ros.core.types import Person2D
 
 MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
 # EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])

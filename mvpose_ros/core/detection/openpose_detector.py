@@ -10,7 +10,8 @@ from mvpose_ros.core.geometry.body import BODY25_INFERENCE_JOINTS, INFERENCE_MIR
 from mvpose_ros.core.detection.grouping import group_body25
 from mvpose_ros.core.heatmap import render_heatmaps
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
+
 
 @dataclass
 class OpenPoseDetectorConfig:

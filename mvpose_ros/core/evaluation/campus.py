@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, to_inference
-from mvpose_ros.core.geometry.camera import Camera, load_rig
-from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation.offline import Sequence2D
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, NUM_JOINTS, to_inference
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, GroundTruth, dataset_cameras, dataset_dir,
+                                                 load_actors_gt)
+from mvpose_ros.core.types import Person2D, Sequence2D
 
 DETECTIONS_FILE = 'pred_campus_maskrcnn_hrnet_coco.pkl'
 STRIDE, SIGMA = 2.0, 3.0  # px; Campus images are 360x288
@@ -34,9 +34,10 @@ def oracle_people(cameras: list[Camera], poses: np.ndarray) -> list[list[Person2
         people = []
         for pose in poses[np.isfinite(poses).all(axis=(1, 2))]:
             kp = np.zeros((NUM_INFERENCE_JOINTS, 3))
-            kp[:14, :2] = cam.project(pose)
-            inside = (kp[:14, 0] >= 0) & (kp[:14, 0] < cam.width) & (kp[:14, 1] >= 0) & (kp[:14, 1] < cam.height)
-            kp[:14, 2] = inside
+            kp[:NUM_JOINTS, :2] = cam.project(pose)
+            u, v = kp[:NUM_JOINTS, 0], kp[:NUM_JOINTS, 1]
+            inside = (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)
+            kp[:NUM_JOINTS, 2] = inside
             if inside.sum() >= 4:
                 people.append(Person2D.from_keypoints(kp, STRIDE, SIGMA))
         out.append(people)
@@ -47,7 +48,7 @@ def campus_sequence(root: str | None, campus_dir: Path | None) -> tuple[Sequence
     """The sequence, its ground truth and the head model its keypoints need."""
     if campus_dir is None:
         campus = dataset_dir('campus', root)
-        cameras = load_rig(campus / 'calibration' / 'calibration_campus.json')
+        cameras = dataset_cameras('campus', root)
         gt = load_actors_gt(campus / 'mmpose_subset' / 'actorsGT.mat')
         people = [oracle_people(cameras, poses) for poses in gt.poses]
         return Sequence2D(cameras, [int(f) for f in gt.frames], people), gt, 'direct'
@@ -56,7 +57,7 @@ def campus_sequence(root: str | None, campus_dir: Path | None) -> tuple[Sequence
         if not (campus_dir / name).is_file():
             raise FileNotFoundError(f'{campus_dir / name}: missing (a CampusSeq1 folder needs actorsGT.mat, '
                                     f'calibration_campus.json and {DETECTIONS_FILE})')
-    cameras = load_rig(campus_dir / 'calibration_campus.json')
+    cameras = dataset_cameras('campus', calibration=campus_dir / 'calibration_campus.json')
     gt = load_actors_gt(campus_dir / 'actorsGT.mat', CAMPUS_TEST_FRAMES)
     with open(campus_dir / DETECTIONS_FILE, 'rb') as f:
         detections = pickle.load(f)

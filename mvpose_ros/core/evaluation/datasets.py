@@ -14,6 +14,9 @@ from typing import Sequence
 import numpy as np
 import scipy.io
 
+from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+
 DATA_ROOT_ENV = 'MVPOSE_DATA_ROOT'
 
 SHELF_TEST_FRAMES = range(300, 601)
@@ -23,8 +26,7 @@ CAMPUS_ACTORS = (0, 1, 2)
 
 # (width, height) in pixels; the calibration json files do not record it.
 IMAGE_SIZES = {'shelf': (1032, 776), 'campus': (360, 288)}
-
-N_JOINTS = 14
+FRAME_RATE = 25.0  # Hz, both datasets; frame f is stamped f / FRAME_RATE s in the bags
 
 
 def data_root(override: str | None = None) -> Path:
@@ -54,6 +56,27 @@ def data_root(override: str | None = None) -> Path:
 def dataset_dir(name: str, root: str | None = None) -> Path:
     """`<data root>/data/<name>`, e.g. dataset_dir('shelf')."""
     return data_root(root) / 'data' / name
+
+
+def calibration_path(name: str) -> Path:
+    """The calibration json of dataset `name` ('shelf' or 'campus'), relative to the data root."""
+    return Path('data') / name / 'calibration' / f'calibration_{name}.json'
+
+
+def calibration_file(name: str, root: str | None = None) -> Path:
+    """The calibration json of dataset `name` in the shared data."""
+    return data_root(root) / calibration_path(name)
+
+
+def dataset_cameras(name: str, root: str | None = None, calibration: str | Path | None = None) -> list[Camera]:
+    """The cameras of dataset `name` at its image size, from its shared calibration or from
+    `calibration` (e.g. a CampusSeq1 folder's copy)."""
+    return load_rig(calibration or calibration_file(name, root), *IMAGE_SIZES[name])
+
+
+def shelf_cameras(root: str | None = None) -> list[Camera]:
+    """The five Shelf cameras."""
+    return dataset_cameras('shelf', root)
 
 
 @dataclass
@@ -86,7 +109,7 @@ def _cells(mat_path: str | Path, key: str, frames: Sequence[int] | None) -> tupl
 def load_actors_gt(mat_path: str | Path, frames: Sequence[int] | None = None) -> GroundTruth:
     """3D ground truth of every actor in `mat_path` at `frames` (all frames when None)."""
     idx, actors = _cells(mat_path, 'actor3D', frames)
-    poses = np.full((idx.size, len(actors), N_JOINTS, 3), np.nan)
+    poses = np.full((idx.size, len(actors), NUM_JOINTS, 3), np.nan)
     for a, cells in enumerate(actors):
         here = np.array([c.size > 0 for c in cells], dtype=bool)
         if here.any():
@@ -102,7 +125,7 @@ def load_actors_gt_2d(mat_path: str | Path, frames: Sequence[int] | None = None)
     """
     idx, actors = _cells(mat_path, 'actor2D', frames)
     n_cams = max((cell.size for cells in actors for cell in cells), default=0)
-    uv = np.full((idx.size, len(actors), n_cams, N_JOINTS, 2), np.nan)
+    uv = np.full((idx.size, len(actors), n_cams, NUM_JOINTS, 2), np.nan)
     for a, cells in enumerate(actors):
         for c in range(n_cams):
             views = [cell.ravel()[c] if cell.size > c else np.empty(0) for cell in cells]

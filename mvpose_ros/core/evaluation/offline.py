@@ -7,31 +7,21 @@ costs only the BP part again.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
-from mvpose_ros.core.geometry.camera import Camera, load_rig
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
-from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.person2d import Person2D
-from mvpose_ros.core.inference.solver import StageConfig, person_frames
+from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
+from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.inference.solver import person_frames
+from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
+from mvpose_ros.core.stage import Stage3D, StageConfig
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.association.associator import Associator
-from mvpose_ros.core.inference.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
-
-
-@dataclass
-class Sequence2D:
-    """Per frame, per camera, the 2D people (None where a camera has no data)."""
-
-    cameras: list[Camera]
-    frames: list[int]
-    people: list[list[list[Person2D] | None]]
-    seconds: dict[str, float] = field(default_factory=dict)
+from mvpose_ros.core.types import FrameResult, PersonFrame, Sequence2D
 
 
 @dataclass
@@ -43,31 +33,42 @@ class Prepared:
     timer: StageTimer
 
 
-def shelf_openpose(root: str | None, detector: OpenPoseDetectorConfig,
-                   frames: Sequence[int] = SHELF_TEST_FRAMES) -> Sequence2D:
-    """The Shelf test frames' 2D people from the shared OpenPose BODY25 output."""
-    shelf = dataset_dir('shelf', root)
-    cameras = load_rig(shelf / 'calibration' / 'calibration_shelf.json')
-    raw = [read_body25(shelf / 'openpose_body25' / f'{c}.txt', cam.width, cam.height)
-           for c, cam in enumerate(cameras)]
+GROUPING = 'grouping and heatmaps'  # the step that turns OpenPose output into 2D people
+
+
+def shelf_openpose_raw(root: str | None,
+                       n_cameras: int | None = None) -> tuple[list[Camera], list[list[OpenPoseFrame]]]:
+    """The first n_cameras Shelf cameras (all when None) and, per camera, the OpenPose BODY25
+    output of every test frame (SHELF_TEST_FRAMES order)."""
+    cameras = shelf_cameras(root)[:n_cameras]
+    openpose = dataset_dir('shelf', root) / 'openpose_body25'
+    return cameras, [read_body25(openpose / f'{c}.txt', cam.width, cam.height) for c, cam in enumerate(cameras)]
+
+
+def detect_sequence(cameras: Sequence[Camera], raw: Sequence[Sequence[OpenPoseFrame]], frames: Sequence[int],
+                    detector: OpenPoseDetectorConfig) -> Sequence2D:
+    """The 2D people of `frames` (Shelf test frame numbers) from raw[c], camera c's OpenPose
+    output of every test frame; seconds[GROUPING] is the time of grouping alone."""
     first = SHELF_TEST_FRAMES.start
     t0 = time.perf_counter()
     people = [[detect_people(raw[c][f - first], detector) for c in range(len(cameras))] for f in frames]
-    return Sequence2D(cameras, list(frames), people, {'grouping and heatmaps': time.perf_counter() - t0})
+    return Sequence2D(list(cameras), list(frames), people, {GROUPING: time.perf_counter() - t0})
+
+
+def shelf_openpose(root: str | None, detector: OpenPoseDetectorConfig, frames: Sequence[int] = SHELF_TEST_FRAMES,
+                   n_cameras: int | None = None) -> Sequence2D:
+    """The Shelf test frames' 2D people from the shared OpenPose BODY25 output, of the first
+    n_cameras cameras (all when None)."""
+    cameras, raw = shelf_openpose_raw(root, n_cameras)
+    return detect_sequence(cameras, raw, frames, detector)
 
 
 def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
     """Association, hypotheses and data term of every frame, in order."""
-    associator = Associator(seq.cameras, config.association)
-    timer = StageTimer()
-    out = []
-    for frame, people in zip(seq.frames, seq.people):
-        t0 = time.perf_counter()
-        observations = associator.update(frame, people)
-        timer.add('association', t0)
-        out.append(person_frames(seq.cameras, [(obs.person_id, obs.views) for obs in observations], frame,
-                                 config, timer))
-    return Prepared(list(seq.frames), out, timer)
+    stage = Stage3D(seq.cameras, config)
+    out = [person_frames(seq.cameras, stage.associate(frame, people), frame, config.solver, stage.timer)
+           for frame, people in zip(seq.frames, seq.people)]
+    return Prepared(list(seq.frames), out, stage.timer)
 
 
 def infer(prepared: Prepared, inference: InferenceConfig, head_model: str,
@@ -88,4 +89,3 @@ def infer(prepared: Prepared, inference: InferenceConfig, head_model: str,
 def as_predictions(results: Sequence[FrameResult]) -> dict[int, np.ndarray]:
     """Frame -> (P, 14, 3), the form evaluation.evaluate takes."""
     return {r.frame: r.joints for r in results}
-

@@ -9,7 +9,7 @@ import numpy as np
 
 from mvpose_ros.core.geometry.body import BONES, NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Person2D
 
 DETECTION_BGR = (255, 255, 255)
 _SHIFT = 4  # cv2 sub-pixel drawing: coordinates in 1/16 px

@@ -12,14 +12,15 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import N_JOINTS, GroundTruth
+from mvpose_ros.core.evaluation.datasets import GroundTruth
+from mvpose_ros.core.geometry.body import NUM_JOINTS
 
 FORMS = ('strict', 'lenient')
 GROUPS = ('Head', 'Torso', 'Upper arm', 'Forearm', 'Thigh', 'Shin', 'All')
 ALPHA = 0.5
 
 # Joint 14 is a virtual hip centre (mean of the hips), the torso's lower end.
-_HIP_CENTRE = N_JOINTS
+_HIP_CENTRE = NUM_JOINTS
 LIMBS = np.array([(0, 1), (1, 2), (3, 4), (4, 5), (6, 7), (7, 8), (9, 10), (10, 11), (12, 13),
                   (_HIP_CENTRE, 12)])
 LIMB_GROUPS = ('Shin', 'Thigh', 'Thigh', 'Shin', 'Forearm', 'Upper arm', 'Upper arm', 'Forearm',
@@ -91,11 +92,11 @@ def _with_hip_centre(poses: np.ndarray) -> np.ndarray:
 
 def _padded(predictions: Mapping[int, np.ndarray], frames: np.ndarray) -> np.ndarray:
     """(F, P, 14, 3) predictions per frame, NaN-padded to the largest count P (>= 1)."""
-    empty = np.empty((0, N_JOINTS, 3))
-    per_frame = [np.asarray(predictions.get(int(f), empty), dtype=float).reshape(-1, N_JOINTS, 3)
+    empty = np.empty((0, NUM_JOINTS, 3))
+    per_frame = [np.asarray(predictions.get(int(f), empty), dtype=float).reshape(-1, NUM_JOINTS, 3)
                  for f in frames]
     counts = np.array([len(p) for p in per_frame], dtype=int)
-    out = np.full((len(frames), max(int(counts.max(initial=0)), 1), N_JOINTS, 3), np.nan)
+    out = np.full((len(frames), max(int(counts.max(initial=0)), 1), NUM_JOINTS, 3), np.nan)
     if counts.sum():
         starts = np.repeat(np.cumsum(counts) - counts, counts)
         out[np.repeat(np.arange(len(frames)), counts), np.arange(counts.sum()) - starts] = \

@@ -12,9 +12,8 @@ from typing import IO, Iterable
 
 import numpy as np
 
-from mvpose_ros.core.inference.window import FrameResult
-
-N_JOINTS = 14
+from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.types import FrameResult
 
 
 def frame_line(result: FrameResult) -> str:
@@ -42,7 +41,7 @@ def read_predictions(path: str | Path) -> dict[int, np.ndarray]:
                 continue
             try:
                 rec = json.loads(line)
-                joints = np.array([p['joints'] for p in rec['people']], dtype=float).reshape(-1, N_JOINTS, 3)
+                joints = np.array([p['joints'] for p in rec['people']], dtype=float).reshape(-1, NUM_JOINTS, 3)
                 frame = int(rec['frame'])
             except (ValueError, KeyError, TypeError) as exc:
                 raise ValueError(f'{path}:{n}: not a predictions line ({exc})') from None

@@ -111,9 +111,10 @@ def to_inference(keypoints: np.ndarray, fmt: str) -> np.ndarray:
     out[..., index < 0, :] = (np.nan, np.nan, 0.0)
     if fmt == 'coco17':
         names = FORMAT_NAMES[fmt]
-        r, l = keypoints[..., names.index('r_shoulder'), :], keypoints[..., names.index('l_shoulder'), :]
-        out[..., NECK, :2] = 0.5 * (r[..., :2] + l[..., :2])
-        out[..., NECK, 2] = np.minimum(r[..., 2], l[..., 2])
+        right = keypoints[..., names.index('r_shoulder'), :]
+        left = keypoints[..., names.index('l_shoulder'), :]
+        out[..., NECK, :2] = 0.5 * (right[..., :2] + left[..., :2])
+        out[..., NECK, 2] = np.minimum(right[..., 2], left[..., 2])
     out[~(out[..., 2] > 0)] = (np.nan, np.nan, 0.0)  # one convention for 'missing' downstream
     return out
 

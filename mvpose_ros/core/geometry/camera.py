@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-from mvpose_ros.core.evaluation.datasets import IMAGE_SIZES
 
 # Newton steps for undistortion; quadratic convergence makes this exact to float precision for
 # any lens whose distortion map is monotone over the image.
@@ -134,17 +133,16 @@ class Camera:
         return xy
 
 
-def _image_size(path: Path, width: int | None, height: int | None,
-                cx: float, cy: float) -> tuple[int, int]:
-    """Explicit size, else the dataset named in the path, else twice the principal point."""
-    if width is not None and height is not None:
-        return width, height
-    parts = [path.name.lower(), *(p.lower() for p in reversed(path.parent.parts))]
-    for part in parts:
-        for dataset, size in IMAGE_SIZES.items():
-            if dataset in part:
-                return width or size[0], height or size[1]
-    return width or round(2 * cx), height or round(2 * cy)
+def _image_size(path: Path, width: int | None, height: int | None) -> tuple[int, int]:
+    """The image size (pixels) given by the caller: calibration files do not record it, and it
+    is never guessed (from a file name or the principal point). ValueError naming the file when
+    either is missing or below 1."""
+    if width is None or height is None:
+        raise ValueError(f'{path}: image size unknown: the calibration does not record it, so give width and '
+                         f'height (got {width}, {height})')
+    if not (int(width) >= 1 and int(height) >= 1):
+        raise ValueError(f'{path}: image size must be at least 1x1 pixels, got {width}x{height}')
+    return int(width), int(height)
 
 
 def _load_json(path: Path, width: int | None, height: int | None) -> list[Camera]:
@@ -191,7 +189,7 @@ def _camera_from_json(path: Path, name: str, e: object, width: int | None, heigh
     k = np.pad(k, (0, 3 - k.size))
     p = np.pad(p, (0, 2 - p.size))
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    w, h = _image_size(path, width, height, cx, cy)
+    w, h = _image_size(path, width, height)
     return Camera(name, K, R, -R @ centre, np.array([k[0], k[1], p[0], p[1], k[2]]), w, h)
 
 
@@ -200,7 +198,7 @@ def _load_projections(files: list[Path], width: int | None, height: int | None) 
     for f in files:
         P = np.array(f.read_text().replace(',', ' ').split(), dtype=float).reshape(3, 4)
         cam = Camera.from_projection(f.name[1:-4], P, 0, 0)
-        w, h = _image_size(f, width, height, cam.K[0, 2], cam.K[1, 2])
+        w, h = _image_size(f, width, height)
         cams.append(dataclasses.replace(cam, width=w, height=h))
     return cams
 
@@ -210,7 +208,8 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
 
     path: a calibration json (Shelf layout: {cam: {R, T (mm, centre in world), fx, fy, cx, cy,
     k, p}}) or a folder holding one (calibration_*.json, preferred: it carries distortion) or
-    P{i}.txt projection matrices (world metres -> pixels).
+    P{i}.txt projection matrices (world metres -> pixels). width, height: the image size in
+    pixels, required (these files do not record it): a ValueError naming the file without it.
     """
     path = Path(path)
     if path.is_file():

@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+
 @dataclass(frozen=True)
 class PairwiseGroup:
     """One type of within-frame pairwise factor.

@@ -66,7 +66,8 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
     first_view = np.concatenate([[0], np.cumsum([len(v) for v in people])]).astype(np.intp)
-    draws = [(rng.random((n_joints, m)), rng.random((n_joints, m, 2))) for rng, views in zip(rngs, people) for _ in views]
+    draws = [(rng.random((n_joints, m)), rng.random((n_joints, m, 2)))
+             for rng, views in zip(rngs, people) for _ in views]
     if not draws:
         return []
     peaks = stack.peak()  # (V, J, 3)

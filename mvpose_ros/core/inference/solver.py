@@ -1,7 +1,7 @@
 """The solver half of the 3D stage: from associated people (an id and its views) to decoded
 3D skeletons: hypothesis sampling with the data term, sliding-window BP and the head model, with
-the time each step takes. The bp_solver node runs it; the offline evaluator calls the same
-person_frames and window (core.offline), after core.association.
+the time each step takes. The bp_solver node runs it (through core.stage); the offline evaluator
+calls the same person_frames and window (core.evaluation.offline).
 """
 from __future__ import annotations
 
@@ -11,30 +11,32 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.association.associator import AssociationConfig
-from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.geometry.body import BONES, HEAD_MODELS, SYMMETRIC_PAIRS, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import HeatmapStack
 from mvpose_ros.core.inference.hypotheses import SamplingConfig, sample_people
-from mvpose_ros.core.person2d import Person2D
+from mvpose_ros.core.types import Bundle, FrameResult, PersonFrame
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.inference.window import FrameResult, InferenceConfig, PersonFrame, SlidingWindow
+from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
 
 
 @dataclass(frozen=True)
-class StageConfig:
-    """Everything the 3D stage needs; head_model must match the one the 2D side used."""
+class SolverConfig:
+    """Everything the solver needs; head_model must match the one the 2D side used."""
 
-    association: AssociationConfig = field(default_factory=AssociationConfig)
     sampling: SamplingConfig = field(default_factory=SamplingConfig)
     inference: InferenceConfig = field(default_factory=InferenceConfig)
     head_model: str = 'anatomical'
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        if self.head_model not in HEAD_MODELS:
+            raise ValueError(f'head_model {self.head_model!r} is not one of {", ".join(HEAD_MODELS)}')
 
-def person_frames(cameras: Sequence[Camera], people: Sequence[tuple[int, dict[int, Person2D]]], frame: int,
-                  config: StageConfig, timer: StageTimer | None = None) -> list[PersonFrame]:
+
+def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: int,
+                  config: SolverConfig, timer: StageTimer | None = None) -> list[PersonFrame]:
     """Hypotheses and data term of each person of a frame (person id, camera index -> 2D
     person), all people batched; a person none of whose joints is seen twice is left out.
 
@@ -61,13 +63,13 @@ class Inference3D:
     """From associated people (id and views) of each frame to decoded 3D skeletons: sampling,
     data term, sliding-window BP and the head model. The bp_solver node runs this."""
 
-    def __init__(self, cameras: Sequence[Camera], config: StageConfig) -> None:
+    def __init__(self, cameras: Sequence[Camera], config: SolverConfig) -> None:
         self.cameras = list(cameras)
         self.config = config
         self.timer = StageTimer()
         self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), self.timer)
 
-    def push(self, frame: int, people: Sequence[tuple[int, dict[int, Person2D]]]) -> list[FrameResult]:
+    def push(self, frame: int, people: Sequence[Bundle]) -> list[FrameResult]:
         """people: (person id, camera index -> 2D person) of this frame; returns the frames due."""
         frames = person_frames(self.cameras, people, frame, self.config, self.timer)
         return [self._finish(r) for r in self.window.push(frame, frames)]

@@ -23,6 +23,7 @@ from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
 from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
+from mvpose_ros.core.types import FrameResult, PersonFrame
 
 TERMS = ('data', 'temp', 'col', 'limb')
 
@@ -39,8 +40,8 @@ class InferenceConfig:
     window: int | None = 15
     lag: int = 7
     iterations: int = 5
-    bp_hypotheses: int | None = None
-    slide_iterations: int | None = None
+    bp_hypotheses: int | None = 16
+    slide_iterations: int | None = 1
     factors: FactorConfig = field(default_factory=FactorConfig)
 
     def __post_init__(self) -> None:
@@ -49,26 +50,12 @@ class InferenceConfig:
             raise ValueError(f'terms must include data and come from {TERMS}, got {self.terms}')
         if self.window is not None and not 0 <= self.lag < self.window:
             raise ValueError(f'lag must be in [0, window), got lag={self.lag} window={self.window}')
+        if self.bp_hypotheses is not None and self.bp_hypotheses < 1:
+            raise ValueError(f'bp_hypotheses must be >= 1 or None, got {self.bp_hypotheses}')
+        if self.iterations < 1:
+            raise ValueError(f'iterations must be >= 1, got {self.iterations}')
         if self.slide_iterations is not None and self.slide_iterations < 1:
             raise ValueError(f'slide_iterations must be >= 1 or None, got {self.slide_iterations}')
-
-
-@dataclass
-class PersonFrame:
-    """One person's hypotheses (J, M, 3) and normalised data term (J, M) at one frame."""
-
-    person_id: int
-    hypotheses: np.ndarray
-    data: np.ndarray
-
-
-@dataclass
-class FrameResult:
-    """Decoded people of one frame: ids (P,) and joints (P, J, 3) metres."""
-
-    frame: int
-    person_ids: list[int]
-    joints: np.ndarray
 
 
 @dataclass

@@ -1,0 +1,182 @@
+"""Approximate-time synchronisation of N cameras' messages (the semantics of message_filters'
+ApproximateTime policy, which PyPI lacks, with a timeout so that a silent camera cannot stall the
+rig). A drop-in for stamp_sync.StampSync: the same add / expire / flush calls, released sets are
+SyncedFrames (with more fields), and with max_skew = 0 the sets are exactly StampSync's frames.
+
+Semantics (stamps are integer nanoseconds, times monotonic seconds passed in by the caller):
+
+- A *set* holds at most one message per camera, all with stamps within `max_skew` of each other.
+  It is formed around its *pivot*, the oldest message pending from any camera: every camera's
+  oldest pending message with a stamp in [pivot, pivot + max_skew] joins it (ties: all cameras
+  with the pivot's stamp are members). A set's stamp is its pivot's stamp, the earliest of its
+  members' stamps; set stamps strictly increase. Its `skew_ns` is the achieved skew, newest minus
+  oldest member stamp (0 <= skew_ns <= max_skew).
+- A set is released, in stamp order, as soon as every camera is decided: a member, or *moved past*
+  (it has delivered a stamp after pivot + max_skew: its messages arrive in stamp order, so none
+  in the window is coming), or *silent* (nothing from it for `timeout` s; a camera never heard
+  from counts as silent since the first message of all). An undecided camera is waited for at
+  most `timeout` s from the arrival of the set's first member; the set then goes without it.
+  Cameras not in a set are listed in `missing`.
+- Sets are numbered in release order from 0 (`index`): frames count sets, not stamp x rate.
+- Each message is used at most once. Dropped messages are counted per reason (`dropped`, and per
+  camera `dropped_by_camera`), never silently lost:
+  'late': a stamp at or before one its camera already passed: its own member's stamp, or the
+  window end of a set released without it (out of order, or a duplicate of a released one);
+  'duplicate': the camera's stamp is already pending; both raise ValueError from add() (as
+  StampSync does) so the caller can log it.
+  'unmatched': a set with fewer than `min_cameras` members is not released: its members are
+  dropped (and do not take a set index); 'overflow': more than `queue_size` messages pending from
+  one camera (e.g. a camera stamping far in the future): its oldest is dropped. These two happen
+  inside the release and are listed by take_drops().
+
+max_skew must cover the rig's stamp offsets plus their jitter (typically half a frame period, at
+most; the caller gives it): cameras offset by more than max_skew form separate sets.
+"""
+from __future__ import annotations
+
+import bisect
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+from mvpose_ros.core.association.stamp_sync import SyncedFrame
+
+REASONS = ('late', 'duplicate', 'unmatched', 'overflow')
+
+
+@dataclass
+class SyncedSet(SyncedFrame):
+    """A released set. stamp_ns: the earliest member stamp; items[c]: camera c's message or None
+    (missing); index: the set's number in release order, from 0; stamps[c]: camera c's own stamp
+    (ns) or None; skew_ns: newest minus oldest member stamp."""
+
+    index: int = 0
+    stamps: list[int | None] = field(default_factory=list)
+    skew_ns: int = 0
+
+
+@dataclass(frozen=True)
+class Drop:
+    """One dropped message: camera index, its stamp (ns) and why (one of REASONS)."""
+
+    camera: int
+    stamp_ns: int
+    reason: str
+
+
+@dataclass
+class _Message:
+    stamp: int
+    arrival: float
+    item: Any
+
+
+class ApproximateSync:
+    """Groups per-camera messages whose header stamps lie within max_skew (see the module)."""
+
+    def __init__(self, cameras: int, timeout: float, max_skew: float, min_cameras: int = 1,
+                 queue_size: int = 100) -> None:
+        """cameras: how many; timeout: seconds (> 0) a set waits for a camera and after which a
+        silent camera is left out; max_skew: seconds (>= 0) between a set's oldest and newest
+        stamps; min_cameras: smallest set released (smaller ones are dropped as 'unmatched');
+        queue_size: messages pending per camera before its oldest is dropped as 'overflow'."""
+        if cameras < 1 or not timeout > 0 or not max_skew >= 0 or not 1 <= min_cameras <= cameras \
+                or queue_size < 1:
+            raise ValueError(f'ApproximateSync needs cameras >= 1, timeout > 0, max_skew >= 0, '
+                             f'1 <= min_cameras <= cameras and queue_size >= 1, got {cameras}, {timeout}, '
+                             f'{max_skew}, {min_cameras}, {queue_size}')
+        self.cameras = cameras
+        self.timeout = float(timeout)
+        self.max_skew_ns = round(max_skew * 1e9)
+        self.min_cameras = min_cameras
+        self.queue_size = queue_size
+        self.sets = 0  # sets released so far (the next set's index)
+        self.dropped: Counter[str] = Counter()
+        self.dropped_by_camera: list[Counter[str]] = [Counter() for _ in range(cameras)]
+        self._pending: list[list[_Message]] = [[] for _ in range(cameras)]  # by stamp
+        self._newest: list[int | None] = [None] * cameras  # newest stamp seen per camera
+        self._floor: list[int | None] = [None] * cameras  # stamps <= this are late
+        self._heard: list[float | None] = [None] * cameras  # arrival of the last message
+        self._start: float | None = None  # arrival of the first message of all
+        self._drops: list[Drop] = []
+
+    def add(self, stamp_ns: int, camera: int, item: Any, now: float) -> list[SyncedSet]:
+        """Take camera's message stamped stamp_ns (now: monotonic seconds); returns the sets this
+        releases. ValueError for an unknown camera, and for a late or duplicate message (counted)."""
+        if not 0 <= camera < self.cameras:
+            raise ValueError(f'camera {camera} is not in 0..{self.cameras - 1}')
+        stamp_ns = int(stamp_ns)
+        floor = self._floor[camera]
+        if floor is not None and stamp_ns <= floor:
+            self._count(camera, 'late')
+            raise ValueError(f'camera {camera} stamp {stamp_ns} ns arrived after its set was released '
+                             f'(late: this camera is past {floor} ns)')
+        queue = self._pending[camera]
+        i = bisect.bisect_left([m.stamp for m in queue], stamp_ns)
+        if i < len(queue) and queue[i].stamp == stamp_ns:
+            self._count(camera, 'duplicate')
+            raise ValueError(f'camera {camera} delivered stamp {stamp_ns} ns twice (duplicate)')
+        queue.insert(i, _Message(stamp_ns, now, item))
+        if self._start is None:
+            self._start = now
+        self._heard[camera] = now
+        newest = self._newest[camera]
+        self._newest[camera] = stamp_ns if newest is None else max(newest, stamp_ns)
+        if len(queue) > self.queue_size:
+            oldest = queue.pop(0)
+            self._count(camera, 'overflow')
+            self._drops.append(Drop(camera, oldest.stamp, 'overflow'))
+        return self._release(now)
+
+    def expire(self, now: float) -> list[SyncedSet]:
+        """Sets released because a camera went silent or a wait ran out (call this periodically)."""
+        return self._release(now)
+
+    def flush(self) -> list[SyncedSet]:
+        """Release everything pending (end of stream), in stamp order."""
+        return self._release(float('inf'))
+
+    def take_drops(self) -> list[Drop]:
+        """The 'unmatched' and 'overflow' drops since the last call (add() raises for the others)."""
+        drops, self._drops = self._drops, []
+        return drops
+
+    def silent(self, now: float) -> list[int]:
+        """Cameras silent at `now`: nothing from them for timeout seconds (never heard from: since
+        the first message of all)."""
+        if self._start is None:
+            return []
+        return [c for c, heard in enumerate(self._heard)
+                if now - (self._start if heard is None else heard) >= self.timeout]
+
+    def _count(self, camera: int, reason: str) -> None:
+        self.dropped[reason] += 1
+        self.dropped_by_camera[camera][reason] += 1
+
+    def _release(self, now: float) -> list[SyncedSet]:
+        out: list[SyncedSet] = []
+        silent = set(self.silent(now))
+        while any(self._pending):
+            pivot = min(q[0].stamp for q in self._pending if q)
+            end = pivot + self.max_skew_ns
+            members = [c for c, q in enumerate(self._pending) if q and q[0].stamp <= end]
+            undecided = [c for c in range(self.cameras) if c not in members and c not in silent
+                         and not (self._newest[c] is not None and self._newest[c] > end)]
+            first_arrival = min(self._pending[c][0].arrival for c in members)
+            if undecided and now - first_arrival < self.timeout:
+                break
+            messages = {c: self._pending[c].pop(0) for c in members}
+            for c in range(self.cameras):
+                passed = messages[c].stamp if c in messages else end
+                self._floor[c] = passed if self._floor[c] is None else max(self._floor[c], passed)
+            if len(members) < self.min_cameras:
+                for c, m in messages.items():
+                    self._count(c, 'unmatched')
+                    self._drops.append(Drop(c, m.stamp, 'unmatched'))
+                continue
+            stamps = [messages[c].stamp if c in messages else None for c in range(self.cameras)]
+            items = [messages[c].item if c in messages else None for c in range(self.cameras)]
+            present = [s for s in stamps if s is not None]
+            out.append(SyncedSet(pivot, items, index=self.sets, stamps=stamps, skew_ns=max(present) - min(present)))
+            self.sets += 1
+        return out

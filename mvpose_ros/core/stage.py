@@ -1,0 +1,124 @@
+"""The whole 3D stage as one streaming object, and its configuration from flat parameters.
+
+`Stage3D` is "associate, bundle, solve": each frame's 2D people of every camera go in, decoded
+frames come out `lag` frames later. The offline evaluator, the benchmarks (one and two processes)
+and `mvpose-images` run it; the node graph runs the same two halves in the association and
+bp_solver nodes.
+
+`StageConfig.from_params` is the one translation from flat parameters (the nodes' ROS parameters,
+the command lines' options, a parameter file's section) to the configuration dataclasses; the
+defaults are the dataclasses' own and validation happens in their constructors.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping, Sequence
+
+from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.association.matching import MatchingConfig
+from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.inference.factors import FactorConfig
+from mvpose_ros.core.inference.hypotheses import SamplingConfig
+from mvpose_ros.core.inference.solver import Inference3D, SolverConfig
+from mvpose_ros.core.inference.window import TERMS, InferenceConfig
+from mvpose_ros.core.timing import StageTimer
+from mvpose_ros.core.types import Bundle, FrameResult, Person2D
+
+# Flat parameter name -> description. 0 stands for None where a setting can be off, since ROS
+# parameters have no None.
+SOLVER_PARAMETERS = {
+    'window': 'frames in the sliding window (0: the whole clip at once, offline only)',
+    'lag': 'frames between a frame arriving and its output (< window)',
+    'iterations': 'BP iterations when a window is solved from scratch (paper: 5)',
+    'slide_iterations': 'iterations per new frame, warm-started from the last slide (0: re-solve every window)',
+    'hypotheses': 'hypotheses M per joint (paper: 64)',
+    'bp_hypotheses': 'hypotheses kept per joint inside BP, best data term first (0: all M)',
+    'terms': f'CRF terms, from {", ".join(TERMS)}',
+    'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
+    'seed': 'seed of the hypothesis sampling',
+    'collision_centre': 'collision factor: sigmoid centre, metres between two joints',
+    'collision_width': 'collision factor: sigmoid width, metres',
+}
+ASSOCIATION_PARAMETERS = {
+    'track_iou': 'per-camera tracking: minimum box IoU (paper: 0.7)',
+    'match_distance': 'cross-view matching: maximum mean ray-to-ray distance between two views of a person, metres',
+}
+
+
+@dataclass(frozen=True)
+class StageConfig:
+    """The 3D stage: association, then the solver."""
+
+    association: AssociationConfig = field(default_factory=AssociationConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Any]) -> StageConfig:
+        """The configuration from flat parameters (names as in SOLVER_PARAMETERS and
+        ASSOCIATION_PARAMETERS; others are ignored, absent ones keep their defaults). ValueError
+        naming the problem when a value is invalid."""
+        d = {**cls().to_params(), **{k: v for k, v in params.items() if k in ALL_PARAMETERS}}
+        window = int(d['window']) or None
+        factors = replace(FactorConfig(), collision_centre=float(d['collision_centre']),
+                          collision_width=float(d['collision_width']))
+        inference = InferenceConfig(terms=tuple(d['terms']), window=window, lag=int(d['lag']),
+                                    iterations=int(d['iterations']), bp_hypotheses=int(d['bp_hypotheses']) or None,
+                                    slide_iterations=int(d['slide_iterations']) or None, factors=factors)
+        solver = SolverConfig(sampling=replace(SamplingConfig(), hypotheses=int(d['hypotheses'])),
+                              inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
+        association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
+                              matching=replace(MatchingConfig(), max_distance=float(d['match_distance'])))
+        return cls(association, solver)
+
+    def to_params(self) -> dict[str, Any]:
+        """The flat parameters of this configuration (the inverse of from_params)."""
+        inference, solver = self.solver.inference, self.solver
+        return {
+            'window': inference.window or 0, 'lag': inference.lag, 'iterations': inference.iterations,
+            'slide_iterations': inference.slide_iterations or 0, 'hypotheses': solver.sampling.hypotheses,
+            'bp_hypotheses': inference.bp_hypotheses or 0, 'terms': list(inference.terms),
+            'head_model': solver.head_model, 'seed': solver.seed,
+            'collision_centre': inference.factors.collision_centre,
+            'collision_width': inference.factors.collision_width,
+            'track_iou': self.association.track_iou, 'match_distance': self.association.matching.max_distance,
+        }
+
+
+ALL_PARAMETERS = {**SOLVER_PARAMETERS, **ASSOCIATION_PARAMETERS}
+
+
+def parameter_specs(names: Mapping[str, str]) -> list[tuple[str, Any, str]]:
+    """(name, default, description) of each named parameter, the defaults from StageConfig()."""
+    defaults = StageConfig().to_params()
+    return [(name, defaults[name], description) for name, description in names.items()]
+
+
+class Stage3D:
+    """Associate and solve, streaming: push each frame's 2D people of every camera, get the
+    decoded frames that are due. `timer` holds the time of every step ('association', then the
+    solver's)."""
+
+    def __init__(self, cameras: Sequence[Camera], config: StageConfig) -> None:
+        self.cameras = list(cameras)
+        self.config = config
+        self.associator = Associator(self.cameras, config.association)
+        self.solver = Inference3D(self.cameras, config.solver)
+        self.timer: StageTimer = self.solver.timer
+
+    def associate(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[Bundle]:
+        """The people seen by >= 2 cameras, each with its id and views; people[c] is camera c's 2D
+        people (None: no data from it)."""
+        t0 = time.perf_counter()
+        bundles = [(o.person_id, o.views) for o in self.associator.update(frame, people)]
+        self.timer.add('association', t0)
+        return bundles
+
+    def push(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[FrameResult]:
+        """Associate and solve one frame; returns the frames whose output is due."""
+        return self.solver.push(frame, self.associate(frame, people))
+
+    def flush(self) -> list[FrameResult]:
+        """Every frame not yet output (end of stream)."""
+        return self.solver.flush()

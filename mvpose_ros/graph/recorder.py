@@ -1,0 +1,244 @@
+"""The skeleton recorder: the node that keeps the graph's output, for the runner and on its own.
+
+`SkeletonRecorder` keeps the first skeletons message of every stamp, counts every message per
+stamp (duplicates), and records when (middleware receipt time, ns of the system clock, so queueing
+in its executor does not count) each stamp's camera 0 camera_info and skeletons arrived; it can
+also append every skeletons message to a predictions file as it comes and record the serialized
+size of every message the nodes publish. `mvpose-graph` runs one inside its own process.
+
+On its own (e.g. on the compute host of a split graph, or inside a network namespace):
+
+    python -m mvpose_ros.graph.recorder --bag bags/shelf --predictions out/p.jsonl --ready /tmp/ready \\
+        --stats /tmp/stats.json [--cameras 5] [--measure] [--start-topic bag_player/start]
+
+It waits until every endpoint the graph needs before playback is visible (graph.config
+expected_connections) and its own readers have matched their writers, then creates
+the --ready file (and, with --start-topic, lets a bag_player started with that start_topic play
+once its camera_info reader has matched the player's writer). Every skeletons message is appended
+to --predictions as it arrives, as a predictions line, duplicates included. It exits 0 once every
+input stamp of --bag has its output and --drain s have passed (to catch duplicates), 1 after
+--timeout s without a new output; --stats is written either way:
+
+    {"complete": bool, "bad": ["<stamp> ns: <why>", ...],
+     "topics": {"/cam0/people2d": [[<stamp ns>, <bytes>], ...], ...}}
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any, Mapping, Sequence, TextIO
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CameraInfo, PointCloud2
+from std_msgs.msg import Empty
+from visualization_msgs.msg import MarkerArray
+
+from msg_adapters.skeleton_msg import msg_to_skeletons
+from msg_adapters.stamp import frame_of_stamp, stamp_ns
+from mvpose_ros.bags.io import read_bag
+from mvpose_ros.bags.replay import FRAME_RATE, header_stamp_ns
+from mvpose_ros.core.evaluation.predictions import frame_line
+from mvpose_ros.core.inference.window import FrameResult
+from mvpose_ros.graph.config import expected_connections
+from mvpose_ros.nodes.bag_player import START_QOS
+from mvpose_ros.nodes.runtime import DATA_QOS
+from mvpose_ros.topics import BUNDLES, CAMERA_INFO, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS, camera_topic
+
+TIMING_TOPIC = camera_topic(0, CAMERA_INFO)  # a frame's latency is timed from its arrival here
+OUTPUT_TOPIC = SKELETONS
+START_TOPIC = 'bag_player/start'  # the player's start signal (its parameter start_topic)
+SPIN_S = 0.05
+
+
+def graph_topics(cameras: int) -> dict[str, Any]:
+    """Every topic the nodes publish -> its message class. Not the player's: a subscriber of
+    cam*/openpose other than the detectors would let the player start before they listen."""
+    topics: dict[str, Any] = {camera_topic(c, PEOPLE2D): PointCloud2 for c in range(cameras)}
+    return topics | {BUNDLES: PointCloud2, OUTPUT_TOPIC: PointCloud2, MARKERS: MarkerArray}
+
+
+class SkeletonRecorder(Node):
+    """Skeletons per stamp, their receipt times and camera 0's camera_info receipt times.
+
+    stream: a text file every skeletons message goes to as a predictions line (None: kept only);
+    measure_cameras: > 0 also records the size of every message the nodes of a graph with that
+    many cameras publish (`sizes`, by fully qualified topic name).
+    """
+
+    def __init__(self, name: str = 'skeleton_recorder', context: Context | None = None,
+                 frame_rate: float = FRAME_RATE, stream: TextIO | None = None, measure_cameras: int = 0) -> None:
+        super().__init__(name, context=context)
+        self.frame_rate = frame_rate
+        self.stream = stream
+        self.info_at: dict[int, int] = {}
+        self.outputs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.output_at: dict[int, int] = {}
+        self.received: Counter[int] = Counter()
+        self.bad: list[str] = []
+        self.last_activity = 0.0  # monotonic s of the last message, for stall timeouts
+        self.last_output = 0.0  # monotonic s of the last skeletons message
+        self.sizes: dict[str, list[tuple[int, int]]] = {}  # fully qualified topic -> (stamp ns, bytes)
+        self._gate: Publisher | None = None
+        self._info = self.create_subscription(CameraInfo, TIMING_TOPIC, self._on_info, DATA_QOS)
+        self._outputs = [self.create_subscription(PointCloud2, OUTPUT_TOPIC, self._on_skeletons, DATA_QOS,
+                                                  raw=True)]
+        for topic, msg_type in (graph_topics(measure_cameras) if measure_cameras > 0 else {}).items():
+            name = self.resolve_topic_name(topic)
+            self.sizes[name] = []
+            if topic != OUTPUT_TOPIC:
+                self._outputs.append(self.create_subscription(
+                    msg_type, topic, lambda cdr, t=name, m=msg_type: self._measure(t, m, cdr), DATA_QOS, raw=True))
+        self._output_name = self.resolve_topic_name(OUTPUT_TOPIC)
+
+    def _on_info(self, msg: CameraInfo, info: Any) -> None:
+        self.last_activity = time.monotonic()
+        self.info_at.setdefault(stamp_ns(msg.header.stamp), info['received_timestamp'])
+
+    def _measure(self, topic: str, msg_type: Any, cdr: bytes) -> None:
+        if msg_type is MarkerArray:  # no header of its own: the stamp of its first marker
+            markers = deserialize_message(cdr, MarkerArray).markers
+            stamp = stamp_ns(markers[0].header.stamp) if markers else -1
+        else:
+            stamp = header_stamp_ns(cdr)
+        self.sizes[topic].append((stamp, len(cdr)))
+
+    def _on_skeletons(self, cdr: bytes, info: Any) -> None:
+        self.last_activity = self.last_output = time.monotonic()
+        msg = deserialize_message(cdr, PointCloud2)
+        stamp = stamp_ns(msg.header.stamp)
+        if self._output_name in self.sizes:
+            self.sizes[self._output_name].append((stamp, len(cdr)))
+        self.received[stamp] += 1
+        try:
+            decoded = msg_to_skeletons(msg)
+        except ValueError as exc:
+            self.bad.append(f'{stamp} ns: {exc}')
+            return
+        if stamp not in self.outputs:
+            self.outputs[stamp] = decoded
+            self.output_at[stamp] = info['received_timestamp']
+        if self.stream is not None:
+            ids, joints = decoded
+            result = FrameResult(frame_of_stamp(msg.header.stamp, self.frame_rate), [int(i) for i in ids], joints)
+            self.stream.write(frame_line(result) + '\n')
+            self.stream.flush()
+
+    def missing_links(self, expected: Mapping[str, Sequence[str]]) -> list[str]:
+        """Expected endpoints not yet in the ROS graph, e.g. 'subscriber of /cam3/openpose'."""
+        count = {'pub': self.count_publishers, 'sub': self.count_subscribers}
+        word = {'pub': 'publisher', 'sub': 'subscriber'}
+        return [f'{word[end]} of {self.resolve_topic_name(topic)}' for topic, ends in expected.items()
+                for end in ends if count[end](topic) == 0]
+
+    def unmatched_outputs(self) -> list[str]:
+        """This node's readers of skeletons (and of every measured topic) that have not matched a
+        writer yet (bp_solver's, ...), by fully qualified name: once matched, a reader drops
+        nothing that writer sends."""
+        return [sub.topic_name for sub in self._outputs if sub.get_publisher_count() == 0]
+
+    def output_matched(self) -> bool:
+        """Whether every reader of `unmatched_outputs` has matched."""
+        return not self.unmatched_outputs()
+
+    def timing_matched(self) -> bool:
+        """Whether this node's camera_info reader has matched a writer (the player's)."""
+        return self._info.get_publisher_count() > 0
+
+    def open_gate(self, topic: str = START_TOPIC) -> None:
+        """Let a player waiting on `topic` (its start_topic) play: one latched message."""
+        if self._gate is None:
+            self._gate = self.create_publisher(Empty, topic, START_QOS)
+            self._gate.publish(Empty())
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of `python -m mvpose_ros.graph.recorder`."""
+    p = argparse.ArgumentParser(prog='python -m mvpose_ros.graph.recorder', description=__doc__.split('\n')[0])
+    p.add_argument('--bag', required=True, type=Path,
+                   help='the bag to be played: its camera 0 openpose stamps are the input')
+    p.add_argument('--predictions', required=True, type=Path, help='predictions file, written as outputs come')
+    p.add_argument('--ready', required=True, type=Path,
+                   help='created once every endpoint of the graph is visible and the output reader matched')
+    p.add_argument('--stats', required=True, type=Path, help='JSON summary written at the end')
+    p.add_argument('--cameras', type=int, default=5)
+    p.add_argument('--frame-rate', type=float, default=FRAME_RATE)
+    p.add_argument('--timeout', type=float, default=60.0,
+                   help='s without a new output (or before the graph is visible) before giving up')
+    p.add_argument('--drain', type=float, default=1.0, help='s to keep listening once every stamp has its output')
+    p.add_argument('--measure', action='store_true',
+                   help='also record the size of every message the nodes publish')
+    p.add_argument('--start-topic', default='',
+                   help="once ready, let a player with this start_topic play (e.g. 'bag_player/start')")
+    return p
+
+
+def _spin_until(executor: SingleThreadedExecutor, done, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            return False
+        executor.spin_once(timeout_sec=SPIN_S)
+    return True
+
+
+def record(args: argparse.Namespace) -> bool:
+    """Record until complete (True) or timed out (False)."""
+    wanted = {stamp for _, _, stamp, _ in read_bag(args.bag, ['/' + camera_topic(0, OPENPOSE)])}
+    expected = expected_connections(args.cameras)
+    rclpy.init()
+    stream = open(args.predictions, 'w', encoding='utf-8')
+    node = SkeletonRecorder(stream=stream, frame_rate=args.frame_rate,
+                            measure_cameras=args.cameras if args.measure else 0)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    complete = False
+    try:
+        if not _spin_until(executor, lambda: not node.missing_links(expected) and node.output_matched(), args.timeout):
+            missing = node.missing_links(expected) or [f'matched writer of {t}' for t in node.unmatched_outputs()]
+            print(f'graph not all visible after {args.timeout:g} s: no {", no ".join(missing)}', file=sys.stderr)
+            return False
+        args.ready.touch()
+        if args.start_topic:
+            if not _spin_until(executor, node.timing_matched, args.timeout):
+                print(f'no player on {node.resolve_topic_name(TIMING_TOPIC)} after {args.timeout:g} s', file=sys.stderr)
+                return False
+            node.open_gate(args.start_topic)
+        node.last_output = time.monotonic()
+        while not wanted <= node.outputs.keys():
+            if time.monotonic() - node.last_output > args.timeout:
+                print(f'no {OUTPUT_TOPIC} for {args.timeout:g} s; {len(wanted - node.outputs.keys())} of '
+                      f'{len(wanted)} stamps missing', file=sys.stderr)
+                return False
+            executor.spin_once(timeout_sec=SPIN_S)
+        complete = True
+        drain_until = time.monotonic() + args.drain
+        while time.monotonic() < drain_until:
+            executor.spin_once(timeout_sec=SPIN_S)
+        return True
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return False
+    finally:
+        stream.close()
+        args.stats.write_text(json.dumps({'complete': complete, 'bad': node.bad, 'topics': node.sizes}))
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the recorder; exit code 0 when every input stamp got its output."""
+    return 0 if record(build_parser().parse_args(argv)) else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,178 @@
+"""Running the node graph on a bag: start the node processes, wait until the graph is connected
+and the recorder's readers have matched, play, collect every output, stop everything.
+
+The order makes start-up lossless for what the runner sees: the player is started only once every
+endpoint the graph needs is visible and the recorder's skeletons reader has matched bp_solver's
+writer; the player then waits until its writers have matched their readers (the detectors', the
+recorder's) and for the recorder's start signal, which the recorder sends once its camera_info
+reader has matched the player's writer. So the first frame's camera_info and skeletons arrive.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+from rclpy.executors import SingleThreadedExecutor
+
+from mvpose_ros.bags.io import read_bag
+from mvpose_ros.bags.replay import loop_offset_ns
+from mvpose_ros.core.evaluation.predictions import write_predictions
+from mvpose_ros.core.inference.window import FrameResult
+from mvpose_ros.graph.config import GraphSettings, NodeSpec, expected_connections, node_command
+from mvpose_ros.graph.memory import MemoryLog
+from mvpose_ros.graph.processes import Interrupted, ProcessGroup
+from mvpose_ros.graph.recorder import TIMING_TOPIC, SkeletonRecorder
+from mvpose_ros.graph.report import frame_of
+
+PLAYER = 'bag_player'
+SPIN_S = 0.05
+DRAIN_S = 0.25  # at most this long for camera infos still queued once every output has come
+# Node start-up (imports, calibration, models, DDS discovery, the player's wait for readers).
+STARTUP_TIMEOUT_S = 60.0
+LOG_TAIL = 15
+MEMORY_PERIOD_S = 1.0
+
+
+class GraphFailure(Exception):
+    """The graph cannot finish: `node` (a process name, or '' for the graph as a whole) and why."""
+
+    def __init__(self, node: str, reason: str) -> None:
+        super().__init__(reason)
+        self.node = node
+
+
+@dataclass
+class Outcome:
+    """How the run ended: the input stamps (ns, bag order), why it stopped early if it did (a
+    failure, a stall, or the signal that interrupted it), the end of the failed node's log, and
+    the nodes' memory."""
+
+    stamps: list[int]
+    memory: MemoryLog = field(default_factory=lambda: MemoryLog(0))
+    failure: GraphFailure | None = None
+    log_tail: str = ''
+    stalled: bool = False
+    interrupted: int | None = None
+
+
+def input_stamps(bag: Path, topic: str, loops: int = 1) -> list[int]:
+    """Header stamps (ns) of the frames the player sends: the log times of the bag's messages on
+    topic (camera 0's detector input, as named in the bag), moved on for each later loop as the
+    player does."""
+    stamps = [stamp for _, _, stamp, _ in read_bag(bag, [topic])]
+    if not stamps:
+        raise ValueError(f'{bag}: no {topic} messages')
+    return [s + loop_offset_ns(k, stamps[0], stamps[-1]) for k in range(loops) for s in stamps]
+
+
+def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str] = ()) -> None:
+    """GraphFailure for the first process that has exited, unless it is in `finished_ok` with code 0."""
+    for name, code in group.poll().items():
+        if not (name in finished_ok and code == 0):
+            raise GraphFailure(name, f'node {name} exited with code {code} (log: {group.log_path(name)})')
+
+
+def _spin_until(executor: SingleThreadedExecutor, group: ProcessGroup, done: Callable[[], bool],
+                why_not: Callable[[], str]) -> None:
+    """Spin until done(); GraphFailure on a crash, or after STARTUP_TIMEOUT_S with why_not()."""
+    deadline = time.monotonic() + STARTUP_TIMEOUT_S
+    while not done():
+        _check_crashes(group)
+        if time.monotonic() > deadline:
+            raise GraphFailure('', why_not())
+        executor.spin_once(timeout_sec=SPIN_S)
+
+
+def _wait_connected(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
+                    settings: GraphSettings, input_topic: str) -> None:
+    """Until every expected endpoint exists and the recorder's skeletons reader has matched."""
+    expected = expected_connections(settings.cameras, input_topic)
+
+    def why_not() -> str:
+        missing = node.missing_links(expected) or [f'matched publisher of {t}' for t in node.unmatched_outputs()]
+        return f'graph not connected after {STARTUP_TIMEOUT_S:g} s: no {", no ".join(missing)}'
+
+    _spin_until(executor, group, lambda: not node.missing_links(expected) and node.output_matched(), why_not)
+
+
+def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
+                  spec: NodeSpec, config: Path) -> None:
+    """Start the player; with a start_topic, let it play once the recorder's camera_info reader
+    has matched its writer."""
+    start_topic = str(spec.parameters.get('start_topic', ''))
+    group.start(spec.name, node_command(spec, config))
+    if start_topic:
+        _spin_until(executor, group, node.timing_matched,
+                    lambda: f'the player did not publish /{TIMING_TOPIC} within {STARTUP_TIMEOUT_S:g} s')
+        node.open_gate(start_topic)
+
+
+def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
+          stamps: Sequence[int], memory: MemoryLog) -> bool:
+    """Spin until every stamp has an output; True when it stopped because nothing happened for
+    `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
+    after the player's start while neither happened yet)."""
+    wanted = set(stamps)
+    started = time.monotonic()
+    player_done: float | None = None
+    sampled = 0.0
+    while not wanted <= node.outputs.keys():
+        executor.spin_once(timeout_sec=SPIN_S)
+        if time.monotonic() - sampled > MEMORY_PERIOD_S:
+            sampled = time.monotonic()
+            memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
+        _check_crashes(group, finished_ok=(PLAYER,))
+        if player_done is None and PLAYER in group.poll():
+            player_done = time.monotonic()
+        limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S
+        if time.monotonic() - max(started, player_done or 0.0, node.last_activity) > limit:
+            return True
+    # Camera infos of the last frames may still be queued behind their outputs.
+    deadline = time.monotonic() + DRAIN_S
+    while not wanted <= node.info_at.keys() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=SPIN_S)
+    return False
+
+
+def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], stamps: list[int],
+              log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
+              per_loop: int) -> Outcome:
+    """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
+    also after Ctrl-C (outcome.interrupted). input_topic: what each detector reads in its camera
+    namespace; per_loop: stamps in one pass of the bag (the memory baseline)."""
+    outcome = Outcome(stamps, MemoryLog(per_loop))
+    # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
+    env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
+    with ProcessGroup(log_dir, env) as group:
+        try:
+            for spec in nodes:
+                if spec.executable == PLAYER:
+                    _wait_connected(node, executor, group, settings, input_topic)
+                    _start_player(node, executor, group, spec, config)
+                else:
+                    group.start(spec.name, node_command(spec, config))
+            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory)
+        except GraphFailure as failure:
+            outcome.failure = failure
+        except Interrupted as exc:
+            outcome.interrupted = exc.signum
+        group.stop()
+        if outcome.failure is not None and outcome.failure.node:
+            outcome.log_tail = group.log_tail(outcome.failure.node, LOG_TAIL)
+    return outcome
+
+
+def save_predictions(stamps: Sequence[int], node: SkeletonRecorder, frame_rate: float, path: Path) -> int:
+    """Write the received frames of `stamps` in bag order; returns how many. Written beside and
+    renamed into place, so that an interruption never leaves a half-written file."""
+    results = [FrameResult(frame_of(s, frame_rate), [int(i) for i in node.outputs[s][0]], node.outputs[s][1])
+               for s in stamps if s in node.outputs]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + '.partial')
+    with open(partial, 'w', encoding='utf-8') as f:
+        n = write_predictions(results, f)
+    os.replace(partial, path)
+    return n

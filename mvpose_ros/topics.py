@@ -1,0 +1,28 @@
+"""The graph's topic names, defined once.
+
+Every name is relative, so a rig's whole graph runs in a namespace of its own
+(`--ros-args -r __ns:=/rig1`). A camera's topics live under its own namespace, `cam<c>` for
+rig camera c: the detector of camera c runs in that namespace and uses the bare names.
+"""
+from __future__ import annotations
+
+# per camera, relative to the camera's namespace
+OPENPOSE = 'openpose'  # raw OpenPose output (PointCloud2 encoding A)
+IMAGE = 'image_raw'  # sensor_msgs/Image
+CAMERA_INFO = 'camera_info'
+PEOPLE2D = 'people2d'  # 2D people with heatmaps (encoding B)
+
+# the rig's
+BUNDLES = 'people/bundles'  # associated people, every view (encoding C)
+SKELETONS = 'skeletons'  # 3D skeletons (encoding D)
+MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
+
+
+def camera_namespace(camera: int) -> str:
+    """The namespace of rig camera `camera`, relative: 'cam0', 'cam1', ..."""
+    return f'cam{camera}'
+
+
+def camera_topic(camera: int, name: str) -> str:
+    """A camera's topic relative to the rig's namespace, e.g. camera_topic(0, PEOPLE2D) = 'cam0/people2d'."""
+    return f'{camera_namespace(camera)}/{name}'

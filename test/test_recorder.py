@@ -1,0 +1,55 @@
+"""The skeleton recorder as a program of its own (`python -m mvpose_ros.graph.recorder`), on the
+fake graph of test_processes: ready once the graph is visible and its output reader matched, the
+player let go once its camera_info reader matched, every frame exactly once, sizes measured."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+from sensor_msgs.msg import PointCloud2
+
+from mvpose_ros.bags.io import write_bag
+from mvpose_ros.graph.processes import ProcessGroup
+from mvpose_ros.graph.recorder import START_TOPIC
+from ros_harness import ros_domain, ros_env
+from test_processes import FAKE_NODE
+
+CAMERAS = 2
+FRAMES = range(300, 320)
+
+
+def test_recorder_process_records_every_frame_of_a_gated_player(tmp_path, monkeypatch):
+    bag = tmp_path / 'bag'
+    write_bag(bag, [('/cam0/openpose', PointCloud2(), f * 1_000_000_000 // 25) for f in FRAMES])
+    script = tmp_path / 'fake_node.py'
+    script.write_text(FAKE_NODE)
+    (tmp_path / 'pids').mkdir()
+    ready, predictions, stats = tmp_path / 'ready', tmp_path / 'p.jsonl', tmp_path / 'stats.json'
+    with ros_domain(monkeypatch, profile=None) as domain:
+        env = ros_env(domain, profile=None, FAKE_CAMERAS=str(CAMERAS), FAKE_FRAMES=f'{FRAMES.start}:{FRAMES.stop}',
+                      FAKE_PIDS=str(tmp_path / 'pids'))
+        with ProcessGroup(tmp_path / 'logs', env) as group:
+            group.start('recorder', [sys.executable, '-m', 'mvpose_ros.graph.recorder', '--bag', str(bag),
+                                     '--predictions', str(predictions), '--ready', str(ready), '--stats', str(stats),
+                                     '--cameras', str(CAMERAS), '--timeout', '60', '--drain', '0.2', '--measure',
+                                     '--start-topic', START_TOPIC])
+            for role, ns in [*(('heatmap_detector', f'cam{c}') for c in range(CAMERAS)), ('association', ''),
+                             ('bp_solver', ''), ('bag_player', '')]:
+                group.start(f'{ns}/{role}' if ns else role,
+                            [sys.executable, str(script), role, START_TOPIC, '--ros-args',
+                             *(['-r', f'__ns:=/{ns}'] if ns else [])])
+            deadline = time.monotonic() + 90  # a bound for a failure only: the recorder's exit is the event
+            while 'recorder' not in group.poll() and time.monotonic() < deadline:
+                time.sleep(0.05)
+            code = group.poll().get('recorder')
+            log = group.log_tail('recorder', 20)
+    assert code == 0, log
+    assert ready.exists()
+    lines = [json.loads(line) for line in predictions.read_text().splitlines()]
+    assert [r['frame'] for r in lines] == list(FRAMES)  # each once, in order
+    assert all(r['people'][0]['id'] == 7 for r in lines)
+    summary = json.loads(stats.read_text())
+    assert summary['complete'] and summary['bad'] == []
+    assert len(summary['topics']['/skeletons']) == len(FRAMES)
+    assert [len(summary['topics'][f'/cam{c}/people2d']) for c in range(CAMERAS)] == [len(FRAMES)] * CAMERAS

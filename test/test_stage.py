@@ -1,0 +1,55 @@
+"""The 3D stage as one streaming object (Stage3D) over real Shelf frames, and its configuration
+from flat parameters (StageConfig.from_params)."""
+from __future__ import annotations
+
+import pytest
+
+from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
+from mvpose_ros.core.heatmap import HeatmapStack
+from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig, parameter_specs
+
+
+def test_a_frame_with_nobody_is_output_empty_and_the_others_go_on():
+    cameras, raw = shelf_openpose_raw(None)
+    stage = Stage3D(cameras, StageConfig.from_params({'window': 4, 'lag': 1}))
+    results = []
+    for k in range(10):
+        people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(cameras))]
+        bundles = stage.associate(300 + k, people)
+        results += stage.solver.push(300 + k, [] if k == 4 else bundles)  # frame 304: nobody seen
+    results += stage.flush()
+    assert [r.frame for r in results] == list(range(300, 310))
+    assert [len(r.person_ids) for r in results][4] == 0
+    assert all(len(r.person_ids) >= 2 for k, r in enumerate(results) if k != 4)
+    assert HeatmapStack.of([]).peak().shape == (0, 0, 3)
+    assert {'association', 'sampling', 'data term', 'bp'} <= set(stage.timer.seconds)
+
+
+def test_parameters_round_trip_and_defaults_are_the_dataclasses():
+    default = StageConfig()
+    assert StageConfig.from_params({}) == default
+    assert StageConfig.from_params(default.to_params()) == default
+    assert set(default.to_params()) == set(ALL_PARAMETERS)
+    assert [name for name, _, _ in parameter_specs(ALL_PARAMETERS)] == list(ALL_PARAMETERS)
+    changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
+                                       'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored'})
+    assert changed.solver.inference.window is None and changed.solver.inference.bp_hypotheses is None
+    assert changed.solver.inference.slide_iterations is None and changed.solver.sampling.hypotheses == 32
+    assert changed.solver.inference.terms == ('data', 'temp') and changed.association.matching.max_distance == 0.2
+    assert StageConfig.from_params(changed.to_params()) == changed
+
+
+@pytest.mark.parametrize('params, problem', [
+    ({'window': 6, 'lag': 6}, 'lag'),
+    ({'terms': ['temp']}, 'terms'),
+    ({'hypotheses': 0}, 'hypotheses'),
+    ({'head_model': 'big'}, 'head_model'),
+    ({'match_distance': 0.0}, 'match_distance'),
+    ({'track_iou': 1.5}, 'track_iou'),
+    ({'collision_width': -1.0}, 'collision_width'),
+    ({'iterations': 0}, 'iterations'),
+])
+def test_invalid_parameters_name_the_problem(params, problem):
+    with pytest.raises(ValueError, match=problem):
+        StageConfig.from_params(params)
