@@ -2,7 +2,8 @@
 
 Every name is relative, so a rig's whole graph runs in a namespace of its own
 (`--ros-args -r __ns:=/rig1`). A camera's topics live under its own namespace, `cam<c>` for
-rig camera c: the detector of camera c runs in that namespace and uses the bare names.
+rig camera c (or the camera's name in the rig file): the detector of a camera runs in that
+namespace and uses the bare names.
 """
 from __future__ import annotations
 
@@ -18,11 +19,12 @@ SKELETONS = 'skeletons'  # 3D skeletons (encoding D)
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
 
 
-def camera_namespace(camera: int) -> str:
-    """The namespace of rig camera `camera`, relative: 'cam0', 'cam1', ..."""
-    return f'cam{camera}'
+def camera_namespace(camera: int | str) -> str:
+    """The namespace of a rig camera, relative: its name in the rig file, or for an index c of a
+    calibration rig 'cam<c>' (the names such rigs get)."""
+    return camera if isinstance(camera, str) else f'cam{camera}'
 
 
-def camera_topic(camera: int, name: str) -> str:
+def camera_topic(camera: int | str, name: str) -> str:
     """A camera's topic relative to the rig's namespace, e.g. camera_topic(0, PEOPLE2D) = 'cam0/people2d'."""
     return f'{camera_namespace(camera)}/{name}'

@@ -6,9 +6,9 @@ S1. A set holds at most one message per camera, all within max_skew of each othe
     stamped in [pivot, pivot + max_skew]. The set's stamp is the pivot's (the earliest member);
     skew_ns = newest - oldest member stamp.
 S2. A set is released as soon as every camera is a member, has moved past the window (delivered a
-    later stamp), or is silent (nothing for `timeout` s; never heard from: since the first message
-    of all); otherwise it waits for the missing cameras at most `timeout` s from its first
-    member's arrival, then goes without them (listed in `missing`).
+    later stamp), or is absent (an earlier set waited the whole timeout for it, and nothing has
+    come from it since); otherwise it waits for the missing cameras at most `timeout` s from its
+    first member's arrival, then goes without them (listed in `missing`), and they are absent.
 S3. Sets leave in strictly increasing stamp order and are numbered 0, 1, 2, ... in that order.
 S4. Each message is used at most once; nothing is lost silently: a message at or before a stamp
     its camera has passed ('late'), a repeat of a pending stamp ('duplicate'), a set smaller than
@@ -176,15 +176,32 @@ def test_a_camera_gone_for_good_is_waited_for_once_then_left_out_without_delay()
     _check_invariants(released)
     frames = _frames(released)
     assert frames == [{c: f for c in range(5) if not (c == 4 and f >= 20)} for f in range(60)]
-    gone = max(e.arrival for e in events if e.camera == 4)
+    waited = min(e.arrival for e in events if e.frame == 20) + TIMEOUT  # set 20 waits once
     for f, r in enumerate(released):
         ready = max(e.arrival for e in events if e.frame == f)
         if f >= 20:
-            assert r.at == pytest.approx(max(ready, gone + TIMEOUT), abs=0.0101)  # silent after 0.5 s
+            assert r.at == pytest.approx(max(ready, waited), abs=0.0101)
         else:
             assert r.at == ready
-    assert released[-1].at == max(e.arrival for e in events)  # no delay once it is silent
-    assert sync.silent(released[-1].at) == [4]
+    assert released[-1].at == max(e.arrival for e in events)  # no delay once it is absent
+    assert sync.absent == [4]
+
+
+def test_sets_arriving_in_bursts_far_apart_stay_whole():
+    """People from a detector that needs a second per set: every camera is quiet between bursts
+    (far longer than the timeout), yet each burst is a whole set, released when it is complete."""
+    sync = _sync()
+    released = []
+    for k in range(6):
+        burst = 2.0 * k  # s
+        stamp = T0_NS + k * 10 * PERIOD_NS
+        for c in range(5):
+            arrival = burst + 0.001 * c
+            released += [Released(arrival, s) for s in sync.add(stamp + OFFSETS_MS[c] * MS, c, None, arrival)]
+        released += [Released(burst + 0.1, s) for s in sync.expire(burst + 0.1)]
+    assert [sorted(c for c, item in enumerate(r.set.stamps) if item is not None) for r in released] == \
+        [list(range(5))] * 6
+    assert [r.at for r in released] == [2.0 * k + 0.004 for k in range(6)] and sync.absent == []
 
 
 def test_a_set_waits_at_most_the_timeout_for_a_camera_that_is_not_silent():
@@ -327,3 +344,23 @@ def test_bad_construction_is_refused(kw):
     args = dict(cameras=2, timeout=0.5, max_skew=0.02) | kw
     with pytest.raises(ValueError, match='ApproximateSync needs'):
         ApproximateSync(**args)
+
+
+def test_an_absent_camera_whose_messages_come_late_is_waited_for_again():
+    """Camera 4 misses set 1 (the set goes without it after the timeout); its next message comes
+    after the other cameras' (so set 2 goes without it and that message is late), but it is
+    sending again: set 3 waits for it and has it."""
+    sync = _sync()
+    released, now = [], 0.0
+    for k in range(4):
+        stamp = T0_NS + k * PERIOD_NS
+        now = k * 1.0
+        order = range(4) if k in (1, 2) else range(5)
+        for c in order:
+            released += sync.add(stamp, c, c, now)
+        if k == 1:
+            released += sync.expire(now + TIMEOUT)  # the wait for camera 4 runs out
+        if k == 2:
+            with pytest.raises(ValueError, match='late'):
+                sync.add(stamp, 4, 4, now + 0.01)
+    assert [s.missing for s in released] == [[], [4], [4], []] and sync.absent == []

@@ -1,7 +1,8 @@
 """The bag_player node as a process, observed by an in-test rclpy node: every frame once, in
 stamp order, at no more than the recorded speed; nothing before its readers have matched and the
 start signal has come; rate 0 held back by acknowledgements; loops with increasing stamps;
-relative topics under a namespace; bad bags and parameters fail with one line and exit code 2."""
+relative topics under a namespace; bad bags and parameters fail with one line and exit code 2;
+sensor (best-effort) QoS; lockstep by synchronised sets of a rig bag with offset stamps."""
 from __future__ import annotations
 
 import os
@@ -16,7 +17,8 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, PointCloud2
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
@@ -244,3 +246,99 @@ def test_waits_for_readers_and_the_start_signal_and_publishes_relative_topics(pr
     assert received[0][1] == stamp_ns(stamp_of_frame(300))
     proc.kill()
     proc.wait()
+
+
+def _rig_bag(path: Path, sets: int = 6, offsets_ms=(0.0, 7.0, -6.0)) -> tuple[Path, list[list[int]]]:
+    """A driver-style rig bag: per set and camera a CompressedImage and a CameraInfo of its own
+    stamp (set k of camera c at 100 s + k / 25 s + offsets_ms[c] ms), logged at that stamp.
+    Returns the bag and each set's member stamps."""
+    members, items = [], []
+    for k in range(sets):
+        stamps = [100 * S + k * S // 25 + round(o * 1e6) for o in offsets_ms]
+        members.append(stamps)
+        for c, stamp in enumerate(stamps):
+            header = Header(frame_id=f'cam_{c}_optical_frame')
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, S)
+            items.append((stamp, f'/rig/cam_{c}/camera_info', CameraInfo(header=header, width=64, height=48)))
+            items.append((stamp, f'/rig/cam_{c}/image_raw/compressed',
+                          CompressedImage(header=header, format='jpeg', data=f'{k}/{c}'.encode())))
+    items.sort(key=lambda item: item[0])
+    write_bag(path, [(topic, msg, stamp) for stamp, topic, msg in items])
+    return path, members
+
+
+def test_sensor_qos_reaches_best_effort_readers_and_reliable_reaches_both(probe, tmp_path):
+    """qos sensor publishes best effort like a camera driver: a best-effort reader gets every image
+    (DDS does not let a reliable reader match a best-effort writer: it stays unmatched); qos
+    reliable reaches best-effort and reliable readers alike."""
+    node, executor = probe
+    bag, members = _rig_bag(tmp_path / 'bag', sets=4)
+    topic = '/rig/cam_0/image_raw/compressed'
+    for qos in ('sensor', 'reliable'):
+        best_effort, reliable = [], []
+        subs = [node.create_subscription(CompressedImage, topic, lambda m: best_effort.append(m),
+                                         qos_profile_sensor_data),
+                node.create_subscription(CompressedImage, topic, lambda m: reliable.append(m), DATA_QOS)]
+        # the player waits for a reader on every camera's images: the other two cameras' readers
+        others = [node.create_subscription(CompressedImage, f'/rig/cam_{c}/image_raw/compressed', lambda m: None,
+                                           qos_profile_sensor_data) for c in (1, 2)]
+        proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=0.0', 'sets:=true', 'ack_topic:=ack',
+                            'max_in_flight:=100', f'qos:={qos}', 'wait_subscribers:=60.0', f'start_topic:={START}')
+        _start_when_matched(node, executor, proc, log, (subs if qos == 'reliable' else subs[:1]) + others)
+        assert _run_to_end(executor, proc, lambda: len(best_effort) >= 4 and (qos == 'sensor' or len(reliable) >= 4)) \
+            == 0, log.read_text()
+        assert [stamp_ns(m.header.stamp) for m in best_effort] == [m[0] for m in members]
+        if qos == 'sensor':
+            assert reliable == [] and subs[1].get_publisher_count() == 0
+        else:
+            assert [stamp_ns(m.header.stamp) for m in reliable] == [m[0] for m in members]
+        for sub in subs + others:
+            node.destroy_subscription(sub)
+
+
+def test_lockstep_publishes_the_next_set_once_the_previous_set_stamp_is_acknowledged(probe, tmp_path):
+    """sets + rate 0 + max_in_flight 1: a set (every camera's image and CameraInfo, stamps up to
+    13 ms apart) goes out whole, and the next only after an ack carrying the set's stamp, its
+    earliest member stamp; a set never acknowledged is given up after ack_timeout."""
+    node, executor = probe
+    bag, members = _rig_bag(tmp_path / 'bag', sets=4)
+    received = []
+    subs = [node.create_subscription(CompressedImage, f'/rig/cam_{c}/image_raw/compressed',
+                                     lambda m: received.append(m), DATA_QOS) for c in range(3)]
+    ack = node.create_publisher(PointCloud2, '/test_ack', DATA_QOS)
+    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=0.0', 'sets:=true', 'max_in_flight:=1', 'max_skew:=0.02',
+                        'ack_topic:=/test_ack', 'ack_timeout:=3.0', f'start_topic:={START}')
+    _start_when_matched(node, executor, proc, log, [*subs, ack])
+
+    def stamps():
+        return sorted(stamp_ns(m.header.stamp) for m in received)
+
+    assert _spin_until(executor, lambda: len(received) >= 3), log.read_text()
+    _spin_until(executor, lambda: len(received) > 3, 0.5)  # a window for the next set to (wrongly) come
+    assert stamps() == sorted(members[0])
+    set_stamp = min(members[0])  # the earliest member: camera 2, 6 ms before camera 0
+
+    def acknowledge(stamp: int, count: int) -> bool:
+        deadline = time.monotonic() + 15
+        while len(received) < count and time.monotonic() < deadline:
+            header = Header(frame_id='world')
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, S)
+            ack.publish(PointCloud2(header=header))
+            _spin_until(executor, lambda: len(received) >= count, 0.1)
+        return len(received) >= count
+
+    # an ack older than the set's stamp releases nothing
+    header = Header(frame_id='world')
+    header.stamp.sec, header.stamp.nanosec = divmod(set_stamp - 1, S)
+    ack.publish(PointCloud2(header=header))
+    _spin_until(executor, lambda: len(received) > 3, 0.5)
+    assert len(received) == 3
+    assert acknowledge(set_stamp, 6), log.read_text()
+    assert stamps() == sorted(members[0] + members[1])
+    # set 1 is never acknowledged: after ack_timeout the player goes on with set 2
+    assert _spin_until(executor, lambda: len(received) >= 9, 10.0), log.read_text()
+    assert acknowledge(min(members[2]), 12)
+    assert _run_to_end(executor, proc, lambda: True) == 0, log.read_text()
+    assert stamps() == sorted(s for m in members for s in m)
+    text = log.read_text()
+    assert 'no ack of stamp' in text and 'done: 4 sets, 24 messages' in text and '1 never acknowledged' in text

@@ -1,5 +1,5 @@
 """rosbag2 bags: write/read round trip, the Shelf and Campus recipes against the real data,
-damaged bags, and the `mvpose-make-bag` command."""
+damaged bags, the foreign-rig bags (shelf_rig, shelf_rig_raw) and the `mvpose-make-bag` command."""
 from __future__ import annotations
 
 import json
@@ -355,3 +355,75 @@ def test_make_bag_exit_codes(tmp_path, capsys, campus_dir, monkeypatch):
     err = capsys.readouterr().err
     assert 'nowhere' in err and 'Traceback' not in err
     assert not (tmp_path / 's').exists()
+
+
+def test_shelf_rig_bag_is_a_foreign_driver_recording_with_its_rig_file(tmp_path, capsys):
+    """mvpose-make-bag shelf_rig: driver topics and frame ids, CompressedImage (jpeg) + CameraInfo
+    per capture, images upscaled x1.5 with K to match, stamps within +-9 ms of the 25 Hz grid, a
+    late camera and a camera dropping 3 frames, MCAP read back; its rig.yaml has the Shelf
+    extrinsics and no intrinsics, which CameraInfo completes into the scaled Shelf cameras."""
+    from msg_adapters.camera_info_msg import info_to_intrinsics
+    from msg_adapters.image_msg import compressed_to_image
+    from mvpose_ros.bags.recipes import ForeignRig, RIG_FILE
+    from mvpose_ros.core.geometry.rig import load_rig_file
+    from sensor_msgs.msg import CompressedImage
+    out = tmp_path / 'shelf_rig'
+    assert make_bag(['shelf_rig', '--output', str(out)]) == 0
+    assert 'rig.yaml' in capsys.readouterr().out
+    assert [f.suffix for f in out.glob('*.mcap')] == ['.mcap']
+    summary = bag_summary(out)
+    names = ForeignRig.NAMES
+    expected_counts = {'back': 37, 'door': 37}
+    assert summary.topics == {
+        **{f'/rig/{n}/camera_info': ('sensor_msgs/msg/CameraInfo', expected_counts.get(n, 40)) for n in names},
+        **{f'/rig/{n}/image_raw/compressed': ('sensor_msgs/msg/CompressedImage', expected_counts.get(n, 40))
+           for n in names}}
+    shelf = shelf_cameras()
+    per_camera: dict[str, list[int]] = {n: [] for n in names}
+    decoded = set()
+    for topic, msgtype, log_ns, cdr in read_bag(out):
+        name = topic.split('/')[2]
+        msg = deserialize_message(cdr, CompressedImage if msgtype.endswith('CompressedImage') else CameraInfo)
+        stamp = msg.header.stamp.sec * S + msg.header.stamp.nanosec
+        assert msg.header.frame_id == f'{name}_optical_frame' and log_ns == stamp
+        c = names.index(name)
+        if isinstance(msg, CameraInfo):
+            per_camera[name].append(stamp)
+            K, D, width, height = info_to_intrinsics(msg)
+            assert (width, height) == (1548, 1164)
+            assert np.allclose(K[:2, :2], 1.5 * shelf[c].K[:2, :2])
+            assert np.allclose(K[:2, 2], 1.5 * (shelf[c].K[:2, 2] + 0.5) - 0.5)
+        elif name not in decoded:
+            decoded.add(name)
+            assert 'jpeg' in msg.format
+            assert compressed_to_image(msg).shape == (1164, 1548, 3)
+    start = ForeignRig.START_NS
+    for name, stamps in per_camera.items():
+        sets = [round((s - start) / FRAME_NS) for s in stamps]
+        offsets = np.array([s - start - k * FRAME_NS for s, k in zip(stamps, sets)])
+        assert np.abs(offsets).max() <= 9_000_000, name
+        missing = sorted(set(range(40)) - set(sets))
+        assert missing == {'back': [0, 1, 2], 'door': [11, 22, 33]}.get(name, []), name
+    assert len({tuple(np.array(v[3:30]) - np.array(per_camera['left'][3:30])) for v in per_camera.values()}) == 5
+
+    rig = load_rig_file(out / RIG_FILE)
+    assert rig.names == list(names) and not rig.calibrated
+    assert [c.image for c in rig.cameras] == [f'/rig/{n}/image_raw/compressed' for n in names]
+    point = np.array([0.3, -0.2, 1.1])
+    for c, rig_camera in enumerate(rig.cameras):
+        first = next(read_bag(out, [f'/rig/{names[c]}/camera_info']))
+        info = deserialize_message(first[3], CameraInfo)
+        camera = rig_camera.with_info(*info_to_intrinsics(info))
+        assert np.allclose(camera.project(point[None]), 1.5 * (shelf[c].project(point[None]) + 0.5) - 0.5, atol=1e-4)
+
+
+def test_shelf_rig_raw_recipe_gives_rgb8_images_on_the_raw_topics():
+    from mvpose_ros.bags.recipes import shelf_rig_recipe
+    recipe = shelf_rig_recipe(SHELF, compressed=False)
+    assert recipe.name == 'shelf_rig_raw'
+    items = recipe.items()
+    (t1, _, s1), (t2, image, s2) = next(items), next(items)
+    assert t1.endswith('/camera_info') and t2 == t1.replace('camera_info', 'image_raw') and s1 == s2
+    assert isinstance(image, Image) and image.encoding == 'rgb8' and (image.width, image.height) == (1548, 1164)
+    assert msg_to_image(image).shape == (1164, 1548, 3)
+    assert '/image_raw/compressed' not in recipe.rig_text() and "image: /rig/left/image_raw\n" in recipe.rig_text()

@@ -10,10 +10,11 @@ import pytest
 import scipy.optimize
 
 from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, load_rig, ray_ray_distance
-from mvpose_ros.core.evaluation.datasets import (IMAGE_SIZES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
-                                                 load_actors_gt_2d)
+from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt, load_actors_gt_2d
 
 SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]
+
+IMAGE_SIZES = {'shelf': (1032, 776), 'campus': (360, 288)}  # (width, height) as the datasets publish them
 
 
 def _calibration(dataset: str):

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
-from mvpose_ros.core.evaluation.datasets import calibration_file
 from mvpose_ros.cli import images
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.evaluation.datasets import calibration_file, dataset_dir
 
 SHELF = dataset_dir('shelf')
+REPO = Path(__file__).resolve().parents[1]
 FRAMES = [str(SHELF / 'frames' / f'cam{c}_000572.png') for c in range(5)]
 CALIBRATION = str(calibration_file('shelf'))
 # Measured with the defaults (EfficientPose RT, anatomical head model, seed 0): actor 1 65.6 mm,
@@ -48,7 +50,20 @@ def test_frame_572_finds_the_three_annotated_actors(tmp_path, capsys):
 
 def test_wrong_inputs_are_one_line_errors(tmp_path, capsys):
     assert images.main(['--calibration', CALIBRATION, '--images', *FRAMES[:4]]) == 2
-    assert 'mvpose-images: error: --images: 4 images for 5 calibrated cameras' in capsys.readouterr().err
+    assert 'mvpose-images: error: --images: 4 images for 5 cameras in the rig' in capsys.readouterr().err
     assert images.main(['--calibration', CALIBRATION, '--images', *FRAMES, '--models', str(tmp_path)]) == 2
     assert (f'mvpose-images: error: {tmp_path}/movenet_multipose.onnx: MoveNet MultiPose model file not found'
             in capsys.readouterr().err)
+
+
+def test_a_rig_file_checks_the_image_sizes_it_gives(tmp_path, capsys):
+    """A rig file records each camera's size: an image of another size is refused by name (a bare
+    calibration json takes each image's size instead)."""
+    small = tmp_path / 'small.png'
+    cv2.imwrite(str(small), cv2.resize(cv2.imread(FRAMES[2]), (516, 388)))
+    rig = str(REPO / 'config' / 'rigs' / 'shelf.yaml')
+    assert images.main(['--rig', rig, '--images', *FRAMES[:2], str(small), *FRAMES[3:]]) == 2
+    assert f'{small}: image size 516x388, camera 2 is calibrated for 1032x776' in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:  # one or the other
+        images.main(['--rig', rig, '--calibration', CALIBRATION, '--images', *FRAMES])
+    assert exit_info.value.code == 2 and 'not allowed with argument' in capsys.readouterr().err

@@ -62,6 +62,62 @@ def test_temporal_scale_sharpens():
     assert np.all(narrow[:, 0, 0, 0] > wide[:, 0, 0, 0])
 
 
+def _evenly_spaced_temporal(prev, cur, nxt, config) -> np.ndarray:
+    """The evenly spaced temporal table as it was computed before the factor knew about time steps
+    (midpoint, temporal_scale), operation for operation."""
+    mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])
+    j, ma, mc = mid.shape[:3]
+    mid = mid.reshape(j, ma * mc, 3)
+    sq = (np.einsum('jkd,jkd->jk', mid, mid)[:, :, None] + np.einsum('jbd,jbd->jb', cur, cur)[:, None, :]
+          - 2.0 * mid @ cur.transpose(0, 2, 1))
+    sq = np.maximum(sq, 0.0, out=sq).astype(np.float32)
+    if config.temporal_form == 'laplace':
+        table = np.exp(np.sqrt(sq) * np.float32(-1.0 / config.temporal_scale))
+    else:
+        table = np.exp(sq * np.float32(-0.5 / config.temporal_scale ** 2))
+    table = table.reshape(j, ma, mc, cur.shape[1])
+    total = table.sum(axis=(1, 2, 3), keepdims=True)
+    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32)
+
+
+@pytest.mark.parametrize('form', TEMPORAL_FORMS)
+def test_unit_steps_reproduce_the_evenly_spaced_table_exactly(form):
+    config = FactorConfig(temporal_form=form)
+    prev, cur, nxt = np.random.default_rng(5).normal(scale=0.3, size=(3, 4, 7, 3))
+    old = _evenly_spaced_temporal(prev, cur, nxt, config)
+    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config), old)
+    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (1.0, 1.0)), old)
+    # equal steps of two periods: the same midpoint, the kernel twice as wide
+    wide = FactorConfig(temporal_form=form, temporal_scale=2 * config.temporal_scale)
+    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (2.0, 2.0)),
+                                  _evenly_spaced_temporal(prev, cur, nxt, wide))
+
+
+@pytest.mark.parametrize('form', TEMPORAL_FORMS)
+def test_a_doubled_step_is_the_constant_velocity_prediction_over_two_steps(form):
+    """Frame t+1 dropped: t-1, t, t+2 with steps (1, 2). The factor is largest (kernel 1) where
+    y^{t+2} = y^t + 2 (y^t - y^{t-1}), and it is the Laplace / Gauss kernel of the distance to
+    that prediction with the scale of the mean step (1.5 periods)."""
+    config = FactorConfig(temporal_form=form)
+    rng = np.random.default_rng(6)
+    prev = rng.normal(scale=0.3, size=(2, 5, 3))
+    cur = rng.normal(scale=0.3, size=(2, 4, 3))
+    nxt = rng.normal(scale=0.3, size=(2, 6, 3))
+    nxt[:, 2] = cur[:, 3] + 2 * (cur[:, 3] - prev[:, 1])  # a = 1, b = 3, c = 2 move at constant velocity
+    table = temporal_table(prev, cur, nxt, config, (1.0, 2.0))
+    for j in range(2):
+        assert np.unravel_index(np.argmax(table[j]), table[j].shape) == (1, 2, 3)
+    mid = prev[:, :, None, None] + (nxt[:, None, :, None] - prev[:, :, None, None]) / 3  # (J, a, c, 1, 3)
+    d = np.linalg.norm(cur[:, None, None, :] - mid, axis=-1)
+    scale = 1.5 * config.temporal_scale
+    kernel = np.exp(-d / scale) if form == 'laplace' else np.exp(-d ** 2 / (2 * scale ** 2))
+    np.testing.assert_allclose(table, kernel / kernel.sum(axis=(1, 2, 3), keepdims=True), rtol=1e-4, atol=1e-9)
+    # blind to the times, the midpoint would be predicted instead: a different, wrong peak
+    assert not np.array_equal(temporal_table(prev, cur, nxt, config), table)
+    with pytest.raises(ValueError, match='positive'):
+        temporal_table(prev, cur, nxt, config, (0.0, 1.0))
+
+
 def test_pair_distances():
     a = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])  # (1, 2, 3)
     b = np.array([[[0.0, 3.0, 4.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])  # (1, 3, 3)

@@ -7,13 +7,18 @@ import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.inference.factors import data_term
-from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
-from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_hypotheses,
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_people,
                                                   split_draws)
 
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
 SAMPLE_RADIUS_PX = np.sqrt(2) * (MARGIN_SIGMAS * SIGMA + STRIDE)
+
+
+def sample_hypotheses(views, rng, config):
+    """Hypotheses (J, M, 3) of one person (sample_people of one), or None when no joint is seen twice."""
+    return sample_people([views], HeatmapStack.of([hm for _, hm in views]), [rng], config)[0]
 
 
 @pytest.fixture(scope='module')

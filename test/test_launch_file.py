@@ -105,3 +105,49 @@ def test_launch_arguments_and_imports():
                         ('launch_ros.parameter_descriptions', 'ParameterValue')}
     (gen,) = [f for f in tree.body if isinstance(f, ast.FunctionDef)]
     assert gen.name == 'generate_launch_description'
+
+
+RIG_LAUNCH = REPO / 'launch' / 'rig.launch.py'
+
+
+def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
+    """launch/rig.launch.py rig:=FILE: the live graph of `mvpose-graph --rig` without the player, every
+    node with the parameter file (default: the package's rig_template.yaml) and the rig file."""
+    from mvpose_ros.graph.config import RigRun, rig_graph_nodes
+    tree = ast.parse(RIG_LAUNCH.read_text(), str(RIG_LAUNCH))
+    consts = _constants(tree)
+    (comp,) = [c for c in ast.walk(tree) if isinstance(c, ast.ListComp)]
+    (gen,) = comp.generators
+    names = _evaluate(gen.iter, consts)
+    (call,) = _calls(tree, 'Node')
+    keywords = {kw.arg: kw.value for kw in call.keywords}
+    launched = [(_evaluate(keywords['executable'], {**consts, gen.target.id: n}),
+                 _evaluate(keywords['name'], {**consts, gen.target.id: n})) for n in names]
+    runner = rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0))
+    assert [e for e, _ in launched] == [s.executable for s in runner if s.executable != 'bag_player']
+    assert all(e == n for e, n in launched) and _evaluate(keywords['package'], consts) == 'mvpose_ros'
+    assert ast.unparse(keywords['parameters']) == '[params, overrides[name]]'
+    assert ast.unparse(keywords['namespace']) == 'namespace'
+    overrides = next(n.value for n in ast.walk(tree) if isinstance(n, ast.Assign)
+                     and ast.unparse(n.targets[0]) == 'overrides')
+    values = {ast.literal_eval(k): {ast.literal_eval(kk): ast.unparse(vv) for kk, vv in zip(v.keys, v.values)}
+              for k, v in zip(overrides.keys, overrides.values)}
+    assert values == {'heatmap_detector': {'rig': 'rig', 'camera': "'all'"}, 'association': {'rig': 'rig'},
+                      'bp_solver': {'rig': 'rig'}}
+    args = {ast.literal_eval(c.args[0]): {k.arg: ast.unparse(k.value) for k in c.keywords}
+            for c in _calls(tree, 'DeclareLaunchArgument')}
+    assert set(args) == {'rig', 'params', 'namespace'} and 'default_value' not in args['rig']  # rig:= is required
+    assert args['params']['default_value'] == "os.path.join(config, 'rig_template.yaml')"
+    (env,) = _calls(tree, 'SetEnvironmentVariable')
+    assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "
+                                "os.path.join(config, 'fastdds.xml'))")
+    assert (REPO / 'config' / 'rig_template.yaml').is_file()
+
+
+def test_rig_template_sections_match_the_rig_graph_and_leave_command_line_values_out():
+    from mvpose_ros.graph.config import load_params
+    params = load_params(REPO / 'config' / 'rig_template.yaml')
+    assert set(params) == {'/**', '/**/heatmap_detector', '/**/association', '/**/bp_solver', 'mvpose_graph'}
+    assert params['/**/heatmap_detector']['camera'] == 'all' and params['/**/heatmap_detector']['backend'] == 'onnx'
+    # a '/**/<node>' section wins over -p: it must not set what rig:= / the runner set
+    assert all('rig' not in section for section in params.values())

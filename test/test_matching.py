@@ -14,7 +14,7 @@ from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
 from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.association.matching import MatchingConfig, cluster_views, view_distance
+from mvpose_ros.core.association.matching import MatchingConfig, all_view_distances, cluster_views
 from mvpose_ros.core.types import Person2D
 
 SHELF = dataset_dir('shelf')
@@ -22,6 +22,11 @@ FRAMES = range(576, 594)  # Shelf frames where actors 0, 1 and 2 are all annotat
 FRAME = 580
 NOISE_PX = 2.0
 R_SHOULDER, L_SHOULDER = 8, 9
+
+
+def view_distance(cam_a, people_a, cam_b, people_b, config):
+    """Mean ray distance (Na, Nb) between two cameras' skeletons (all_view_distances of two)."""
+    return all_view_distances([cam_a, cam_b], [people_a, people_b], config)[:len(people_a), len(people_a):]
 
 
 @pytest.fixture(scope='module')

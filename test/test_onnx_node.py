@@ -39,8 +39,12 @@ def test_onnx_detector_node_turns_images_into_people_and_logs_bad_frames(domain,
         node.create_subscription(PointCloud2, '/cam1/people2d',
                                  lambda m: out.setdefault(frame_of_stamp(m.header.stamp), []).append(m), DATA_QOS)
         pub = node.create_publisher(Image, '/cam1/image_raw', DATA_QOS)
+        # every image counts here: the camera subscription made reliable and deep enough by QoS
+        # overrides (its default, best effort keep-last 2, drops what a slow detector cannot take)
+        overrides = 'qos_overrides./cam1/image_raw.subscription'
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/cam1', '-p', 'camera:=1',
-                          '-p', 'backend:=onnx', '-p', 'threads:=1')
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'{overrides}.reliability:=reliable',
+                          '-p', f'{overrides}.depth:=10')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30.0), log.read_text()
             pub.publish(image_to_msg(bgr, _header(572, 'cam1')))
@@ -74,14 +78,16 @@ def test_onnx_detector_node_turns_images_into_people_and_logs_bad_frames(domain,
             np.testing.assert_allclose(a.heatmap.lookup(uv), b.heatmap.lookup(uv), atol=1 / 255 + 1e-3)
     text = log.read_text()
     assert "stamp 22920000000 ns dropped: frame_id 'cam7' is not this camera ('cam1')" in text
-    assert 'stamp 22960000000 ns dropped: image size 320x240 is not the calibrated 1032x776' in text
+    assert 'stamp 22960000000 ns dropped: Image size: 320x240, expected 1032x776' in text
     assert "stamp 23000000000 ns dropped: Image encoding: expected one of" in text and "got 'xyz'" in text
 
 
 def test_a_missing_model_stops_the_node_with_one_line(domain, tmp_path):
     log = tmp_path / 'bad.log'
+    rig = tmp_path / 'rig.yaml'  # the calibration where it is, the models in an empty data root
+    rig.write_text(f'calibration: {CALIBRATION}\nwidth: 1032\nheight: 776\n')
     proc = start_node('heatmap_detector', domain, log, '-p', 'backend:=onnx', '-p', f'data_root:={tmp_path}',
-                      '-p', f'calibration:={CALIBRATION}')
+                      '-p', f'rig:={rig}')
     assert proc.wait(30) == 2
     text = log.read_text()
     assert f'backend onnx: {tmp_path}/models/movenet_multipose.onnx: MoveNet MultiPose model file not found' in text

@@ -10,13 +10,15 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from mvpose_ros.core.evaluation.datasets import IMAGE_SIZES, data_root, dataset_dir
+from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir
 from mvpose_ros.core.geometry.camera import load_rig
 from mvpose_ros.core.geometry.rig import (RigCamera, load_rig_file, matrix_to_quaternion,
                                           quaternion_to_matrix)
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rigs'
 SHELF_JSON = dataset_dir('shelf') / 'calibration' / 'calibration_shelf.json'
+
+IMAGE_SIZES = {'shelf': (1032, 776), 'campus': (360, 288)}  # (width, height) as the datasets publish them
 
 
 @pytest.fixture(scope='module')

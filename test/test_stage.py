@@ -33,10 +33,12 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     assert set(default.to_params()) == set(ALL_PARAMETERS)
     assert [name for name, _, _ in parameter_specs(ALL_PARAMETERS)] == list(ALL_PARAMETERS)
     changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
-                                       'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored'})
+                                       'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored',
+                                       'max_gap': 0.5, 'frame_rate': 30.0})
     assert changed.solver.inference.window is None and changed.solver.inference.bp_hypotheses is None
     assert changed.solver.inference.slide_iterations is None and changed.solver.sampling.hypotheses == 32
     assert changed.solver.inference.terms == ('data', 'temp') and changed.association.matching.max_distance == 0.2
+    assert (changed.solver.inference.max_gap, changed.solver.inference.frame_rate) == (0.5, 30.0)
     assert StageConfig.from_params(changed.to_params()) == changed
 
 
@@ -49,6 +51,8 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     ({'track_iou': 1.5}, 'track_iou'),
     ({'collision_width': -1.0}, 'collision_width'),
     ({'iterations': 0}, 'iterations'),
+    ({'max_gap': 0.0}, 'max_gap'),
+    ({'frame_rate': -25.0}, 'frame_rate'),
 ])
 def test_invalid_parameters_name_the_problem(params, problem):
     with pytest.raises(ValueError, match=problem):

@@ -178,21 +178,83 @@ def test_window_spanning_the_clip_equals_whole_clip(terms, extra):
         np.testing.assert_array_equal(a.joints, b.joints)
 
 
-@pytest.mark.parametrize('kwargs', [{'window': None}, {'window': 10, 'lag': 4},
-                                    {'window': 10, 'lag': 4, 'slide_iterations': 1}])
-def test_a_skipped_frame_number_breaks_every_chain(kwargs):
-    """Frames 300..309 then 311..319: nothing links 309 to 311, so each side decodes as if the
-    other did not exist."""
+MODES = [{'window': None}, {'window': 10, 'lag': 4}, {'window': 10, 'lag': 4, 'slide_iterations': 1}]
+
+
+def _push_all(window: SlidingWindow, labels, frames, times=None) -> list[FrameResult]:
+    times = times or [None] * len(labels)
+    return [r for f, people, ts in zip(labels, frames, times) for r in window.push(f, people, ts)] + window.flush()
+
+
+@pytest.mark.parametrize('kwargs', MODES)
+def test_a_gap_longer_than_max_gap_breaks_every_chain(kwargs):
+    """Frames 300..309 then 320..329 (0.4 s later, max_gap 0.2 s): nothing links 309 to 320, so
+    each side decodes as if the other did not exist."""
     frames, _, _ = _clip(seed=3, n_frames=20)
-    labels = [FRAME0 + t + (t >= 10) for t in range(20)]
-    window = _window(**kwargs)
-    both = [r for f, people in zip(labels, frames) for r in window.push(f, people)] + window.flush()
+    labels = [FRAME0 + t + 10 * (t >= 10) for t in range(20)]
+    both = _push_all(_window(**kwargs), labels, frames)
     assert [r.frame for r in both] == labels
     for part in (slice(0, 10), slice(10, 20)):
-        alone = _window(**kwargs)
-        out = [r for f, people in zip(labels[part], frames[part]) for r in alone.push(f, people)] + alone.flush()
+        out = _push_all(_window(**kwargs), labels[part], frames[part])
         for a, b in zip(out, both[part]):
             np.testing.assert_array_equal(a.joints, b.joints)
+    # every second frame missing (80 ms steps): within max_gap the chains hold and the temporal
+    # term fixes the data term; with max_gap below the step nothing is linked: no temporal term
+    frames, truth, data_right = _clip(seed=3, n_frames=20)
+    labels = [FRAME0 + 2 * t for t in range(20)]
+    truth = {pid: np.repeat(x, 2, axis=0) for pid, x in truth.items()}  # indexed by frame - FRAME0
+    data_acc = np.mean([data_right[pid] for pid in IDS])
+    assert _accuracy(_push_all(_window(**kwargs), labels, frames), truth) > 0.95 > data_acc + 0.2
+    unlinked = _push_all(_window(max_gap=0.05, **kwargs), labels, frames)
+    for a, b in zip(unlinked, _push_all(_window(terms=('data', 'col'), **kwargs), labels, frames)):
+        np.testing.assert_array_equal(a.joints, b.joints)
+
+
+@pytest.mark.parametrize('kwargs', MODES)
+def test_evenly_spaced_times_give_exactly_the_results_of_frame_numbers(kwargs):
+    """Times of frames 40 ms apart however they are written (rounded floats far from zero,
+    nanosecond stamps) give the evenly spaced factors bit for bit."""
+    frames, _, _ = _clip(seed=4, n_frames=20)
+    labels = [FRAME0 + t for t in range(20)]
+    reference = _push_all(_window(**kwargs), labels, frames)
+    for times in ([1.7e6 + 0.04 * t for t in range(20)], [(12_000_000_000 + 40_000_000 * t) / 1e9 for t in range(20)],
+                  [0.04 * t for t in range(20)]):
+        for a, b in zip(_push_all(_window(**kwargs), list(range(20)), frames, times), reference):
+            np.testing.assert_array_equal(a.joints, b.joints)
+
+
+def _fast_clip(seed: int, n_frames: int):
+    """A clip whose people move five times as fast as _clip's (about 10 cm per frame)."""
+    rng = np.random.default_rng(seed)
+    truth, frames = {}, [[] for _ in range(n_frames)]
+    for pid in IDS:
+        truth[pid] = _truth(rng, 5 * n_frames)[::5]
+        hyp, data, _ = _frames(rng, truth[pid])
+        for t in range(n_frames):
+            frames[t].append(PersonFrame(pid, hyp[t], data[t]))
+    return frames, truth
+
+
+@pytest.mark.parametrize('kwargs', MODES)
+def test_frames_dropped_at_random_are_bridged_with_the_real_times(kwargs):
+    """40 % of the frames of a fast clip dropped (gaps of 1 to 4 periods): the temporal term with
+    the real times still fixes the data term; blind to the times (the frames taken as evenly
+    spaced) it does worse."""
+    frames, truth = _fast_clip(seed=7, n_frames=80)
+    kept = sorted(np.random.default_rng(8).choice(80, 48, replace=False).tolist())
+    labels = [FRAME0 + t for t in kept]
+    sub = [frames[t] for t in kept]
+    data_only = _accuracy(_push_all(_window(terms=('data',), **kwargs), labels, sub), truth)
+    real = _accuracy(_push_all(_window(**kwargs), labels, sub), truth)
+    blind = _accuracy(_push_all(_window(**kwargs), labels, sub, [k / 25 for k in range(len(kept))]), truth)
+    assert real > 0.98 and real > blind + 0.02 and real > data_only + 0.3, (data_only, blind, real)
+
+
+def test_times_must_increase():
+    window = _window(window=10, lag=4)
+    window.push(FRAME0, [], 1.0)
+    with pytest.raises(ValueError, match='times must increase'):
+        window.push(FRAME0 + 1, [], 1.0)
 
 
 def test_frames_must_increase():
@@ -233,6 +295,8 @@ def test_bp_hypotheses_keeps_the_top_k_by_data(clip):
     {'window': 10, 'lag': 10},
     {'window': 10, 'lag': 12},
     {'window': 10, 'lag': -1},
+    {'max_gap': 0.0},
+    {'frame_rate': 0.0},
 ])
 def test_inference_config_rejects(kwargs):
     with pytest.raises(ValueError):

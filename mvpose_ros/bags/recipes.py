@@ -4,25 +4,34 @@
   (the real OpenPose BODY25 output, encoding A), plus `/cam{c}/image_raw` for frame 572, the one
   frame whose real images are available.
 - `shelf_images`: frame 572 only, images and camera infos (input of image-based 2D backends).
+- `shelf_rig` / `shelf_rig_raw`: the five frame-572 images as a foreign rig's driver would record
+  them (see shelf_rig_recipe): 40 sets at 25 Hz, camera names, topics and frame ids of a driver,
+  images upscaled to 1548x1164, per-camera stamp offsets with jitter, a late camera and three
+  dropped frames; sensor_msgs/CompressedImage (jpeg) or, for `_raw`, sensor_msgs/Image (rgb8),
+  plus CameraInfo with every image. Its rig file (extrinsics only) is written by `rig_file_text`.
 - `campus`: a user's CampusSeq1 folder; per test frame with images, `/cam{c}/image_raw`,
   `/cam{c}/camera_info` and the annotated actors on `/ground_truth/skeletons` (encoding D,
   person id = actor index).
 
-Frame f is stamped f / 25 s and logged at that time; camera c is rig index c (load_rig order).
+Frame f is stamped f / 25 s and logged at that time; camera c is rig index c (load_rig order)
+(except the shelf_rig bags, whose stamps are a driver's: each camera's own capture time).
 A recipe also names the files it reads, so a bag can tell whether it is still up to date.
 """
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
+import cv2
 import numpy as np
+import yaml
+from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import camera_to_info
-from msg_adapters.image_msg import image_to_msg
+from msg_adapters.image_msg import image_to_compressed_msg, image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
@@ -30,24 +39,30 @@ from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
                                                  load_actors_gt)
 from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
 # so bags made by older code count as out of date.
 RECIPE_VERSION = 1
-RECIPES = ('shelf', 'shelf_images', 'campus')
+RECIPES = ('shelf', 'shelf_images', 'shelf_rig', 'shelf_rig_raw', 'campus')
 SHELF_IMAGE_FRAMES = (572,)
 GROUND_TRUTH_TOPIC = '/ground_truth/skeletons'
+RIG_FILE = 'rig.yaml'  # a bag's own rig file, inside its folder (ros2 bag ignores it)
 
 Item = tuple[str, Any, int]  # (topic, rclpy message, log stamp ns)
 
 
 @dataclass(frozen=True)
 class Recipe:
-    """A bag's content: its name, the files it is made from, and its messages in log-time order."""
+    """A bag's content: its name, the files it is made from, its messages in log-time order and,
+    for a bag of a rig the project has no file for, the text of its rig file (RIG_FILE in the bag
+    folder)."""
 
     name: str
     inputs: tuple[Path, ...]
     items: Callable[[], Iterator[Item]]
+    rig_text: Callable[[], str] | None = None
 
     def fingerprint(self) -> str:
         """Hash of the recipe version and each input's path, size and modification time."""
@@ -66,6 +81,8 @@ def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path 
         return campus_recipe(campus_dir)
     if name in ('shelf', 'shelf_images'):
         return shelf_recipe(dataset_dir('shelf', data_root), images_only=name == 'shelf_images')
+    if name in ('shelf_rig', 'shelf_rig_raw'):
+        return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name == 'shelf_rig')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
 
 
@@ -111,6 +128,130 @@ def shelf_recipe(shelf: Path, images_only: bool = False) -> Recipe:
 
     name = 'shelf_images' if images_only else 'shelf'
     return Recipe(name, (calibration, *images.values(), *detections), items)
+
+
+class ForeignRig:
+    """How the shelf_rig bags imitate a user's rig: camera names (Shelf camera c is NAMES[c]), the
+    upscaling, and the driver's timing. Stamps: set k of camera c is captured at
+    START_NS + k * PERIOD_NS + OFFSETS_MS[c] ms + uniform(-JITTER_MS, JITTER_MS) ms (seeded)."""
+
+    NAMES = ('left', 'centre', 'right', 'back', 'door')
+    SCALE = 1.5  # 1032x776 -> 1548x1164: nothing may assume Shelf's size
+    SETS = 40
+    PERIOD_NS = 40_000_000  # 25 Hz
+    START_NS = 1_700_000_000 * 1_000_000_000  # a wall-clock capture time, as drivers stamp
+    OFFSETS_MS = (0.0, 5.0, -8.0, 3.0, -6.0)
+    JITTER_MS = 1.0
+    SEED = 572
+    LATE_CAMERA = 'back'  # its first LATE_SETS sets are missing: it starts late
+    LATE_SETS = 3
+    DROP_CAMERA = 'door'  # these sets of it are missing: dropped frames
+    DROPPED_SETS = (11, 22, 33)
+    FRAME = 572  # the Shelf frame whose five images every set shows
+    JPEG_QUALITY = 90
+
+    @staticmethod
+    def image_topic(name: str, compressed: bool) -> str:
+        """The driver's image topic of camera `name`."""
+        return f'/rig/{name}/image_raw' + ('/compressed' if compressed else '')
+
+    @staticmethod
+    def info_topic(name: str) -> str:
+        """The driver's camera_info topic of camera `name`."""
+        return f'/rig/{name}/camera_info'
+
+    @staticmethod
+    def frame_id(name: str) -> str:
+        """The driver's optical frame id of camera `name`."""
+        return f'{name}_optical_frame'
+
+
+def scaled_camera(camera: Camera, scale: float) -> Camera:
+    """The camera of an image resized by `scale` (cv2.resize's pixel-centre mapping
+    x' = scale * (x + 0.5) - 0.5); distortion acts on normalised coordinates and is unchanged."""
+    K = np.array(camera.K, dtype=float)
+    K[0, 0] *= scale
+    K[1, 1] *= scale
+    K[0, 1] *= scale
+    K[:2, 2] = scale * (K[:2, 2] + 0.5) - 0.5
+    return replace(camera, K=K, width=round(camera.width * scale), height=round(camera.height * scale))
+
+
+def shelf_rig_stamps(rig: type[ForeignRig] = ForeignRig) -> dict[str, list[int | None]]:
+    """Camera name -> its stamp (ns) of every set, None where the camera has no frame."""
+    rng = np.random.default_rng(rig.SEED)
+    jitter = rng.uniform(-rig.JITTER_MS, rig.JITTER_MS, size=(rig.SETS, len(rig.NAMES)))
+    out: dict[str, list[int | None]] = {}
+    for c, name in enumerate(rig.NAMES):
+        stamps: list[int | None] = []
+        for k in range(rig.SETS):
+            missing = (name == rig.LATE_CAMERA and k < rig.LATE_SETS) or \
+                (name == rig.DROP_CAMERA and k in rig.DROPPED_SETS)
+            stamps.append(None if missing else rig.START_NS + k * rig.PERIOD_NS
+                          + round((rig.OFFSETS_MS[c] + jitter[k, c]) * 1e6))
+        out[name] = stamps
+    return out
+
+
+def rig_file_text(calibration: Path, compressed: bool = True) -> str:
+    """The shelf_rig bags' rig file: per camera its driver topics, frame id and extrinsics from the
+    Shelf calibration (position, orientation quaternion), and no intrinsics: those come from the
+    bag's CameraInfo, at the upscaled size."""
+    cameras = dataset_cameras('shelf', calibration=calibration)
+    entries = []
+    for name, cam in zip(ForeignRig.NAMES, cameras):
+        position = -cam.R.T @ cam.t
+        entries.append({'name': name, 'image': ForeignRig.image_topic(name, compressed),
+                        'camera_info': ForeignRig.info_topic(name), 'frame_id': ForeignRig.frame_id(name),
+                        'position': [round(float(v), 9) for v in position],
+                        'orientation': [round(float(v), 12) for v in matrix_to_quaternion(cam.R.T)]})
+    doc = {'world_frame': 'world', 'up': [0.0, 0.0, 1.0], 'cameras': entries}
+    kind = 'sensor_msgs/CompressedImage (jpeg)' if compressed else 'sensor_msgs/Image (rgb8)'
+    return (f'# The rig of the shelf_rig bags (mvpose-make-bag): the five Shelf cameras under a driver\'s\n'
+            f'# names, {kind} images upscaled x{ForeignRig.SCALE:g}; extrinsics from\n'
+            f'# {calibration.name}; intrinsics and image size come from each camera\'s CameraInfo.\n'
+            + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
+
+
+def shelf_rig_recipe(shelf: Path, compressed: bool = True) -> Recipe:
+    """The `shelf_rig` bag (CompressedImage; `shelf_rig_raw` with compressed False: Image rgb8)
+    from the Shelf folder `shelf`: see ForeignRig. Each message is logged at its header stamp;
+    every image goes with a CameraInfo of the same stamp (camera_info first)."""
+    calibration = shelf / 'calibration' / 'calibration_shelf.json'
+    _require(calibration)
+    cameras = dataset_cameras('shelf', calibration=calibration)
+    images = [shelf / 'frames' / f'cam{c}_{ForeignRig.FRAME:06d}.png' for c in range(len(cameras))]
+    _require(*images)
+    if len(cameras) != len(ForeignRig.NAMES):
+        raise ValueError(f'{calibration}: {len(cameras)} cameras, expected {len(ForeignRig.NAMES)}')
+
+    def items() -> Iterator[Item]:
+        scaled = [scaled_camera(cam, ForeignRig.SCALE) for cam in cameras]
+        pixels = [cv2.resize(read_image(path, cam), (big.width, big.height), interpolation=cv2.INTER_LINEAR)
+                  for path, cam, big in zip(images, cameras, scaled)]
+        header0 = Header()
+        # One encoding per camera: every set shows the same capture, only the header changes.
+        payload = ([image_to_compressed_msg(p, header0, 'jpeg', ForeignRig.JPEG_QUALITY) for p in pixels]
+                   if compressed else [image_to_msg(p, header0, 'rgb8') for p in pixels])
+        stamps = shelf_rig_stamps()
+        # (stamp, camera) in log order; messages are made as they are written (raw images are big)
+        order = sorted((stamp, c) for c, name in enumerate(ForeignRig.NAMES) for stamp in stamps[name]
+                       if stamp is not None)
+        for stamp, c in order:
+            name = ForeignRig.NAMES[c]
+            header = Header(frame_id=ForeignRig.frame_id(name))
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            p = payload[c]
+            if compressed:
+                image = CompressedImage(header=header, format=p.format, data=p.data)
+            else:
+                image = Image(header=header, height=p.height, width=p.width, encoding=p.encoding,
+                              is_bigendian=p.is_bigendian, step=p.step, data=p.data)
+            yield ForeignRig.info_topic(name), camera_to_info(scaled[c], header), stamp
+            yield ForeignRig.image_topic(name, compressed), image, stamp
+
+    return Recipe('shelf_rig' if compressed else 'shelf_rig_raw', (calibration, *images), items,
+                  lambda: rig_file_text(calibration, compressed))
 
 
 def campus_image(campus_dir: Path, camera: int, frame: int) -> Path:

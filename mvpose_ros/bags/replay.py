@@ -2,7 +2,11 @@
 move on for later loops, how far ahead of downstream the player may run, and header stamps
 rewritten in place in the serialised (CDR) bytes.
 
-A frame is every message sharing one log stamp (all cameras of one dataset frame). Loop k >= 1
+A frame is every message sharing one log stamp (all cameras of one dataset frame). A *set* (for
+bags of a rig whose cameras stamp their own capture times) is one synchronised capture: the
+cameras' image messages grouped by approximate synchronisation of their header stamps (the graph's
+own rule, core.association.approximate_sync, with the graph's max_skew), with the messages that go
+with them (each camera's CameraInfo); see group_sets. Loop k >= 1
 replays the bag with every stamp moved on by k * (last - first + one frame period), so the stream
 stays strictly increasing and keeps its frame spacing across the seam.
 """
@@ -11,10 +15,12 @@ from __future__ import annotations
 import struct
 from bisect import bisect_right
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Iterator
+from typing import Callable, Iterable, Iterator, Sequence
 
-FRAME_RATE = 25.0  # Hz, the datasets' frame rate (frame f has stamp f / 25 s)
-FRAME_PERIOD_NS = 40_000_000  # 1 / FRAME_RATE s, exact in ns
+from mvpose_ros.core.association.approximate_sync import ApproximateSync
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+
+FRAME_PERIOD_NS = round(1e9 / FRAME_RATE)  # the datasets' frame f has stamp f * FRAME_PERIOD_NS
 NS = 1_000_000_000
 
 # CDR encapsulation identifiers (first two bytes, big-endian) and the struct order they imply.
@@ -52,6 +58,76 @@ def group_frames(messages: Iterable[tuple[str, str, int, bytes]]) -> Iterator[Fr
         frame.messages.append((topic, msgtype, cdr))
     if frame is not None:
         yield frame
+
+
+@dataclass
+class SyncSet(Frame):
+    """One synchronised set of a rig bag: stamp_ns is the earliest member's header stamp (the
+    stamp the graph gives the set and its skeletons); index: its number in the bag from 0;
+    members: camera topic -> its header stamp (ns); skew_ns: newest minus oldest member stamp;
+    messages: the members and the messages going with them, in bag order."""
+
+    index: int = 0
+    members: dict[str, int] = field(default_factory=dict)
+    skew_ns: int = 0
+
+
+def group_sets(messages: Iterable[tuple[str, str, int, bytes]], cameras: Sequence[str], max_skew: float,
+               timeout: float = 0.5, stamped: Callable[[str], bool] = lambda msgtype: True) -> Iterator[SyncSet]:
+    """(topic, msgtype, log stamp ns, CDR) in log-time order -> the bag's synchronised sets.
+
+    cameras: the topics whose messages are synchronised (one per camera, each starting with a
+    std_msgs/Header); sets are ApproximateSync(len(cameras), timeout, max_skew) over their header
+    stamps, arrivals at their log times. Every other message goes with the first set released
+    after it whose newest member stamp is not older than its header stamp (unstamped ones: with the
+    first set released after them); an image the synchronisation refuses (late, duplicate) is
+    treated the same way, so nothing of the bag is left out. What follows the last set goes with it.
+    stamped(msgtype): whether that type starts with a header (others count as unstamped).
+    """
+    cams = list(cameras)
+    if not cams:
+        raise ValueError('group_sets needs at least one camera topic')
+    camera_of = {t: c for c, t in enumerate(cams)}
+    sync = ApproximateSync(len(cams), timeout, max_skew)
+    order = 0
+    extras: list[tuple[int, int | None, tuple[str, str, bytes]]] = []  # (bag order, header stamp, message)
+    held: SyncSet | None = None  # the latest set, kept until the next one (the end takes the rest)
+    count = 0
+
+    def take(released) -> Iterator[SyncSet]:
+        nonlocal held, count, extras
+        for synced in released:
+            members = {cams[c]: s for c, s in enumerate(synced.stamps) if s is not None}
+            newest = max(members.values())
+            last_member = max(item[0] for item in synced.items if item is not None)
+            mine = [e for e in extras if (e[1] <= newest if e[1] is not None else e[0] < last_member)]
+            taken = {e[0] for e in mine}
+            extras = [e for e in extras if e[0] not in taken]
+            parts = sorted([*mine, *(item for item in synced.items if item is not None)], key=lambda e: e[0])
+            if held is not None:
+                yield held
+            held = SyncSet(synced.stamp_ns, [e[2] for e in parts], index=count, members=members,
+                           skew_ns=synced.skew_ns)
+            count += 1
+
+    for topic, msgtype, log_ns, cdr in messages:
+        entry = (topic, msgtype, cdr)
+        c = camera_of.get(topic)
+        if c is not None and not stamped(msgtype):
+            raise ValueError(f'{topic}: {msgtype} has no header stamp to synchronise on')
+        stamp = header_stamp_ns(cdr) if stamped(msgtype) else None
+        if c is not None:
+            try:
+                yield from take(sync.add(stamp, c, (order, stamp, entry), log_ns / NS))
+            except ValueError:  # late or duplicate: the graph drops it too; it is played all the same
+                extras.append((order, stamp, entry))
+        else:
+            extras.append((order, stamp, entry))
+        order += 1
+    yield from take(sync.flush())
+    if held is not None:
+        held.messages += [e[2] for e in extras]
+        yield held
 
 
 def loop_offset_ns(loop: int, first_ns: int, last_ns: int, period_ns: int = FRAME_PERIOD_NS) -> int:
@@ -115,6 +191,12 @@ class InFlight:
             raise ValueError(f'published stamps must increase; got {stamp_ns} after {self._last} ns')
         self._stamps.append(stamp_ns)
         self._last = stamp_ns
+
+    def give_up(self) -> int:
+        """Stop waiting for the oldest frame in flight (downstream dropped it); returns its stamp."""
+        if not self._stamps:
+            raise ValueError('no frame in flight')
+        return self._stamps.pop(0)
 
     def acked(self, stamp_ns: int) -> int:
         """Downstream finished the frame at stamp_ns (and all before it); returns frames released."""

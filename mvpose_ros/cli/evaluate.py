@@ -2,6 +2,8 @@
 
     mvpose-eval shelf [--data-root DIR] [--terms data,temp,col,limb] [--window N --lag L]
                       [--predictions FILE]
+    mvpose-eval shelf --drop-every 2    # uneven frames: every second set dropped, scored on the rest
+    mvpose-eval shelf --drop-fraction 0.3 --drop-seed 1 [--evenly-spaced]
     mvpose-eval shelf --score FILE      # score a predictions file (e.g. from the ROS graph)
     mvpose-eval campus [--campus-dir CampusSeq1]
 """
@@ -14,11 +16,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Sequence, TextIO
 
+import numpy as np
+
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
 from mvpose_ros.core.evaluation.campus import campus_sequence
-from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir,
-                                                 load_actors_gt)
-from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, infer, prepare, shelf_openpose
+from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
+                                                 dataset_dir, load_actors_gt)
+from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.predictions import read_predictions, write_predictions
 from mvpose_ros.core.geometry.body import HEAD_MODELS
@@ -65,6 +69,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--collision-centre', type=float, default=d['collision_centre'])
     p.add_argument('--collision-width', type=float, default=d['collision_width'])
     p.add_argument('--seed', type=int, default=d['seed'])
+    p.add_argument('--max-gap', type=float, default=d['max_gap'], help=SOLVER_PARAMETERS['max_gap'])
+    p.add_argument('--drop-every', type=int, default=0, metavar='N',
+                   help='leave out every N-th frame (as sets dropped upstream) and score the frames left')
+    p.add_argument('--drop-fraction', type=float, default=0.0, metavar='F',
+                   help='leave out this fraction of the (remaining) frames at random and score the frames left')
+    p.add_argument('--drop-seed', type=int, default=0, metavar='S', help='seed of --drop-fraction')
+    p.add_argument('--evenly-spaced', action='store_true',
+                   help='treat the frames left as evenly spaced, blind to the real times (for comparison)')
     p.add_argument('--predictions', type=Path, help='write the predictions here (JSON lines)')
     p.add_argument('--score', type=Path, help='only score this predictions file')
     p.add_argument('--no-ablation', action='store_true', help='skip the ablation table')
@@ -84,6 +96,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.dataset == 'shelf':
         gt = load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', SHELF_TEST_FRAMES)
         actors, reference = SHELF_ACTORS, PAPER_SHELF_PCP
+    dropping = bool(args.drop_every or args.drop_fraction)
     if args.score:
         if args.dataset != 'shelf':
             raise ValueError('--score is for shelf')
@@ -100,13 +113,23 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
         config = replace(config, solver=replace(config.solver, head_model=head_model))
+    if dropping:
+        n_all = len(seq.frames)
+        seq = drop_frames(seq, args.drop_every, args.drop_fraction, args.drop_seed)
+        gt = _restricted(gt, seq.frames)
     prepared = prepare(seq, config)
     bp_timer = StageTimer()
-    results = infer(prepared, config.solver.inference, config.solver.head_model, bp_timer)
+    real_time = not args.evenly_spaced
+    results = infer(prepared, config.solver.inference, config.solver.head_model, bp_timer, real_time)
     ev = evaluate(as_predictions(results), gt, actors)
     mode = f'window {args.window}, lag {args.lag}' if args.window else 'whole clip'
     print(f'{args.dataset}: {len(seq.frames)} frames, {len(seq.cameras)} cameras, terms {",".join(args.terms)}, '
           f'{mode}, M={args.hypotheses}, head model {config.solver.head_model}', file=out)
+    if dropping:
+        print(f'uneven frames: {n_all - len(seq.frames)} of {n_all} left out (every {args.drop_every or "-"}, '
+              f'fraction {args.drop_fraction}, seed {args.drop_seed}), scored on the {len(seq.frames)} left; '
+              f'temporal term {"with the real times" if real_time else "blind to the times (evenly spaced)"}, '
+              f'max gap {args.max_gap} s', file=out)
     print(format_table(ev, reference), file=out)
     print(_summary(ev), file=out)
     if args.dataset == 'campus':
@@ -118,7 +141,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             n = write_predictions(results, f)
         print(f'wrote {n} frames to {args.predictions}', file=out)
     if not args.no_ablation:
-        _print_ablation(prepared, config, gt, actors, args.dataset == 'shelf', out)
+        _print_ablation(prepared, config, gt, actors, args.dataset == 'shelf', out, real_time)
     print(f'total {time.perf_counter() - t0:.1f} s', file=out)
     return 0
 
@@ -133,12 +156,22 @@ def _print_speed(seq: Sequence2D, prepared: Prepared, bp_timer: StageTimer, out)
     print(f'  {"total":24s} {1000 * total / n:7.2f} ms  -> {n / total:.1f} frames/s', file=out)
 
 
-def _print_ablation(prepared: Prepared, config: StageConfig, gt, actors: Sequence[int], paper: bool, out) -> None:
+def _restricted(gt: GroundTruth, frames: Sequence[int]) -> GroundTruth:
+    """The ground truth of `frames` only (a subset of gt.frames)."""
+    rows = np.searchsorted(gt.frames, frames)
+    if not np.array_equal(gt.frames[rows], frames):
+        raise ValueError('frames to score are not all in the ground truth')
+    return replace(gt, frames=gt.frames[rows], poses=gt.poses[rows])
+
+
+def _print_ablation(prepared: Prepared, config: StageConfig, gt, actors: Sequence[int], paper: bool, out,
+                    real_time: bool = True) -> None:
     print('\nAblation (All PCP per actor, strict | lenient; same hypotheses, same window):', file=out)
     header = f'{"terms":22s} ' + ' '.join(f'A{a + 1:d} str  A{a + 1:d} len' for a in actors)
     print(header + '   avg-fw str/len   avg-act str/len' + ('   paper A1/A2/A3' if paper else ''), file=out)
     for name, terms in ABLATION:
-        results = infer(prepared, replace(config.solver.inference, terms=terms), config.solver.head_model)
+        results = infer(prepared, replace(config.solver.inference, terms=terms), config.solver.head_model,
+                        real_time=real_time)
         ev = evaluate(as_predictions(results), gt, actors)
         cells = ' '.join(f'{ev.pcp("strict", a):6.2f} {ev.pcp("lenient", a):6.2f}' for a in actors)
         row = (f'{name:22s} {cells}   {ev.frame_weighted("strict"):6.2f}/{ev.frame_weighted("lenient"):6.2f}'

@@ -1,6 +1,6 @@
 """`mvpose-images`: 3D skeletons from one synchronised set of camera images of a calibrated rig.
 
-    mvpose-images --calibration FILE --images CAM0 CAM1 ... [--output DIR] [--frame N]
+    mvpose-images (--rig FILE | --calibration FILE) --images CAM0 CAM1 ... [--output DIR] [--frame N]
                   [--model rt|i] [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
 
 Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose + EfficientPose),
@@ -25,6 +25,7 @@ import numpy as np
 from msg_adapters.markers import person_colour
 from mvpose_ros.core.geometry.body import HEAD_MODELS, NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
 from mvpose_ros.core.detection.image_file import read_image
@@ -40,9 +41,13 @@ DEFAULTS = OnnxDetectorConfig(model_dir=Path())
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=PROG, description=__doc__.split('\n')[0])
-    p.add_argument('--calibration', required=True, type=Path, help='rig calibration json (Shelf layout)')
+    rig = p.add_mutually_exclusive_group(required=True)
+    rig.add_argument('--rig', type=Path, help='rig file (YAML, with every camera\'s intrinsics; see README "Your own '
+                                              'cameras"): the images must have the sizes it gives')
+    rig.add_argument('--calibration', type=Path, help='calibration json (Shelf layout): each camera at the size of '
+                                                      'its image')
     p.add_argument('--images', required=True, nargs='+', type=Path,
-                   help='one image per camera, in the calibration\'s camera order')
+                   help='one image per camera, in the rig\'s camera order')
     p.add_argument('--output', type=Path, default=Path('out/images'), help='folder for skeletons.jsonl and '
                    'the overlays (default: out/images)')
     p.add_argument('--frame', type=int, default=0, help='frame number written with the skeletons (default: 0)')
@@ -64,15 +69,23 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _rig_and_images(calibration: Path, paths: Sequence[Path]) -> tuple[list[Camera], list[np.ndarray]]:
-    """The calibrated cameras, each at the size of its image (the calibration does not record
-    it), and the images."""
-    images = [read_image(path) for path in paths]
+def _rig_and_images(args: argparse.Namespace) -> tuple[list[Camera], list[np.ndarray]]:
+    """The rig's cameras and their images: checked against the sizes a rig file gives, or giving a
+    calibration json (which records none) each camera's size."""
+    if args.rig is not None:
+        cameras = load_rig_file(args.rig, data_root=data_root(args.data_root)).calibrated_cameras()
+        _same_count(args.images, cameras)
+        return cameras, [read_image(path, cam) for path, cam in zip(args.images, cameras)]
+    images = [read_image(path) for path in args.images]
     height, width = images[0].shape[:2]
-    cameras = load_rig(calibration, width, height)
-    if len(paths) != len(cameras):
-        raise ValueError(f'--images: {len(paths)} images for {len(cameras)} calibrated cameras')
+    cameras = load_rig(args.calibration, width, height)
+    _same_count(args.images, cameras)
     return [replace(cam, width=im.shape[1], height=im.shape[0]) for cam, im in zip(cameras, images)], images
+
+
+def _same_count(paths: Sequence[Path], cameras: Sequence[Camera]) -> None:
+    if len(paths) != len(cameras):
+        raise ValueError(f'--images: {len(paths)} images for {len(cameras)} cameras in the rig')
 
 
 def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
@@ -94,7 +107,7 @@ def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
-    cameras, images = _rig_and_images(args.calibration, args.images)
+    cameras, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
                                                    input_size=args.input_size, stride=args.stride, ears=args.ears))

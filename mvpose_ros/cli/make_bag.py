@@ -1,10 +1,12 @@
 """`mvpose-make-bag`: build a rosbag2 (MCAP) bag of the real data for the ROS graph.
 
-    mvpose-make-bag shelf|shelf_images [--data-root DIR] [--output DIR] [--force]
+    mvpose-make-bag shelf|shelf_images|shelf_rig|shelf_rig_raw [--data-root DIR] [--output DIR] [--force]
     mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]
 
 A bag that is complete and made from the current inputs by the current recipe is left alone
-(exit 0), so scripts can call this every time; any other existing output needs --force.
+(exit 0), so scripts can call this every time; any other existing output needs --force. The
+shelf_rig bags (a foreign rig recorded by its driver) also get their rig file, `rig.yaml` inside
+the bag folder: `mvpose-graph --rig bags/shelf_rig/rig.yaml --bag bags/shelf_rig`.
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from pathlib import Path
 from typing import Sequence, TextIO
 
 from mvpose_ros.bags.io import bag_summary, write_bag
-from mvpose_ros.bags.recipes import RECIPES, Recipe, make_recipe
+from mvpose_ros.bags.recipes import RECIPES, RIG_FILE, Recipe, make_recipe
 
 RECIPE_KEY = 'mvpose_recipe'
 FINGERPRINT_KEY = 'mvpose_fingerprint'
@@ -56,14 +58,25 @@ def _remove_bag(output: Path) -> None:
     if not output.is_dir():
         raise FileExistsError(f'{output}: exists and is not a folder; not replacing it')
     foreign = [f.name for f in output.iterdir()
-               if f.name != 'metadata.yaml' and not f.name.endswith(_BAG_FILE_SUFFIXES)]
+               if f.name not in ('metadata.yaml', RIG_FILE) and not f.name.endswith(_BAG_FILE_SUFFIXES)]
     if foreign:
         raise FileExistsError(f'{output}: holds non-bag files ({", ".join(sorted(foreign)[:3])}); '
                               f'not deleting it')
     shutil.rmtree(output)
 
 
+def _write_rig(output: Path, recipe: Recipe, out: TextIO) -> None:
+    """The recipe's rig file inside the bag folder (rewritten: it is cheap and follows the code)."""
+    if recipe.rig_text is not None:
+        path = output / RIG_FILE
+        text = recipe.rig_text()
+        if not path.is_file() or path.read_text(encoding='utf-8') != text:
+            path.write_text(text, encoding='utf-8')
+        print(f'{path}: its rig file (intrinsics from the CameraInfo messages)', file=out)
+
+
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Make the bag `args` name; returns the exit code."""
     out = out or sys.stdout
     recipe = make_recipe(args.recipe, args.data_root, args.campus_dir)
     output = Path(args.output or Path('bags') / args.recipe)
@@ -72,6 +85,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         reason = _stale_reason(output, recipe, fingerprint)
         if reason is None and not args.force:
             print(f'{output}: {recipe.name} bag already made and up to date', file=out)
+            _write_rig(output, recipe, out)
             return 0
         if not args.force:
             raise FileExistsError(f'{output}: exists and {reason}; pass --force to replace it')
@@ -83,6 +97,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     print(f'{output}: {recipe.name} bag, {summary.message_count} messages on {len(summary.topics)} '
           f'topics, stamps {summary.first_ns / 1e9:.2f}..{summary.last_ns / 1e9:.2f} s, '
           f'{_size_mb(output):.1f} MB, made in {seconds:.1f} s', file=out)
+    _write_rig(output, recipe, out)
     return 0
 
 

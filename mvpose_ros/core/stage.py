@@ -40,6 +40,9 @@ SOLVER_PARAMETERS = {
     'seed': 'seed of the hypothesis sampling',
     'collision_centre': 'collision factor: sigmoid centre, metres between two joints',
     'collision_width': 'collision factor: sigmoid width, metres',
+    'frame_rate': 'nominal frames per second: the temporal factor is defined for one such period and widens '
+                  'with the real time between frames',
+    'max_gap': 's between two successive frames beyond which every temporal chain breaks',
 }
 ASSOCIATION_PARAMETERS = {
     'track_iou': 'per-camera tracking: minimum box IoU (paper: 0.7)',
@@ -65,7 +68,8 @@ class StageConfig:
                           collision_width=float(d['collision_width']))
         inference = InferenceConfig(terms=tuple(d['terms']), window=window, lag=int(d['lag']),
                                     iterations=int(d['iterations']), bp_hypotheses=int(d['bp_hypotheses']) or None,
-                                    slide_iterations=int(d['slide_iterations']) or None, factors=factors)
+                                    slide_iterations=int(d['slide_iterations']) or None, factors=factors,
+                                    frame_rate=float(d['frame_rate']), max_gap=float(d['max_gap']))
         solver = SolverConfig(sampling=replace(SamplingConfig(), hypotheses=int(d['hypotheses'])),
                               inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
         association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
@@ -82,6 +86,7 @@ class StageConfig:
             'head_model': solver.head_model, 'seed': solver.seed,
             'collision_centre': inference.factors.collision_centre,
             'collision_width': inference.factors.collision_width,
+            'frame_rate': inference.frame_rate, 'max_gap': inference.max_gap,
             'track_iou': self.association.track_iou, 'match_distance': self.association.matching.max_distance,
         }
 
@@ -115,9 +120,11 @@ class Stage3D:
         self.timer.add('association', t0)
         return bundles
 
-    def push(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[FrameResult]:
-        """Associate and solve one frame; returns the frames whose output is due."""
-        return self.solver.push(frame, self.associate(frame, people))
+    def push(self, frame: int, people: Sequence[Sequence[Person2D] | None],
+             time_s: float | None = None) -> list[FrameResult]:
+        """Associate and solve one frame, taken at time_s seconds (None: frame / the nominal frame
+        rate); returns the frames whose output is due."""
+        return self.solver.push(frame, self.associate(frame, people), time_s)
 
     def flush(self) -> list[FrameResult]:
         """Every frame not yet output (end of stream)."""

@@ -15,6 +15,9 @@ from typing import Mapping, Sequence, get_type_hints
 
 import yaml
 
+from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.geometry.rig import Rig
 from mvpose_ros.topics import BUNDLES, OPENPOSE, PEOPLE2D, SKELETONS, camera_namespace, camera_topic
 
 RUNNER_SECTION = 'mvpose_graph'
@@ -134,12 +137,15 @@ def _ros_value(value: bool | int | float | str) -> str:
     return json.dumps(value)
 
 
-def node_command(spec: NodeSpec, params_file: str | Path, python: str = sys.executable) -> list[str]:
-    """The command running `spec` with this interpreter, so that nodes run the runner's own code."""
+def node_command(spec: NodeSpec, params_file: str | Path | Sequence[str | Path],
+                 python: str = sys.executable) -> list[str]:
+    """The command running `spec` with this interpreter, so that nodes run the runner's own code.
+    Several parameter files are given in order (a later one overrides an earlier one)."""
     cmd = [python, '-m', f'{NODE_PACKAGE}.{spec.executable}', '--ros-args']
     if spec.namespace:
         cmd += ['-r', f'__ns:=/{spec.namespace}']
-    cmd += ['--params-file', str(params_file)]
+    for path in [params_file] if isinstance(params_file, (str, Path)) else params_file:
+        cmd += ['--params-file', str(path)]
     for name, value in spec.parameters.items():
         cmd += ['-p', f'{name}:={_ros_value(value)}']
     return cmd
@@ -170,7 +176,103 @@ def expected_connections(cameras: int, input_topic: str = OPENPOSE) -> dict[str,
 
 def unknown_nodes(params: Mapping[str, object], nodes: Sequence[NodeSpec]) -> list[str]:
     """Sections of the parameter file that match none of `nodes` (typos) besides the runner's."""
-    known = {RUNNER_SECTION}
+    known = {RUNNER_SECTION, '/**'}
     for spec in nodes:
         known |= {spec.executable, f'/{spec.name}', f'/**/{spec.executable}'}
     return sorted(set(params) - known)
+
+
+# What `mvpose-graph --rig` runs when --config does not say otherwise (package file, see its comments).
+RIG_TEMPLATE = 'config/rig_template.yaml'
+RIG_RUNNER_DEFAULTS: dict[str, bool | int | float | str] = {
+    'predictions': 'out/rig_graph.jsonl', 'rate': 1.0, 'timeout': 60.0, 'qos': 'sensor', 'ack_timeout': 5.0}
+LOCKSTEP_ACK = BUNDLES  # a set is done once its bundle is out (the 3D stage holds skeletons back `lag` sets)
+# Lockstep: a set the sync releases late (a camera missing from it, decided by the next set's
+# image or the sync timeout) can leave together with the next; the detector keeps both.
+LOCKSTEP_WAITING_SETS = 8
+
+
+@dataclass(frozen=True)
+class RigRun:
+    """A run of the graph on a recorded rig: the rig file (absolute), the bag, lockstep or `rate`,
+    the player's QoS ('sensor' or 'reliable'), the set synchronisation (max_skew, sync_timeout,
+    s, as the graph's association), and ack_timeout (lockstep: s after which a set the graph
+    dropped is given up); loops: passes over the bag (stamps moved on as the player does)."""
+
+    rig: str
+    bag: str
+    lockstep: bool
+    rate: float
+    qos: str
+    max_skew: float
+    sync_timeout: float
+    ack_timeout: float
+    loops: int = 1
+
+
+def runner_section(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> dict[str, object]:
+    """The merged mvpose_graph sections of parameter files (a later file overrides)."""
+    out: dict[str, object] = {}
+    for params in params_list:
+        out |= dict(params.get(RUNNER_SECTION, {}))
+    return out
+
+
+def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> tuple[float, float]:
+    """max_skew and sync_timeout (s) the association node gets from these parameter files (its
+    defaults: max_skew 0 = half a frame period of frame_rate, 25 Hz; sync_timeout 0.5 s)."""
+    section: dict[str, object] = {}
+    for params in params_list:
+        for node, values in params.items():
+            if node in ('/**', 'association', '/association', '/**/association'):
+                section |= dict(values)
+    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(float(section.get('frame_rate', FRAME_RATE)))
+    return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
+
+
+def rig_graph_nodes(run: RigRun, data_root: str | None = None, start_topic: str = '') -> list[NodeSpec]:
+    """The graph of a recorded rig in start order: ONE heatmap_detector for the whole rig (camera
+    'all'), association, bp_solver (each with the rig), then bag_player (lockstep: sets, rate 0,
+    one set in flight acknowledged on people/bundles; else `rate`, every message at its time)."""
+    data = {'data_root': data_root} if data_root is not None else {}
+    rig: dict[str, bool | int | float | str] = {'rig': run.rig, **data}
+    waiting = {'waiting_sets': LOCKSTEP_WAITING_SETS} if run.lockstep else {}
+    player: dict[str, bool | int | float | str] = {
+        'bag': run.bag, 'qos': run.qos, 'max_skew': float(run.max_skew), 'sync_timeout': float(run.sync_timeout),
+        'loops': int(run.loops)}
+    if run.lockstep:
+        player |= {'rate': 0.0, 'sets': True, 'max_in_flight': 1, 'ack_topic': LOCKSTEP_ACK,
+                   'ack_timeout': float(run.ack_timeout)}
+    else:
+        player |= {'rate': float(run.rate), 'sets': False}
+    if start_topic:
+        player['start_topic'] = start_topic
+    return [NodeSpec('heatmap_detector', '', {'camera': 'all', **rig, **waiting}),
+            NodeSpec('association', '', dict(rig)),
+            NodeSpec('bp_solver', '', dict(rig)),
+            NodeSpec('bag_player', '', player)]
+
+
+def rig_connections(rig: Rig) -> dict[str, Sequence[str]]:
+    """Topic -> endpoints that must exist before the player of a rig bag may start: a reader of
+    every camera's image topic (the detector), both ends of every <camera>/people2d and of the
+    bundles, and the skeletons' writer."""
+    topics: dict[str, Sequence[str]] = {}
+    for camera in rig.cameras:
+        topics[camera.image] = ('sub',)
+        topics[camera_topic(camera.name, PEOPLE2D)] = ('pub', 'sub')
+    topics[BUNDLES] = ('pub', 'sub')
+    topics[SKELETONS] = ('pub',)
+    return topics
+
+
+def write_overrides(nodes: Sequence[NodeSpec], path: str | Path) -> Path:
+    """A parameter file with every node's command-line values under '/**/<node>', to be given
+    after the others: a '/**/<node>' section of a parameter file wins over `-p` arguments, so the
+    runner's values must come as the last such file to win."""
+    doc = {f'/**/{spec.executable}': {PARAMS_KEY: dict(spec.parameters)} for spec in nodes if spec.parameters}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text('# Written by mvpose-graph: the values it gives each node (they override the files before).\n'
+                    + yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
+    return path

@@ -2,7 +2,9 @@
 
 `SkeletonRecorder` keeps the first skeletons message of every stamp, counts every message per
 stamp (duplicates), and records when (middleware receipt time, ns of the system clock, so queueing
-in its executor does not count) each stamp's camera 0 camera_info and skeletons arrived; it can
+in its executor does not count) each stamp's camera 0 camera_info (for a rig: the first
+camera_info of any camera with that stamp, i.e. the first member of a set) and skeletons arrived,
+and for a rig every camera's people2d stamps (the achieved synchronisation skew); it can
 also append every skeletons message to a predictions file as it comes and record the serialized
 size of every message the nodes publish. `mvpose-graph` runs one inside its own process.
 
@@ -38,6 +40,7 @@ from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, PointCloud2
 from std_msgs.msg import Empty
@@ -46,7 +49,8 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
 from mvpose_ros.bags.io import read_bag
-from mvpose_ros.bags.replay import FRAME_RATE, header_stamp_ns
+from mvpose_ros.bags.replay import header_stamp_ns
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
@@ -76,7 +80,12 @@ class SkeletonRecorder(Node):
     """
 
     def __init__(self, name: str = 'skeleton_recorder', context: Context | None = None,
-                 frame_rate: float = FRAME_RATE, stream: TextIO | None = None, measure_cameras: int = 0) -> None:
+                 frame_rate: float = FRAME_RATE, stream: TextIO | None = None, measure_cameras: int = 0,
+                 timing_topics: Sequence[str] = (TIMING_TOPIC,), timing_qos: QoSProfile = DATA_QOS,
+                 people_topics: Sequence[str] = ()) -> None:
+        """timing_topics: camera_info topics a stamp's latency is timed from (read with timing_qos:
+        best effort for a player or driver publishing so); people_topics: people2d topics whose
+        stamps are kept in `people_stamps` (by the topic as given)."""
         super().__init__(name, context=context)
         self.frame_rate = frame_rate
         self.stream = stream
@@ -89,7 +98,11 @@ class SkeletonRecorder(Node):
         self.last_output = 0.0  # monotonic s of the last skeletons message
         self.sizes: dict[str, list[tuple[int, int]]] = {}  # fully qualified topic -> (stamp ns, bytes)
         self._gate: Publisher | None = None
-        self._info = self.create_subscription(CameraInfo, TIMING_TOPIC, self._on_info, DATA_QOS)
+        self._infos = [self.create_subscription(CameraInfo, t, self._on_info, timing_qos) for t in timing_topics]
+        self.people_stamps: dict[str, list[int]] = {t: [] for t in people_topics}
+        for topic in people_topics:
+            self.create_subscription(PointCloud2, topic, lambda cdr, t=topic: self._on_people(t, cdr), DATA_QOS,
+                                     raw=True)
         self._outputs = [self.create_subscription(PointCloud2, OUTPUT_TOPIC, self._on_skeletons, DATA_QOS,
                                                   raw=True)]
         for topic, msg_type in (graph_topics(measure_cameras) if measure_cameras > 0 else {}).items():
@@ -103,6 +116,9 @@ class SkeletonRecorder(Node):
     def _on_info(self, msg: CameraInfo, info: Any) -> None:
         self.last_activity = time.monotonic()
         self.info_at.setdefault(stamp_ns(msg.header.stamp), info['received_timestamp'])
+
+    def _on_people(self, topic: str, cdr: bytes) -> None:
+        self.people_stamps[topic].append(header_stamp_ns(cdr))
 
     def _measure(self, topic: str, msg_type: Any, cdr: bytes) -> None:
         if msg_type is MarkerArray:  # no header of its own: the stamp of its first marker
@@ -151,8 +167,8 @@ class SkeletonRecorder(Node):
         return not self.unmatched_outputs()
 
     def timing_matched(self) -> bool:
-        """Whether this node's camera_info reader has matched a writer (the player's)."""
-        return self._info.get_publisher_count() > 0
+        """Whether every camera_info reader of this node has matched a writer (the player's)."""
+        return all(sub.get_publisher_count() > 0 for sub in self._infos)
 
     def open_gate(self, topic: str = START_TOPIC) -> None:
         """Let a player waiting on `topic` (its start_topic) play: one latched message."""

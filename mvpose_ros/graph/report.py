@@ -1,7 +1,10 @@
 """What `mvpose-graph` prints after a run: frames in and out, missing, duplicate and unexpected
-stamps, end-to-end latency (p50, p95, by quarter of the run) and the PCP table of the predictions."""
+stamps, end-to-end latency (p50, p95, by quarter of the run) and the PCP table of the predictions;
+for a rig run, sets in / processed / dropped, the synchronisation skew, the latency, the
+predictions lines by set, and a one-scene bag scored set by set against a Shelf frame."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Mapping, Protocol, Sequence, TextIO
 
@@ -9,7 +12,8 @@ import numpy as np
 
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
-from mvpose_ros.core.evaluation.predictions import read_predictions
+from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions
+from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC
 
@@ -95,3 +99,100 @@ def score(predictions: Path | str, frames: Sequence[int], root: str | None, out:
               + f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
               f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
               f' | MPJPE {ev.mpjpe_all:5.1f} mm', file=out)
+
+
+def set_skews_ms(set_stamps: Sequence[int], people_stamps: Mapping[str, Sequence[int]], max_skew_ns: int) -> np.ndarray:
+    """(N,) ms: per set stamp, newest minus oldest of the cameras' people2d stamps within
+    [stamp, stamp + max_skew] (the members the graph synchronised; sets seen by one camera: 0)."""
+    per_camera = [np.sort(np.asarray(stamps, dtype=np.int64)) for stamps in people_stamps.values()]
+    out = []
+    for s in set_stamps:
+        members = []
+        for stamps in per_camera:
+            i = np.searchsorted(stamps, s)
+            if i < stamps.size and stamps[i] <= s + max_skew_ns:
+                members.append(int(stamps[i]))
+        if members:
+            out.append(1e-6 * (max(members) - min(members)))
+    return np.array(out)
+
+
+def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Recorded,
+               people_stamps: Mapping[str, Sequence[int]], max_skew_ns: int, lockstep: bool, out: TextIO) -> list[str]:
+    """Print sets in / processed / dropped, the synchronisation skew and the latency of a rig run
+    (set_stamps: every set of the bag, in order; bag_skews_ns: each set's skew in the bag);
+    returns the problems (lockstep: any set without skeletons; any run: nothing processed,
+    duplicate or unexpected stamps, undecodable outputs)."""
+    wanted = set(set_stamps)
+    processed = [s for s in set_stamps if s in node.outputs]
+    duplicate = [s for s, n in node.received.items() if n > 1]
+    unexpected = [s for s in node.received if s not in wanted]
+    print(f'sets in {len(set_stamps)}, processed {len(processed)}, dropped {len(set_stamps) - len(processed)}'
+          + (f' (set numbers {frame_ranges([i for i, s in enumerate(set_stamps) if s not in node.outputs])})'
+             if len(processed) < len(set_stamps) else '')
+          + f'; duplicate {len(duplicate)}, unexpected {len(unexpected)}', file=out)
+    bag = np.asarray(bag_skews_ns, dtype=float) * 1e-6
+    graph = set_skews_ms(processed, people_stamps, max_skew_ns)
+    if bag.size:
+        print(f'sync skew (newest - oldest member stamp): bag sets p50 {np.median(bag):.1f} ms, max {bag.max():.1f} ms'
+              + (f'; sets the graph processed (people2d stamps) p50 {np.median(graph):.1f} ms, max '
+                 f'{graph.max():.1f} ms' if graph.size else ''), file=out)
+    lat = latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted})
+    if lat.size:
+        p50, p95 = np.percentile(lat, [50, 95])
+        print(f'latency first camera_info of a set -> {OUTPUT_NAME}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, '
+              f'max {lat.max():.1f} ms ({lat.size} sets)', file=out)
+        quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
+        print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
+    problems = []
+    if lockstep and len(processed) < len(set_stamps):
+        problems.append(f'{len(set_stamps) - len(processed)} of {len(set_stamps)} sets got no {OUTPUT_NAME}')
+    if not processed:
+        problems.append(f'no set got {OUTPUT_NAME}')
+    problems += [f'{len(duplicate)} stamps got more than one {OUTPUT_NAME}'] if duplicate else []
+    problems += [f'{len(unexpected)} {OUTPUT_NAME} stamps are not set stamps of the bag'] if unexpected else []
+    problems += [f'{len(node.bad)} undecodable {OUTPUT_NAME} messages, first: {node.bad[0]}'] if node.bad else []
+    return problems
+
+
+def rig_prediction_lines(set_stamps: Sequence[int], outputs: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[str]:
+    """One predictions line per set with skeletons, in bag order: {"frame": <set index from 0>,
+    "stamp": <ns>, "people": [{"id": ..., "joints": [[x, y, z] x 14]}]}."""
+    lines = []
+    for index, stamp in enumerate(set_stamps):
+        if stamp in outputs:
+            ids, joints = outputs[stamp]
+            people = json.loads(frame_line(FrameResult(index, [int(i) for i in ids], joints)))['people']
+            lines.append(json.dumps({'frame': index, 'stamp': int(stamp), 'people': people}, separators=(',', ':')))
+    return lines
+
+
+def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextIO) -> None:
+    """Every set of a rig predictions file scored against Shelf's actorsGT frame `frame` (a bag of
+    that one scene repeated): per annotated actor, the sets it is found in, MPJPE (mean, min, max
+    over those sets) and the ids it got (the same id throughout is the tracking working)."""
+    gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [frame])
+    actors = np.flatnonzero(gt.present[0]).tolist()
+    records = [json.loads(line) for line in Path(predictions).read_text(encoding='utf-8').splitlines() if line]
+    errors: dict[int, list[float]] = {a: [] for a in actors}
+    ids: dict[int, set[int]] = {a: set() for a in actors}
+    complete = 0
+    for rec in records:
+        people = rec['people']
+        joints = np.array([p['joints'] for p in people], dtype=float).reshape(-1, 14, 3)
+        ev = evaluate({frame: joints}, gt, actors)
+        found = 0
+        for a, actor in enumerate(ev.actors):
+            if ev.missed[a] == 0:
+                found += 1
+                errors[actor].append(float(ev.mpjpe[a]))
+                truth = gt.poses[0, actor]
+                nearest = int(np.argmin(np.linalg.norm(joints - truth, axis=-1).mean(axis=-1)))
+                ids[actor].add(int(people[nearest]['id']))
+        complete += found == len(actors)
+    print(f'ground truth Shelf frame {frame} (actors {", ".join(str(a + 1) for a in actors)}): every annotated '
+          f'actor found in {complete} of {len(records)} sets', file=out)
+    for actor in actors:
+        e = np.array(errors[actor])
+        stats = f'MPJPE mean {e.mean():.1f} mm, min {e.min():.1f}, max {e.max():.1f}' if e.size else 'MPJPE -'
+        print(f'Actor {actor + 1}: found in {e.size} sets, {stats}; ids {sorted(ids[actor])}', file=out)

@@ -13,7 +13,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 from rclpy.executors import SingleThreadedExecutor
 
@@ -87,9 +87,8 @@ def _spin_until(executor: SingleThreadedExecutor, group: ProcessGroup, done: Cal
 
 
 def _wait_connected(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
-                    settings: GraphSettings, input_topic: str) -> None:
+                    expected: Mapping[str, Sequence[str]]) -> None:
     """Until every expected endpoint exists and the recorder's skeletons reader has matched."""
-    expected = expected_connections(settings.cameras, input_topic)
 
     def why_not() -> str:
         missing = node.missing_links(expected) or [f'matched publisher of {t}' for t in node.unmatched_outputs()]
@@ -99,9 +98,9 @@ def _wait_connected(node: SkeletonRecorder, executor: SingleThreadedExecutor, gr
 
 
 def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
-                  spec: NodeSpec, config: Path) -> None:
-    """Start the player; with a start_topic, let it play once the recorder's camera_info reader
-    has matched its writer."""
+                  spec: NodeSpec, config: Path | Sequence[Path]) -> None:
+    """Start the player; with a start_topic, let it play once the recorder's camera_info readers
+    have matched its writers."""
     start_topic = str(spec.parameters.get('start_topic', ''))
     group.start(spec.name, node_command(spec, config))
     if start_topic:
@@ -111,10 +110,12 @@ def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, grou
 
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
-          stamps: Sequence[int], memory: MemoryLog) -> bool:
+          stamps: Sequence[int], memory: MemoryLog, quiet: float = 0.0) -> bool:
     """Spin until every stamp has an output; True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
-    after the player's start while neither happened yet)."""
+    after the player's start while neither happened yet). quiet > 0 (a paced rig run, whose
+    graph drops sets): also done, not stalled, once the player has exited and nothing came for
+    `quiet` s."""
     wanted = set(stamps)
     started = time.monotonic()
     player_done: float | None = None
@@ -128,7 +129,10 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
         if player_done is None and PLAYER in group.poll():
             player_done = time.monotonic()
         limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S
-        if time.monotonic() - max(started, player_done or 0.0, node.last_activity) > limit:
+        idle = time.monotonic() - max(started, player_done or 0.0, node.last_activity)
+        if quiet > 0 and player_done is not None and idle > quiet:
+            return False
+        if idle > limit:
             return True
     # Camera infos of the last frames may still be queued behind their outputs.
     deadline = time.monotonic() + DRAIN_S
@@ -137,12 +141,16 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     return False
 
 
-def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], stamps: list[int],
+def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Sequence[NodeSpec], stamps: list[int],
               log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
-              per_loop: int) -> Outcome:
+              per_loop: int, expected: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0) -> Outcome:
     """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
-    also after Ctrl-C (outcome.interrupted). input_topic: what each detector reads in its camera
-    namespace; per_loop: stamps in one pass of the bag (the memory baseline)."""
+    also after Ctrl-C (outcome.interrupted). config: the parameter file(s) every node gets, in
+    order; input_topic: what each detector reads in its camera namespace; per_loop: stamps in one
+    pass of the bag (the memory baseline); expected: the endpoints to wait for before playing
+    (default: the Shelf graph's, expected_connections); quiet: see _play."""
+    if expected is None:
+        expected = expected_connections(settings.cameras, input_topic)
     outcome = Outcome(stamps, MemoryLog(per_loop))
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
@@ -150,11 +158,11 @@ def run_graph(settings: GraphSettings, config: Path, nodes: Sequence[NodeSpec], 
         try:
             for spec in nodes:
                 if spec.executable == PLAYER:
-                    _wait_connected(node, executor, group, settings, input_topic)
+                    _wait_connected(node, executor, group, expected)
                     _start_player(node, executor, group, spec, config)
                 else:
                     group.start(spec.name, node_command(spec, config))
-            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory)
+            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet)
         except GraphFailure as failure:
             outcome.failure = failure
         except Interrupted as exc:

@@ -1,94 +1,170 @@
-"""The association node: gathers every camera's 2D people of a stamp, tracks them per camera,
-matches them across views and publishes the people seen by at least two cameras, each with a
-stable 3D id, as one bundle message per stamp (people/bundles, PointCloud2 encoding C).
+"""The association node: synchronises every rig camera's 2D people into sets, tracks them per
+camera, matches them across views and publishes the people seen by at least two cameras, each
+with a stable 3D id, as one bundle message per set (people/bundles, PointCloud2 encoding C).
 
-A camera missing from a stamp is waited for at most `sync_timeout` seconds; the frame then goes
-on without it (logged). Every stamp that arrives yields exactly one bundle message, empty when
-nobody is seen twice.
+Inputs: `<camera name>/people2d` of each rig camera (names from the rig file, relative), whose
+frame_id must be that camera's frame_id in the rig file. Synchronisation is approximate
+(core.association.approximate_sync, message_filters' ApproximateTime semantics): a set holds at
+most one message per camera, their stamps within `max_skew` seconds (0: half a frame period of
+`frame_rate`); a camera missing from a set is waited for at most `sync_timeout` seconds, then the
+set goes on without it (logged). A set needs `min_cameras` members (default 2: a person must be
+seen twice to be triangulated, so a smaller set could only give an empty bundle); the messages of
+a smaller one are dropped. Every set yields exactly one bundle message, empty when nobody is
+seen twice, stamped with the set's stamp (its earliest member stamp) in the rig's world frame.
+Frames are numbered by set order, not by stamp x rate. Every dropped message is counted by
+reason (late, duplicate, unmatched, overflow, frame_id, malformed, no intrinsics) and logged,
+at most every few seconds per camera and reason; every REPORT_EVERY sets the achieved skew
+(median, max) and the drops so far are logged. A rig without intrinsics in its file takes them
+from each camera's CameraInfo: until every camera's is known, inputs are dropped (no intrinsics).
 """
 from __future__ import annotations
 
 import time
+from collections import Counter
 from functools import partial
 
+import numpy as np
+from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.people_msg import bundles_to_msg, msg_to_people
-from msg_adapters.stamp import frame_of_stamp, stamp_ns
+from msg_adapters.stamp import stamp_ns
 from mvpose_ros import topics
+from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
+                                                          default_max_skew)
 from mvpose_ros.core.association.associator import Associator
-from mvpose_ros.core.association.stamp_sync import StampSync, SyncedFrame
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, StageConfig, parameter_specs
-from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
+from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, load_rig_parameter,
+                                      rig_parameters, run)
 
 EXPIRE_PERIOD_S = 0.05
+REPORT_EVERY = 100  # sets between two skew reports
+THROTTLE_S = 2.0  # s between two logs of the same camera and drop reason (or the same missing cameras)
+NS_PER_S = 1_000_000_000
 
 
 class AssociationNode(Node):
-    """cam<c>/people2d of every camera in, people/bundles out (names relative: see topics)."""
+    """<camera>/people2d of every rig camera in, people/bundles out (names relative: see topics)."""
 
     def __init__(self) -> None:
         super().__init__('association')
         p = declare(self, [
             *rig_parameters(),
-            ('sync_timeout', 0.5, 's to wait for a camera missing from a stamp before going on without it'),
+            ('sync_timeout', SYNC_TIMEOUT_S, 's to wait for a camera missing from a set before going on without it'),
+            ('max_skew', 0.0, 's between the oldest and newest stamp of a set (0: half a frame period)'),
+            ('min_cameras', 2, 'cameras a set needs to be bundled (smaller sets are dropped: nobody in them is '
+                               'seen twice)'),
             *parameter_specs(ASSOCIATION_PARAMETERS),
-            ('frame_rate', FRAME_RATE, 'frames per second of the stamp timeline (frame = stamp * rate)'),
+            ('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (for max_skew 0)'),
         ])
-        self._cameras = load_rig_parameter(p)
-        if not (p['sync_timeout'] > 0 and p['frame_rate'] > 0):
-            raise StartupError('parameters sync_timeout, frame_rate: must be > 0')
+        rig = load_rig_parameter(p)
+        n = len(rig.cameras)
+        if not (p['sync_timeout'] > 0 and p['frame_rate'] > 0 and p['max_skew'] >= 0):
+            raise StartupError('parameters sync_timeout, frame_rate: must be > 0; max_skew: must be >= 0')
+        if not 1 <= p['min_cameras'] <= n:
+            raise StartupError(f'parameter min_cameras: must be in 1..{n} (the rig has {n} cameras)')
         try:
-            config = StageConfig.from_params(p).association
+            self._config = StageConfig.from_params(p).association
         except ValueError as exc:
             raise StartupError(f'parameters: {exc}') from None
-        self._rate = p['frame_rate']
-        self._associator = Associator(self._cameras, config)
-        self._sync = StampSync(len(self._cameras), p['sync_timeout'])
+        self._rig = rig
+        self._names = rig.names
+        max_skew = p['max_skew'] or default_max_skew(p['frame_rate'])
+        # a camera whose intrinsics are still unknown (no CameraInfo yet) is left out of the sets
+        self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
+        self._associator = Associator(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
+                                      self._config)
+        self._sync = ApproximateSync(n, p['sync_timeout'], max_skew, p['min_cameras'])
+        self.dropped: Counter[str] = Counter()  # every dropped input message, by reason
+        self._logged: dict[tuple, float] = {}  # (what, ...) -> when last logged
+        self._suppressed: Counter[tuple] = Counter()  # (what, ...) -> not logged since
+        self._skews: list[int] = []  # ns, of the sets since the last report
         self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
-        for c in range(len(self._cameras)):
-            self.create_subscription(PointCloud2, topics.camera_topic(c, topics.PEOPLE2D), partial(self._on_people, c),
-                                     DATA_QOS)
+        for c, camera in enumerate(rig.cameras):
+            self.create_subscription(PointCloud2, topics.camera_topic(camera.name, topics.PEOPLE2D),
+                                     partial(self._on_people, c), DATA_QOS)
         self.create_timer(EXPIRE_PERIOD_S, self._on_timer)
-        self._last_frame: int | None = None
-        self.get_logger().info(f'{len(self._cameras)} cameras, sync timeout {p["sync_timeout"]} s')
+        self.get_logger().info(f'{n} cameras ({", ".join(self._names)}), max skew {1e3 * max_skew:.1f} ms, '
+                               f'sync timeout {p["sync_timeout"]} s, sets of >= {p["min_cameras"]} cameras'
+                               + ('' if rig.calibrated else ', intrinsics from CameraInfo'))
+
+    def _throttled(self, key: tuple, text: str) -> None:
+        """Log text as a warning unless the same key was logged less than THROTTLE_S ago."""
+        now = time.monotonic()
+        if now - self._logged.get(key, -float('inf')) < THROTTLE_S:
+            self._suppressed[key] += 1
+            return
+        more = self._suppressed.pop(key, 0)
+        self._logged[key] = now
+        self.get_logger().warning(text + (f' ({more} more like it since the last such line)' if more else ''))
+
+    def _drop(self, camera: int, stamp: int, reason: str, detail: str) -> None:
+        self.dropped[reason] += 1
+        self._throttled(('drop', camera, reason),
+                        f'{self._names[camera]} people2d stamp {stamp} ns dropped ({reason}): {detail}')
+
+    def _ready(self, camera: int) -> bool:
+        """Whether camera's intrinsics are known (taking them into the associator once they are)."""
+        if self._associator.cameras[camera] is None:
+            self._associator.cameras[camera] = self._intrinsics.known[camera]
+        return self._associator.cameras[camera] is not None
 
     def _on_people(self, camera: int, msg: PointCloud2) -> None:
         stamp = stamp_ns(msg.header.stamp)
-        try:
-            if msg.header.frame_id != f'cam{camera}':
-                raise ValueError(f'frame_id {msg.header.frame_id!r} on the topic of cam{camera}')
-            people = msg_to_people(msg)
-            released = self._sync.add(stamp, camera, (msg.header, people), time.monotonic())
-        except ValueError as exc:
-            self.get_logger().error(f'cam{camera} people2d stamp {stamp} ns dropped: {exc}')
+        if not self._ready(camera):
+            self._drop(camera, stamp, 'no intrinsics', 'no CameraInfo from this camera yet')
             return
-        for frame in released:
-            self._publish(frame)
+        expected = self._rig.cameras[camera].frame_id
+        if msg.header.frame_id != expected:
+            self._drop(camera, stamp, 'frame_id', f'frame_id {msg.header.frame_id!r}, the rig says {expected!r}')
+            return
+        try:
+            people = msg_to_people(msg)
+        except ValueError as exc:
+            self._drop(camera, stamp, 'malformed', str(exc))
+            return
+        before = Counter(self._sync.dropped)
+        try:
+            released = self._sync.add(stamp, camera, people, time.monotonic())
+        except ValueError as exc:
+            reason = next((r for r, k in self._sync.dropped.items() if k != before[r]), 'late')
+            self._drop(camera, stamp, reason, str(exc))
+            return
+        self._release(released)
 
     def _on_timer(self) -> None:
-        for frame in self._sync.expire(time.monotonic()):
-            self._publish(frame)
+        self._release(self._sync.expire(time.monotonic()))
 
-    def _publish(self, synced: SyncedFrame) -> None:
-        header = next(item[0] for item in synced.items if item is not None)
-        frame = frame_of_stamp(header.stamp, self._rate)
+    def _release(self, sets: list[SyncedSet]) -> None:
+        for drop in self._sync.take_drops():
+            self._sync_drop(drop)
+        for synced in sets:
+            self._publish(synced)
+
+    def _sync_drop(self, drop: Drop) -> None:
+        detail = ('no other camera within max_skew (a set needs min_cameras)' if drop.reason == 'unmatched'
+                  else 'too many messages pending from this camera')
+        self._drop(drop.camera, drop.stamp_ns, drop.reason, detail)
+
+    def _publish(self, synced: SyncedSet) -> None:
+        stamp = Time(sec=synced.stamp_ns // NS_PER_S, nanosec=synced.stamp_ns % NS_PER_S)
         if synced.missing:
-            self.get_logger().warning(f'stamp {synced.stamp_ns} ns (frame {frame}): no data from '
-                                      f'{", ".join(f"cam{c}" for c in synced.missing)}; going on without')
-        people = [item[1] if item is not None else None for item in synced.items]
-        if self._last_frame is not None and frame <= self._last_frame:
-            self.get_logger().error(f'stamp {synced.stamp_ns} ns maps to frame {frame}, not after frame '
-                                    f'{self._last_frame}; published empty')
-            observations = []
-        else:
-            observations = self._associator.update(frame, people)
-            self._last_frame = frame
+            names = tuple(self._names[c] for c in synced.missing)
+            self._throttled(('missing', names), f'set {synced.index} stamp {synced.stamp_ns} ns: no data from '
+                                                f'{", ".join(names)}; going on without')
+        observations = self._associator.update(synced.index, synced.items)
         bundles = [(obs.person_id, obs.views) for obs in observations]
-        self._publisher.publish(bundles_to_msg(bundles, Header(stamp=header.stamp, frame_id='world')))
+        self._publisher.publish(bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
+        self._skews.append(synced.skew_ns)
+        if len(self._skews) == REPORT_EVERY:
+            skews = np.array(self._skews) / 1e6
+            drops = ', '.join(f'{r} {k}' for r, k in sorted(self.dropped.items())) or 'none'
+            self.get_logger().info(f'{synced.index + 1} sets; skew of the last {len(skews)}: median '
+                                   f'{np.median(skews):.1f} ms, max {skews.max():.1f} ms; messages dropped: {drops}')
+            self._skews = []
 
 
 def main(args: list[str] | None = None) -> None:

@@ -1,14 +1,23 @@
-"""The bag_player node: replays a rosbag2 bag frame by frame into the graph.
+"""The bag_player node: replays any rosbag2 bag (sqlite3 or mcap) into the graph, on the bag's own
+topics.
 
-Every message of one stamp (a frame: all cameras) is published together, at the recorded rate
-times `rate` (wall-clock paced from the first stamp) or, with rate 0, as fast as downstream keeps
-up: at most `max_in_flight` frames ahead of the last stamp seen on `ack_topic`. Messages go out
-as the bag's CDR bytes; for loop k >= 1 only the header stamp bytes are rewritten (pacing and
-stamp arithmetic: mvpose_ros.bags.replay). Optionally publishes /clock with the bag stamp.
+Every message of one log stamp (a frame) is published together, at the recorded rate times
+`rate` (wall-clock paced from the first stamp) or, with rate 0, as fast as downstream keeps up: at
+most `max_in_flight` frames ahead of the last stamp seen on `ack_topic`. With `sets`, the unit is
+a synchronised set instead (bags.replay.group_sets: the cameras' image messages grouped by
+approximate synchronisation of their header stamps within `max_skew`, each camera's CameraInfo
+with them; a set's stamp is its earliest member stamp, the stamp the graph's bundles and
+skeletons of that set carry): rate 0, sets and max_in_flight 1 is lockstep, the next set going out
+once the previous one is acknowledged. Messages go out as the bag's CDR bytes; for loop k >= 1
+only the header stamp bytes are rewritten (pacing and stamp arithmetic: mvpose_ros.bags.replay).
+Optionally publishes /clock with the bag stamp. `qos`: 'reliable' (reliable, keep-all: every
+reader gets every message) or 'sensor' (best-effort, keep-last 5, as a camera driver publishes:
+only best-effort readers match).
 
 Topics are published relative (the bag's '/cam0/openpose' as 'cam0/openpose'), so a namespace
 (`-r __ns:=/rig1`) moves the whole input. Nothing goes out before the readers are there: the player
-waits until each camera's detector input (openpose, else image_raw) has a matched reader and every
+waits until each camera's detector input (cam<c>/openpose, else cam<c>/image_raw, else every
+Image or CompressedImage topic) has a matched reader and every
 reader visible in the ROS graph on any of its topics has matched its writer (up to
 `wait_subscribers` s, then it plays anyway with a warning). A writer's match does not mean the
 reader has matched it too, and a volatile reader drops what a writer sends before that: a reader
@@ -30,14 +39,16 @@ from rclpy.duration import Duration
 from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty
 
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
-from mvpose_ros.bags.replay import (NS, Frame, InFlight, due_s, group_frames, header_stamp_ns, looped,
+from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.bags.replay import (NS, Frame, InFlight, due_s, group_frames, group_sets, header_stamp_ns, looped,
                                     with_header_stamp)
 from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, run
 from mvpose_ros.topics import IMAGE, OPENPOSE, SKELETONS
@@ -48,6 +59,9 @@ _POLL_S = 0.05  # subscriber polling period while waiting to start
 # The start signal (parameter start_topic): latched, so it arrives whenever the reader matches.
 START_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                        history=HistoryPolicy.KEEP_LAST, depth=1)
+# parameter qos -> what the player publishes with: reliable (the graph's own) or a camera driver's
+PLAYER_QOS = {'reliable': DATA_QOS, 'sensor': qos_profile_sensor_data}
+IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
 
 
 def relative(topic: str) -> str:
@@ -101,7 +115,15 @@ class BagPlayerNode(Node):
              'if set, also wait for a message there (std_msgs/Empty, reliable, transient local) before playing'),
             ('ack_topic', SKELETONS, string, 'downstream output whose stamps release frames when rate is 0'),
             ('max_in_flight', 16, None,
-             'rate 0: at most this many frames published but not yet seen on ack_topic'),
+             'rate 0: at most this many frames (sets) published but not yet seen on ack_topic'),
+            ('qos', 'reliable', string,
+             "'reliable' (keep-all) or 'sensor' (best-effort keep-last, as a camera driver)"),
+            ('sets', False, None, 'play synchronised sets of the image topics instead of frames of one log stamp'),
+            ('max_skew', default_max_skew(FRAME_RATE), None,
+             'sets: s between the oldest and newest stamp of a set (as the graph)'),
+            ('sync_timeout', SYNC_TIMEOUT_S, None, 'sets: s of bag time a set waits for a camera that sent nothing'),
+            ('ack_timeout', 0.0, None,
+             'rate 0: s without an ack after which the oldest frame in flight is given up (0 = wait forever)'),
         )
         values = {}
         for name, default, type_, description in specs:
@@ -123,6 +145,18 @@ class BagPlayerNode(Node):
         self._in_flight = InFlight(p['max_in_flight']) if p['rate'] == 0 else None
         if self._in_flight is not None and not p['ack_topic']:
             raise StartupError('parameter ack_topic: required with rate 0')
+        if p['qos'] not in PLAYER_QOS:
+            raise StartupError(f'parameter qos: expected one of {", ".join(PLAYER_QOS)}, got {p["qos"]!r}')
+        if not (p['max_skew'] >= 0 and p['sync_timeout'] > 0):
+            raise StartupError(f'parameters max_skew, sync_timeout: must be >= 0 and > 0, got {p["max_skew"]}, '
+                               f'{p["sync_timeout"]}')
+        if not p['ack_timeout'] >= 0:
+            raise StartupError(f'parameter ack_timeout: must be >= 0 s, got {p["ack_timeout"]}')
+        self._ack_timeout = p['ack_timeout']
+        self._progress = 0.0  # monotonic s of the last publication or ack (rate 0)
+        self._given_up = 0
+        qos = PLAYER_QOS[p['qos']]
+        self._best_effort = qos.reliability == ReliabilityPolicy.BEST_EFFORT
 
         summary = bag_summary(self._bag)
         in_bag = {relative(t): t for t in summary.topics}
@@ -132,7 +166,7 @@ class BagPlayerNode(Node):
             raise StartupError(f'parameter topics: {", ".join(unknown)} not in {self._bag} '
                                f'(it has {", ".join(summary.topics)})')
         self._topics = [in_bag[t] for t in wanted] if wanted else list(summary.topics)
-        self._pubs = {t: self.create_publisher(_message_class(summary.topics[t][0]), relative(t), DATA_QOS)
+        self._pubs = {t: self.create_publisher(_message_class(summary.topics[t][0]), relative(t), qos)
                       for t in self._topics}
         self._stamped = {t: has_header(summary.topics[t][0]) for t in self._topics}
         self._clock_pub = self.create_publisher(ClockMsg, '/clock', DATA_QOS) if p['clock'] else None
@@ -140,33 +174,51 @@ class BagPlayerNode(Node):
             self.create_subscription(PointCloud2, p['ack_topic'], self._on_ack, DATA_QOS, raw=True)
 
         # Start when the 2D stage listens: detections if the bag has them, else images.
+        images = [t for t in self._topics if summary.topics[t][0] in IMAGE_TYPES]
         inputs = [t for t in self._topics if _camera_input(t, OPENPOSE)]
-        self._awaited = inputs or [t for t in self._topics if _camera_input(t, IMAGE)]
+        self._awaited = inputs or [t for t in self._topics if _camera_input(t, IMAGE)] or images
         self._wait_s = p['wait_subscribers']
         self._wait_until = time.monotonic() + self._wait_s
         self._started = not p['start_topic']
         if not self._started:
             self.create_subscription(Empty, p['start_topic'], self._on_start, START_QOS)
 
-        self._frames = looped(lambda: group_frames(read_bag(self._bag, self._topics)), self._loops)
+        self._unit = 'sets' if p['sets'] else 'frames'
+        if p['sets']:
+            cameras = images or inputs
+            if not cameras:
+                raise StartupError(f'parameter sets: {self._bag} has no image (or cam<c>/openpose) topic to '
+                                   f'synchronise')
+            self._frames = looped(lambda: group_sets(read_bag(self._bag, self._topics), cameras, p['max_skew'],
+                                                     p['sync_timeout'], has_header), self._loops)
+        else:
+            self._frames = looped(lambda: group_frames(read_bag(self._bag, self._topics)), self._loops)
         self._next = None  # the (loop, offset, frame) to publish next
         self._first_ns = None
         self._start = 0.0
         self._playing = False
         self._frames_out = self._messages_out = 0
         self.get_logger().info(f'{self._bag}: {summary.message_count} messages on {len(summary.topics)} topics, '
-                               f'playing {len(self._topics)} at rate {self._rate:g}, loops {self._loops}')
+                               f'playing {len(self._topics)} by {self._unit} at rate {self._rate:g}, loops '
+                               f'{self._loops}, qos {p["qos"]}')
         self._timer = self.create_timer(_POLL_S, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _unmatched(self) -> list[str]:
         """Topics still waiting for readers: an awaited input without a matched reader, or a topic
-        with fewer matched readers than the ROS graph shows."""
+        with fewer matched readers than the ROS graph shows readers this writer can match (a
+        reliable reader never matches a best-effort writer: it is not waited for)."""
         out = []
         for topic, pub in self._pubs.items():
             count = pub.get_subscription_count()
-            if count < max(1 if topic in self._awaited else 0, self.count_subscribers(pub.topic_name)):
+            if count < max(1 if topic in self._awaited else 0, self._compatible_readers(pub.topic_name)):
                 out.append(pub.topic_name)
         return out
+
+    def _compatible_readers(self, topic: str) -> int:
+        readers = self.get_subscriptions_info_by_topic(topic)
+        if self._best_effort:
+            readers = [r for r in readers if r.qos_profile.reliability != ReliabilityPolicy.RELIABLE]
+        return len(readers)
 
     def _on_start(self, msg: Empty) -> None:
         if not self._started:
@@ -196,6 +248,7 @@ class BagPlayerNode(Node):
             self.get_logger().warning(f'ignoring a message on the ack topic: {exc}')
             return
         if self._in_flight.acked(stamp) and self._playing and not self.finished.done():
+            self._progress = time.monotonic()
             self._play()
 
     def _advance(self) -> bool:
@@ -225,8 +278,19 @@ class BagPlayerNode(Node):
                     self._timer.reset()
                     return
             elif self._in_flight.full:
-                self._timer.cancel()  # _on_ack resumes
-                return
+                if not self._ack_timeout:
+                    self._timer.cancel()  # _on_ack resumes
+                    return
+                wait = self._progress + self._ack_timeout - time.monotonic()
+                if wait > 0:
+                    self._timer.timer_period_ns = max(1, int(wait * NS))
+                    self._timer.reset()  # _on_ack resumes sooner
+                    return
+                given_up = self._in_flight.give_up()
+                self._given_up += 1
+                self._progress = time.monotonic()
+                self.get_logger().warning(f'no ack of stamp {given_up} ns within {self._ack_timeout:g} s: '
+                                          f'dropped downstream, going on ({self._given_up} so far)')
             self._publish(loop, stamp, offset, frame)
             if not self._advance():
                 return
@@ -238,20 +302,22 @@ class BagPlayerNode(Node):
             self._pubs[topic].publish(with_header_stamp(cdr, stamp) if offset and self._stamped[topic] else cdr)
         if self._in_flight is not None:
             self._in_flight.published(stamp)
+            self._progress = time.monotonic()
         self._frames_out += 1
         self._messages_out += len(frame.messages)
         if self._frames_out % LOG_EVERY == 0:
             elapsed = time.monotonic() - self._start
-            self.get_logger().info(f'{self._frames_out} frames (stamp {stamp / NS:.3f} s, loop {loop + 1}/'
-                                   f'{self._loops}), {self._frames_out / max(elapsed, 1e-9):.1f} frames/s')
+            self.get_logger().info(f'{self._frames_out} {self._unit} (stamp {stamp / NS:.3f} s, loop {loop + 1}/'
+                                   f'{self._loops}), {self._frames_out / max(elapsed, 1e-9):.1f} {self._unit}/s')
 
     def _finish(self, code: int) -> None:
         self._timer.cancel()
         if code == 0:
             elapsed = time.monotonic() - self._start
-            self.get_logger().info(f'done: {self._frames_out} frames, {self._messages_out} messages, '
+            self.get_logger().info(f'done: {self._frames_out} {self._unit}, {self._messages_out} messages, '
                                    f'{self._loops} loop(s) in {elapsed:.2f} s '
-                                   f'({self._frames_out / max(elapsed, 1e-9):.1f} frames/s)')
+                                   f'({self._frames_out / max(elapsed, 1e-9):.1f} {self._unit}/s)'
+                                   + (f', {self._given_up} never acknowledged' if self._given_up else ''))
             deadline = time.monotonic() + ACK_TIMEOUT_S
             publishers = [*self._pubs.values(), *([self._clock_pub] if self._clock_pub else [])]
             unacked = [pub.topic_name for pub in publishers if not pub.wait_for_all_acked(

@@ -1,48 +1,201 @@
-"""The heatmap_detector node: one camera's 2D people with their joint heatmaps.
+"""The heatmap_detector node: the rig's cameras' 2D people with their joint heatmaps.
 
-Run one per camera, in namespace cam<camera>, so its topics resolve to /cam<c>/...: backend
-'openpose' turns the raw OpenPose output on `openpose` (PointCloud2, encoding A), backend 'onnx'
-the camera image on `image_raw` (sensor_msgs/Image, bgr8 or rgb8; MoveNet MultiPose and
-EfficientPose on onnxruntime, core.onnx_detector) into people on `people2d` (PointCloud2,
-encoding B), one output per input frame, empty when nobody is seen. A message that cannot be
-used is logged with its stamp and the reason. `camera_info` is checked against the calibration
-parameter; a contradiction is logged (once per distinct problem) and the calibration kept.
+Backends: 'openpose' turns each camera's raw OpenPose output (`<camera>/openpose`, PointCloud2
+encoding A, reliable keep-all as the recorded data it is) into people; 'onnx' detects them in the
+camera image (MoveNet MultiPose and EfficientPose on onnxruntime, core.onnx_detector). People go
+out on `<camera>/people2d` (PointCloud2 encoding B) with the input's stamp and the rig camera's
+frame_id, one message per used input, empty when nobody is seen.
+
+Modes, by the parameter `camera`:
+
+- one camera: its name in the rig file ('cam2', 'left') or its index in the rig (2 or '2'). Run
+  one node per camera; each input is detected in its callback.
+- the whole rig: '' or 'all'. One node takes every camera. Inputs are grouped into synchronised
+  sets (core.approximate_sync: stamps within `max_skew`, a missing camera waited for at most
+  `sync_timeout`); a worker thread detects one set at a time and publishes every camera's people of the set
+  together, each with that camera's own stamp and frame_id. While it is busy only the newest
+  released set waits: an older waiting set is dropped whole and counted (a throttled warning, and
+  the totals when the node stops), so latency stays bounded by about two sets' detection time and
+  no queue grows (camera subscriptions keep the last `queue_depth` messages; the synchroniser
+  keeps at most a sync_timeout's worth of frames per camera).
+
+Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace)
+and frame_id. The rig's namespace is the node's own, except that a one-camera node whose
+namespace ends with the camera's name (the Shelf graph's `/cam1`, or `/rig/cam1`) is in the
+camera's namespace: the rig's is then its parent. Outputs are `<camera name>/people2d` there.
+
+Image type: sensor_msgs/Image or CompressedImage (jpeg, png), taken from the ROS graph when a
+publisher of the topic is known at start-up (get_topic_names_and_types), else by image_transport's
+naming: a topic ending in '/compressed' is CompressedImage, any other an Image. A topic decided by
+its name is looked up again every TYPE_RECHECK s until the graph knows it; if its publishers then
+have the other type, the subscription is re-made (logged).
+
+QoS: images and CameraInfo are camera inputs (runtime.camera_subscription): best effort, keep
+last `queue_depth`, so best-effort (sensor data) and reliable publishers both connect; the
+parameter file can override them (qos_overrides.<topic>.subscription.*).
+
+Intrinsics: from the rig file, else from the camera's first usable CameraInfo (images wait
+for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use is logged
+once per camera and problem and never acted on.
+
+An input that cannot be used (another frame_id, an encoding or size that does not decode, no
+intrinsics yet, out of sync) is logged once per camera and cause, with its stamp, and counted
+after that (a throttled summary, and the totals when the node stops); the node goes on. That
+camera is left out of that stamp: nothing is published for it, so the synchronisation downstream
+leaves it out of its set. An empty people2d would instead claim the camera saw nobody.
 """
 from __future__ import annotations
 
+import math
+import threading
 import time
+import traceback
+from collections import Counter
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
+import rclpy.logging
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from rclpy.subscription import Subscription
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
-from msg_adapters.camera_info_msg import check_info
-from msg_adapters.image_msg import msg_to_image
+from msg_adapters.camera_info_msg import check_info, info_to_intrinsics
+from msg_adapters.image_msg import to_bgr
 from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.stamp import stamp_ns
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
+                                                          default_max_skew)
+from mvpose_ros.core.detection.newest_queue import NewestQueue
 from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, load_rig_parameter, rig_parameters, run
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rig import Rig, RigCamera
+from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, StartupError, camera_subscription, declare,
+                                      load_rig_parameter, rig_parameters, run)
+from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
 
-# backend -> its input topic (relative to the camera namespace)
-INPUT_TOPICS = {'openpose': 'openpose', 'onnx': 'image_raw'}
+# backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
+INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
 BACKENDS = tuple(INPUT_TOPICS)
+WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
+IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
+TYPE_RECHECK = 2.0  # s between graph look-ups of an image topic typed by its name
+SUMMARY_PERIOD = 10.0  # s, at most one summary of counted drops per period
+
+
+def image_type_by_name(topic: str) -> type:
+    """image_transport's naming: '<base>/compressed' carries CompressedImage, anything else Image."""
+    return CompressedImage if topic.rstrip('/').endswith('/compressed') else Image
+
+
+def image_type(topic: str, graph: list[tuple[str, list[str]]]) -> tuple[type, str]:
+    """The message type of the image topic `topic` (resolved) and how it was decided: 'graph' when
+    the graph (get_topic_names_and_types()) lists it with exactly one image type, else 'name'."""
+    for name, types in graph:
+        if name == topic:
+            known = {IMAGE_TYPES[t] for t in types if t in IMAGE_TYPES}
+            if len(known) == 1:
+                return known.pop(), 'graph'
+    return image_type_by_name(topic), 'name'
+
+
+def rig_namespace(node_namespace: str, camera: str | None) -> str:
+    """The rig's namespace of a node in node_namespace: the same, or for a one-camera node (camera:
+    its name) whose last namespace component is that name, the parent."""
+    parts = [p for p in node_namespace.split('/') if p]
+    if camera is not None and parts and parts[-1] == camera:
+        parts.pop()
+    return '/' + '/'.join(parts)
+
+
+def in_namespace(namespace: str, topic: str) -> str:
+    """A rig topic (absolute, or relative to the rig's namespace) as an absolute name."""
+    if topic.startswith('/'):
+        return topic
+    return f'{namespace.rstrip("/")}/{topic}'
+
+
+def decode_image(msg: Image | CompressedImage, camera: Camera) -> Any:
+    """(H, W, 3) uint8 BGR of a camera image of the calibrated size camera.width x camera.height:
+    an Image's header, a CompressedImage's jpeg/png header checked before decoding (to_bgr), and
+    the decoded size after it. ValueError of one line otherwise."""
+    size = (camera.width, camera.height)
+    bgr = to_bgr(msg, size)
+    if bgr.shape[:2] != (camera.height, camera.width):
+        raise ValueError(f'image size {bgr.shape[1]}x{bgr.shape[0]} is not the calibrated {size[0]}x{size[1]}')
+    return bgr
+
+
+class DropLog:
+    """Inputs that could not be used: the first of each (camera, cause) is logged as an error
+    with its stamp; later ones are counted, with a summary at most every SUMMARY_PERIOD s."""
+
+    def __init__(self, logger: Any) -> None:
+        self._logger = logger
+        self.counts: Counter[tuple[str, str]] = Counter()
+        self._lock = threading.Lock()  # the worker thread reports too
+
+    def report(self, camera: str, what: str, stamp: int, cause: str) -> bool:
+        """Count one dropped input; True when this was logged (the first of its camera and cause)."""
+        cause = ' '.join(cause.split())
+        with self._lock:
+            self.counts[camera, cause] += 1
+            first = self.counts[camera, cause] == 1
+        if first:
+            self._logger.error(f'{camera}: {what} stamp {stamp} ns dropped: {cause} (said once per camera and '
+                               f'cause; later ones are counted)')
+        else:
+            self._logger.warning(f'inputs dropped so far: {self.summary()}', throttle_duration_sec=SUMMARY_PERIOD)
+        return first
+
+    def summary(self) -> str:
+        """'<camera>: <n> x <cause>; ...', or 'none'."""
+        with self._lock:
+            items = sorted(self.counts.items())
+        return '; '.join(f'{camera}: {n} x {cause}' for (camera, cause), n in items) or 'none'
+
+
+@dataclass
+class _Camera:
+    """One camera this node detects: its rig entry, topics, intrinsics once known, output."""
+
+    index: int
+    rig: RigCamera
+    input_topic: str  # absolute
+    info_topic: str  # absolute
+    output: Any  # Publisher
+    camera: Camera | None = None
+    source: str = 'the rig file'  # where the intrinsics came from
+    input_type: type = PointCloud2
+    typed_by: str = 'backend'  # 'graph', 'name' or 'backend' (openpose)
+    subscription: Subscription | None = None
+    info_problems: set[str] = field(default_factory=set)
 
 
 class HeatmapDetectorNode(Node):
-    """Raw detections of one camera in, 2D people with heatmaps out."""
+    """Raw detections or images of one camera, or of every rig camera, in; 2D people out."""
 
     def __init__(self) -> None:
         super().__init__('heatmap_detector')
         defaults = OpenPoseDetectorConfig()
         onnx = OnnxDetectorConfig(model_dir=Path())  # its defaults
+        try:
+            self.declare_parameter('camera', 0, ParameterDescriptor(
+                dynamic_typing=True,
+                description="this node's camera: its name in the rig, or its index there (an integer, or a string "
+                            f"of digits); {' or '.join(repr(w) for w in WHOLE_RIG)}: every camera of the rig, "
+                            'detected in synchronised sets'))
+        except ParameterException as exc:
+            raise StartupError(f'parameter camera: {exc}') from None
         p = declare(self, [
-            ('camera', 0, 'index of this camera in the calibration rig; its frame_id is cam<camera>'),
-            ('backend', 'openpose', f'2D detector: one of {", ".join(BACKENDS)} (input topic '
-             f'{", ".join(f"{b}: {t}" for b, t in INPUT_TOPICS.items())})'),
+            ('backend', 'openpose', f'2D detector: one of {", ".join(BACKENDS)} (input: openpose: '
+             "<camera>/openpose; onnx: the rig camera's image topic)"),
             ('stride', defaults.stride, 'heatmap cell size, pixels'),
             ('sigma', defaults.sigma, 'std of the Gaussian rendered at each candidate (onnx: at each COCO ear), '
              'pixels'),
@@ -61,47 +214,112 @@ class HeatmapDetectorNode(Node):
             ('heatmap_floor', onnx.heatmap_floor, "onnx: heatmap cells below this fraction of their map's peak are 0"),
             ('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
              'needs them)'),
+            ('queue_depth', CAMERA_QUEUE_DEPTH, 'camera inputs (images, CameraInfo): keep-last depth of the '
+             'best-effort subscriptions (a parameter file may override each topic: qos_overrides.<topic>...)'),
+            ('frame_rate', FRAME_RATE, 'whole rig: the cameras\' frame rate, Hz (the default of max_skew)'),
+            ('sync_timeout', SYNC_TIMEOUT_S, 'whole rig: s a set waits for a missing camera (not waited for again '
+             'until it sends)'),
+            ('min_cameras', 1, 'whole rig: sets with fewer cameras are dropped (counted as unmatched)'),
+            ('waiting_sets', 1, 'whole rig: sets that wait while one is detected; older ones are dropped whole '
+             '(1: only the newest, for live cameras; more for a replay that must lose none)'),
             *rig_parameters(),
         ])
+        p['camera'] = self.get_parameter('camera').value
+        if not p['frame_rate'] > 0:
+            raise StartupError(f'parameter frame_rate: must be > 0, got {p["frame_rate"]}')
+        p |= declare(self, [('max_skew', default_max_skew(p['frame_rate']),
+                             'whole rig: s between the oldest and newest stamp of a set (default: half a frame '
+                             'period)')])
         if p['backend'] not in BACKENDS:
             raise StartupError(f'parameter backend: {p["backend"]!r} is not one of {", ".join(BACKENDS)}')
-        cameras = load_rig_parameter(p)
-        if not 0 <= p['camera'] < len(cameras):
-            raise StartupError(f'parameter camera: {p["camera"]} is not in 0..{len(cameras) - 1} '
-                               f'({p["calibration"]} has {len(cameras)} cameras)')
         if not (p['stride'] > 0 and p['sigma'] > 0):
             raise StartupError(f'parameters stride, sigma: must be > 0, got {p["stride"]}, {p["sigma"]}')
-        self._camera = cameras[p['camera']]
-        self._frame_id = f'cam{p["camera"]}'
+        if not p['queue_depth'] >= 1:
+            raise StartupError(f'parameter queue_depth: must be >= 1, got {p["queue_depth"]}')
+        rig = load_rig_parameter(p)
+        indices = _camera_indices(p['camera'], rig)
+        self._whole_rig = len(indices) != 1 or p['camera'] in WHOLE_RIG
+        self._backend = p['backend']
+        self._depth = p['queue_depth']
         self._config = OpenPoseDetectorConfig(stride=p['stride'], sigma=p['sigma'],
                                               secondary_radius=p['secondary_radius'])
-        if p['backend'] == 'onnx':
+        if self._backend == 'onnx':
             self._detector = self._onnx_detector(p)  # before subscribing: the graph connects when it is ready
-        self._publisher = self.create_publisher(PointCloud2, 'people2d', DATA_QOS)
-        topic = INPUT_TOPICS[p['backend']]
-        if p['backend'] == 'onnx':
-            self.create_subscription(Image, topic, self._on_image, DATA_QOS)
-        else:
-            self.create_subscription(PointCloud2, topic, self._on_openpose, DATA_QOS)
-        # The calibration parameter is what the 3D stage uses; a CameraInfo that disagrees means a
-        # wrong file or a re-calibrated camera: said once per distinct problem, never acted on.
-        self._info_problems: set[str] = set()
-        self.create_subscription(CameraInfo, 'camera_info', self._on_info, DATA_QOS)
-        self.get_logger().info(f'{self._frame_id}: backend {p["backend"]}, '
-                               f'{self.resolve_topic_name(topic)} -> {self.resolve_topic_name("people2d")}')
+        self._drops = DropLog(self.get_logger())
+        namespace = rig_namespace(self.get_namespace(), None if self._whole_rig else rig.cameras[indices[0]].name)
+        graph = self.get_topic_names_and_types()
+        self._cameras: list[_Camera] = []
+        for index in indices:
+            rc = rig.cameras[index]
+            output = self.create_publisher(PointCloud2, in_namespace(namespace, camera_topic(rc.name, PEOPLE2D)),
+                                           DATA_QOS)
+            cam = _Camera(index, rc, '', in_namespace(namespace, rc.camera_info), output, rc.camera,
+                          'the rig file' if rc.camera is not None else '')
+            if self._backend == 'onnx':
+                cam.input_topic = in_namespace(namespace, rc.image)
+                cam.input_type, cam.typed_by = image_type(cam.input_topic, graph)
+            else:
+                cam.input_topic = in_namespace(namespace, camera_topic(rc.name, OPENPOSE))
+            self._cameras.append(cam)
+        if self._whole_rig:
+            self._start_sets(p)
+        for cam in self._cameras:
+            self._subscribe(cam)
+            camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam), self._depth)
+            typed = f'{cam.input_type.__name__}, by {cam.typed_by}' if self._backend == 'onnx' else 'PointCloud2'
+            self.get_logger().info(f'{cam.rig.name}: backend {self._backend}, {cam.input_topic} ({typed}) -> '
+                                   f'{self.resolve_topic_name(cam.output.topic_name)}')
+        if self._backend == 'onnx' and any(c.typed_by == 'name' for c in self._cameras):
+            self._recheck_timer = self.create_timer(TYPE_RECHECK, self._recheck_types)
 
-    def _on_info(self, msg: CameraInfo) -> None:
-        try:
-            if msg.header.frame_id != self._frame_id:
-                raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({self._frame_id!r})')
-            check_info(msg, self._camera)
-        except ValueError as exc:
-            problem = str(exc)
-            if problem not in self._info_problems:
-                self._info_problems.add(problem)
-                self.get_logger().error(f'camera_info stamp {stamp_ns(msg.header.stamp)} ns contradicts the '
-                                        f'calibration parameter: {problem}; the calibration is kept '
-                                        f'(said once per problem)')
+    # --- set-up -------------------------------------------------------------------------------
+
+    def _start_sets(self, p: dict[str, Any]) -> None:
+        if not (p['sync_timeout'] > 0 and p['max_skew'] >= 0 and 1 <= p['min_cameras'] <= len(self._cameras)
+                and p['waiting_sets'] >= 1):
+            raise StartupError(f'parameters sync_timeout, max_skew, min_cameras, waiting_sets: need sync_timeout > 0, '
+                               f'max_skew >= 0, 1 <= min_cameras <= {len(self._cameras)} and waiting_sets >= 1, got '
+                               f'{p["sync_timeout"]}, {p["max_skew"]}, {p["min_cameras"]}, {p["waiting_sets"]}')
+        # pending messages per camera: a sync_timeout's worth of frames, twice (more only from a
+        # camera stamping far ahead of the others: its oldest are dropped as 'overflow', counted)
+        queue = math.ceil(2 * p['sync_timeout'] * p['frame_rate']) + 2
+        self._sync = ApproximateSync(len(self._cameras), p['sync_timeout'], p['max_skew'], p['min_cameras'], queue)
+        self._waiting: NewestQueue[SyncedSet] = NewestQueue(p['waiting_sets'])
+        self._stopping = False
+        self._processed = 0
+        self._expire_timer = self.create_timer(min(0.05, p['sync_timeout'] / 2), self._expire)
+        self._worker = threading.Thread(target=self._work, name='heatmap_detector_sets', daemon=True)
+        self._worker.start()
+        names = ', '.join(c.rig.name for c in self._cameras)
+        self.get_logger().info(f'whole rig: {len(self._cameras)} cameras ({names}), max_skew '
+                               f'{1e3 * p["max_skew"]:.1f} ms, sync_timeout {p["sync_timeout"]} s; while detecting, '
+                               f'the newest {p["waiting_sets"]} set(s) wait')
+
+    def _subscribe(self, cam: _Camera) -> None:
+        callback = partial(self._on_set_input if self._whole_rig else self._on_input, cam)
+        if self._backend == 'openpose':  # recorded data, not a camera: reliable, keep-all
+            cam.subscription = self.create_subscription(PointCloud2, cam.input_topic, callback, DATA_QOS)
+            return
+        cam.subscription = camera_subscription(self, cam.input_type, cam.input_topic, callback, self._depth)
+
+    def _recheck_types(self) -> None:
+        """A topic typed by its name: re-subscribe if the graph shows publishers of the other type."""
+        graph = self.get_topic_names_and_types()
+        for cam in self._cameras:
+            if cam.typed_by != 'name':
+                continue
+            found, how = image_type(cam.input_topic, graph)
+            if how != 'graph':
+                continue
+            cam.typed_by = 'graph'
+            if found is not cam.input_type:
+                self.get_logger().warning(f'{cam.rig.name}: {cam.input_topic} carries {found.__name__}, not '
+                                          f'{cam.input_type.__name__} as its name suggests: subscribing again')
+                self.destroy_subscription(cam.subscription)
+                cam.input_type = found
+                self._subscribe(cam)
+        if all(c.typed_by != 'name' for c in self._cameras):
+            self._recheck_timer.cancel()
 
     @staticmethod
     def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:
@@ -117,36 +335,160 @@ class HeatmapDetectorNode(Node):
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
 
-    def _on_openpose(self, msg: PointCloud2) -> None:
-        try:
-            if msg.header.frame_id != self._frame_id:
-                raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({self._frame_id!r})')
-            people = detect_people(msg_to_openpose(msg), self._config)
-            out = people_to_msg(people, msg.header)
-        except ValueError as exc:
-            self.get_logger().error(f'openpose stamp {stamp_ns(msg.header.stamp)} ns dropped: {exc}')
-            return
-        self._publisher.publish(out)
+    # --- CameraInfo ---------------------------------------------------------------------------
 
-    def _on_image(self, msg: Image) -> None:
+    def _on_info(self, cam: _Camera, msg: CameraInfo) -> None:
+        try:
+            if msg.header.frame_id != cam.rig.frame_id:
+                raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
+            if cam.camera is None:
+                cam.camera = cam.rig.with_info(*info_to_intrinsics(msg))
+                cam.source = f'the CameraInfo of stamp {stamp_ns(msg.header.stamp)} ns'
+                self.get_logger().info(f'{cam.rig.name}: intrinsics from {cam.info_topic} '
+                                       f'({cam.camera.width}x{cam.camera.height})')
+                return
+            check_info(msg, cam.camera)
+        except ValueError as exc:
+            # A CameraInfo that disagrees means a wrong file or a re-calibrated camera: said once
+            # per camera and problem, never acted on.
+            problem = ' '.join(str(exc).split())
+            if problem not in cam.info_problems:
+                cam.info_problems.add(problem)
+                what = 'the calibration parameter' if cam.source == 'the rig file' else cam.source
+                self.get_logger().error(f'{cam.rig.name}: camera_info stamp {stamp_ns(msg.header.stamp)} ns '
+                                        f'contradicts {what}: {problem}; the intrinsics are kept (said once per '
+                                        f'problem)')
+
+    # --- detection ----------------------------------------------------------------------------
+
+    def _people(self, cam: _Camera, msg: Any) -> PointCloud2:
+        """The people2d message of one input; ValueError (one line) when it cannot be used."""
+        if msg.header.frame_id != cam.rig.frame_id:
+            raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
+        if self._backend == 'openpose':
+            return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
+        if cam.camera is None:
+            raise ValueError(f'no intrinsics yet (the rig file has none: waiting for a CameraInfo on '
+                             f'{cam.info_topic})')
+        return people_to_msg(self._detector.detect(decode_image(msg, cam.camera)), msg.header)
+
+    def _what(self) -> str:
+        return 'openpose' if self._backend == 'openpose' else 'image'
+
+    def _on_input(self, cam: _Camera, msg: Any) -> None:
+        """One-camera mode: detect in the callback (a slower detector drops frames in the
+        keep-last subscription, never queues them)."""
         t0 = time.perf_counter()
         try:
-            if msg.header.frame_id != self._frame_id:
-                raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({self._frame_id!r})')
-            bgr = msg_to_image(msg)
-            cam = self._camera
-            if bgr.shape[:2] != (cam.height, cam.width):
-                raise ValueError(f'image size {bgr.shape[1]}x{bgr.shape[0]} is not the calibrated '
-                                 f'{cam.width}x{cam.height}')
-            out = people_to_msg(self._detector.detect(bgr), msg.header)
+            out = self._people(cam, msg)
         except ValueError as exc:
-            self.get_logger().error(f'image stamp {stamp_ns(msg.header.stamp)} ns dropped: {exc}')
+            self._drops.report(cam.rig.name, self._what(), stamp_ns(msg.header.stamp), str(exc))
             return
-        self._publisher.publish(out)
-        t = self._detector.timing
-        self.get_logger().debug(f'image stamp {stamp_ns(msg.header.stamp)} ns: {t.people} people, MultiPose '
-                                f'{1e3 * t.multipose:.0f} ms, EfficientPose {1e3 * t.efficientpose:.0f} ms, '
-                                f'in-to-out {1e3 * (time.perf_counter() - t0):.0f} ms')
+        cam.output.publish(out)
+        if self._backend == 'onnx':
+            t = self._detector.timing
+            self.get_logger().debug(f'{cam.rig.name}: image stamp {stamp_ns(msg.header.stamp)} ns: {t.people} '
+                                    f'people, MultiPose {1e3 * t.multipose:.0f} ms, EfficientPose '
+                                    f'{1e3 * t.efficientpose:.0f} ms, in-to-out '
+                                    f'{1e3 * (time.perf_counter() - t0):.0f} ms')
+
+    # --- whole rig: synchronised sets ----------------------------------------------------------
+
+    def _on_set_input(self, cam: _Camera, msg: Any) -> None:
+        stamp = stamp_ns(msg.header.stamp)
+        before = Counter(self._sync.dropped)
+        try:
+            released = self._sync.add(stamp, cam.index, msg, time.monotonic())  # every rig camera: sync index
+        except ValueError as exc:
+            reason = next(iter(self._sync.dropped - before), 'rejected')
+            self._drops.report(cam.rig.name, self._what(), stamp, f'not synchronised ({reason}): '
+                                                                  f'{_without_numbers(str(exc))}')
+            return
+        self._offer(released)
+
+    def _expire(self) -> None:
+        self._offer(self._sync.expire(time.monotonic()))
+
+    def _offer(self, released: list[SyncedSet]) -> None:
+        for drop in self._sync.take_drops():
+            cam = self._cameras[drop.camera]
+            cause = {'unmatched': 'its set had fewer than min_cameras cameras',
+                     'overflow': 'too many frames pending synchronisation (a camera stamping far ahead?)'}
+            self._drops.report(cam.rig.name, self._what(), drop.stamp_ns,
+                               f'not synchronised ({drop.reason}): {cause.get(drop.reason, drop.reason)}')
+        for synced in released:
+            if self._waiting.put(synced):
+                self.get_logger().warning(
+                    f'detection is slower than the cameras: {self._waiting.dropped} of {self._waiting.put_count} '
+                    f'sets dropped whole so far (the newest wait)', throttle_duration_sec=SUMMARY_PERIOD)
+
+    def _work(self) -> None:
+        while (synced := self._waiting.take()) is not None:
+            try:
+                self._detect_set(synced)
+            except Exception:  # the worker must survive a bug in one set; a shutdown ends it quietly
+                if self._stopping:
+                    return
+                self.get_logger().error(f'set {synced.index}: {traceback.format_exc(limit=3)}')
+
+    def _detect_set(self, synced: SyncedSet) -> None:
+        """Detect every image of the set, then publish them together (the set reaches the
+        association at once, not spread over the detection time)."""
+        t0 = time.perf_counter()
+        outputs = []
+        for cam, msg in zip(self._cameras, synced.items):
+            if msg is None:
+                continue
+            try:
+                outputs.append((cam, self._people(cam, msg)))
+            except ValueError as exc:
+                self._drops.report(cam.rig.name, self._what(), stamp_ns(msg.header.stamp), str(exc))
+        for cam, out in outputs:
+            cam.output.publish(out)
+        self._processed += 1
+        dropped = self._waiting.dropped
+        self.get_logger().debug(f'set {synced.index} stamp {synced.stamp_ns} ns: {len(outputs)} of '
+                                f'{len(self._cameras)} cameras, skew {synced.skew_ns / 1e6:.1f} ms, detected in '
+                                f'{1e3 * (time.perf_counter() - t0):.0f} ms; {dropped} sets dropped whole so far')
+
+    def destroy_node(self) -> None:
+        """Stop the worker (whole-rig mode) and log the totals, then destroy the node."""
+        # the context may be shut down already (Ctrl-C): a logger without a rosout publisher
+        logger = rclpy.logging.get_logger(f'{self.get_logger().name}.totals')
+        if getattr(self, '_whole_rig', False) and hasattr(self, '_worker'):
+            self._stopping = True
+            self._waiting.close()
+            self._worker.join(10.0)
+            logger.info(f'sets: {self._waiting.put_count} released, {self._processed} detected, '
+                        f'{self._waiting.dropped} dropped whole while detecting; sync drops '
+                        f'{dict(self._sync.dropped) or "none"}')
+        if hasattr(self, '_drops') and self._drops.counts:
+            logger.info(f'inputs dropped: {self._drops.summary()}')
+        super().destroy_node()
+
+
+def _without_numbers(text: str) -> str:
+    """A cause without the stamps and counts in it (so that it names the cause, not the message)."""
+    return ' '.join('<n>' if word.strip('(),:;').isdigit() else word for word in text.split())
+
+
+def _camera_indices(camera: Any, rig: Rig) -> list[int]:
+    """The rig indices a `camera` parameter value names: every camera for '' or 'all', else one
+    (a name in the rig, or an index as an integer or a string of digits)."""
+    n = len(rig.cameras)
+    if isinstance(camera, str) and camera.strip() in WHOLE_RIG:
+        return list(range(n))
+    if isinstance(camera, str) and camera in rig.names:
+        return [rig.names.index(camera)]
+    if isinstance(camera, str) and camera.strip().isdigit():
+        camera = int(camera)
+    if isinstance(camera, int) and not isinstance(camera, bool):
+        if not 0 <= camera < n:
+            raise StartupError(f'parameter camera: {camera} is not in 0..{n - 1} ({rig.path or "the rig"} has '
+                               f'{n} cameras: {", ".join(rig.names)})')
+        return [camera]
+    raise StartupError(f'parameter camera: {camera!r} is not a camera of {rig.path or "the rig"} (expected one of '
+                       f'{", ".join(rig.names)}, an index 0..{n - 1}, or {" or ".join(map(repr, WHOLE_RIG))})')
 
 
 def main(args: list[str] | None = None) -> None:

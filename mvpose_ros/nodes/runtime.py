@@ -1,8 +1,9 @@
-"""What every mvpose_ros node shares: typed parameter declaration, the data QoS, the rig from
-the `calibration` parameter, one-line start-up errors, and the rclpy main loop."""
+"""What every mvpose_ros node shares: typed parameter declaration, the data QoS and the camera
+QoS, the rig from the `rig` parameter, one-line start-up errors, and the rclpy main loop."""
 from __future__ import annotations
 
 import sys
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -11,15 +12,56 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
+from rclpy.subscription import Subscription
+from sensor_msgs.msg import CameraInfo
 
-from mvpose_ros.core.geometry.camera import Camera, load_rig
-from mvpose_ros.core.evaluation.datasets import IMAGE_SIZES, calibration_path, data_root
+from msg_adapters.camera_info_msg import info_to_intrinsics
+from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rig import Rig, load_rig_file
+from mvpose_ros.package_files import package_path
 
 # Reliable and keep-all: a node that falls behind queues frames (and in the end slows its
 # publishers down) rather than dropping them; no frame may be lost silently.
 DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+# Camera inputs (images, CameraInfo) as a camera driver's subscribers take them: best effort, so
+# that both best-effort (sensor data) and reliable publishers connect, and keep-last of a small
+# depth, so that a node slower than its cameras drops old frames in the middleware rather than
+# queueing them (see camera_subscription: the parameter file can override it).
+CAMERA_QUEUE_DEPTH = 2
+
+
+def camera_qos(depth: int = CAMERA_QUEUE_DEPTH) -> QoSProfile:
+    """A fresh camera-input profile (rclpy's QoS overriding writes into the profile it is given)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def camera_subscription(node: Node, msg_type: type, topic: str, callback: Callable[[Any], None],
+                        depth: int = CAMERA_QUEUE_DEPTH) -> Subscription:
+    """A camera-input subscription (camera_qos(depth)) whose history, depth and reliability the
+    parameter file can override, as rclpy's QoS overriding options read them: parameters
+    `qos_overrides.<resolved topic>.subscription.{history,depth,reliability}`, e.g.::
+
+        /**/heatmap_detector:
+          ros__parameters:
+            qos_overrides:
+              /cam0/image_raw:
+                subscription: {reliability: reliable, depth: 5}
+
+    A bad override is a StartupError."""
+    try:
+        return node.create_subscription(msg_type, topic, callback, camera_qos(depth),
+                                        qos_overriding_options=QoSOverridingOptions.with_default_policies())
+    except (InvalidQosOverridesError, RuntimeError, ParameterException, ValueError) as exc:
+        raise StartupError(f'QoS of {node.resolve_topic_name(topic)}: {" ".join(str(exc).split())}') from None
+
+
+DEFAULT_RIG = 'config/rigs/shelf.yaml'
 
 # (name, default, description); string and array defaults carry their type explicitly
 ParameterSpec = tuple[str, Any, str]
@@ -45,26 +87,78 @@ def declare(node: Node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:
 
 
 def rig_parameters() -> list[ParameterSpec]:
-    """The parameters naming the rig: its calibration and image size (Shelf's by default)."""
-    width, height = IMAGE_SIZES['shelf']
+    """The parameters naming the rig: a rig file (see core.geometry.rig) and the data root."""
     return [
         ('data_root', '', "folder holding data/ and models/ ('' = $MVPOSE_DATA_ROOT or ../shared)"),
-        ('calibration', str(calibration_path('shelf')),
-         'calibration json (Shelf layout); relative paths are under data_root'),
-        ('image_width', width, "the calibrated cameras' image width, pixels"),
-        ('image_height', height, "the calibrated cameras' image height, pixels"),
+        ('rig', DEFAULT_RIG, 'rig file (YAML; or a calibration json, see core.geometry.rig); a relative path '
+                             "is looked up from the working directory, then among the package's files"),
     ]
 
 
-def load_rig_parameter(values: dict[str, Any]) -> list[Camera]:
-    """The rig named by the `calibration`, `image_width`, `image_height` and `data_root` values."""
-    path = Path(values['calibration'])
+def load_rig_parameter(values: dict[str, Any]) -> Rig:
+    """The rig named by the `rig` and `data_root` parameter values."""
+    path = Path(values['rig'])
     try:
-        if not path.is_absolute():
-            path = data_root(values['data_root'] or None) / path
-        return load_rig(path, values['image_width'], values['image_height'])
+        if not path.is_absolute() and not path.is_file():
+            path = package_path(path)
+        return load_rig_file(path, data_root=data_root(values['data_root'] or None))
     except (OSError, ValueError, KeyError) as exc:
-        raise StartupError(f'parameter calibration: {" ".join(str(exc).split())}') from None
+        raise StartupError(f'parameter rig: {" ".join(str(exc).split())}') from None
+
+
+def rig_cameras(values: dict[str, Any]) -> list[Camera]:
+    """The calibrated cameras of the rig parameter (every camera's intrinsics in the rig file)."""
+    try:
+        return load_rig_parameter(values).calibrated_cameras()
+    except ValueError as exc:
+        raise StartupError(f'parameter rig: {" ".join(str(exc).split())}') from None
+
+
+class RigIntrinsics:
+    """The rig's Cameras, completing the intrinsics the rig file leaves out from each camera's
+    CameraInfo (its own topic from the rig file; sensor-data QoS, which reliable publishers reach
+    too). `cameras` is None until every camera is known; a CameraInfo that cannot be used is
+    logged once per camera and cause."""
+
+    def __init__(self, node: Node, rig: Rig) -> None:
+        self._node = node
+        self._rig = rig
+        self._cameras: list[Camera | None] = [c.camera for c in rig.cameras]
+        self._problems: set[tuple[str, str]] = set()
+        for index, rig_camera in enumerate(rig.cameras):
+            if rig_camera.camera is None:
+                node.create_subscription(CameraInfo, rig_camera.camera_info, partial(self._on_info, index),
+                                         qos_profile_sensor_data)
+
+    @property
+    def cameras(self) -> list[Camera] | None:
+        """Every camera in rig order once all intrinsics are known, else None."""
+        return None if any(c is None for c in self._cameras) else list(self._cameras)
+
+    @property
+    def known(self) -> list[Camera | None]:
+        """Every camera in rig order, None where its intrinsics are not known yet."""
+        return list(self._cameras)
+
+    @property
+    def missing(self) -> list[str]:
+        """Names of the cameras whose intrinsics are still unknown."""
+        return [rc.name for rc, c in zip(self._rig.cameras, self._cameras) if c is None]
+
+    def _on_info(self, index: int, msg: CameraInfo) -> None:
+        if self._cameras[index] is not None:
+            return
+        rig_camera = self._rig.cameras[index]
+        try:
+            self._cameras[index] = rig_camera.with_info(*info_to_intrinsics(msg))
+        except ValueError as exc:
+            problem = " ".join(str(exc).split())
+            if (rig_camera.name, problem) not in self._problems:
+                self._problems.add((rig_camera.name, problem))
+                self._node.get_logger().error(f'{rig_camera.name}: CameraInfo unusable: {problem}')
+            return
+        topic = self._node.resolve_topic_name(rig_camera.camera_info)
+        self._node.get_logger().info(f'{rig_camera.name}: intrinsics from {topic}')
 
 
 def params_files(args: Sequence[str]) -> list[str]:

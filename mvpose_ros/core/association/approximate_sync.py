@@ -13,9 +13,12 @@ Semantics (stamps are integer nanoseconds, times monotonic seconds passed in by 
   oldest member stamp (0 <= skew_ns <= max_skew).
 - A set is released, in stamp order, as soon as every camera is decided: a member, or *moved past*
   (it has delivered a stamp after pivot + max_skew: its messages arrive in stamp order, so none
-  in the window is coming), or *silent* (nothing from it for `timeout` s; a camera never heard
-  from counts as silent since the first message of all). An undecided camera is waited for at
-  most `timeout` s from the arrival of the set's first member; the set then goes without it.
+  in the window is coming), or *absent* (an earlier set already waited the whole timeout for it
+  and it has sent nothing since). An undecided camera is waited for at most `timeout` s from the
+  arrival of the set's first member; the set then goes without it and the camera is absent until
+  its next message (a late one too), so a camera gone for good delays one set, not every set. Silence is not
+  judged by the clock alone: where sets arrive in bursts far apart (people from a detector that
+  needs a second per set), every camera is quiet between bursts, yet each burst is whole.
   Cameras not in a set are listed in `missing`.
 - Sets are numbered in release order from 0 (`index`): frames count sets, not stamp x rate.
 - Each message is used at most once. Dropped messages are counted per reason (`dropped`, and per
@@ -42,6 +45,12 @@ from typing import Any
 from mvpose_ros.core.association.stamp_sync import SyncedFrame
 
 REASONS = ('late', 'duplicate', 'unmatched', 'overflow')
+SYNC_TIMEOUT_S = 0.5  # the default wait for a camera missing from a set
+
+
+def default_max_skew(frame_rate: float) -> float:
+    """The default max_skew, seconds: half a frame period of cameras running at frame_rate Hz."""
+    return 0.5 / frame_rate
 
 
 @dataclass
@@ -96,8 +105,7 @@ class ApproximateSync:
         self._pending: list[list[_Message]] = [[] for _ in range(cameras)]  # by stamp
         self._newest: list[int | None] = [None] * cameras  # newest stamp seen per camera
         self._floor: list[int | None] = [None] * cameras  # stamps <= this are late
-        self._heard: list[float | None] = [None] * cameras  # arrival of the last message
-        self._start: float | None = None  # arrival of the first message of all
+        self._absent: set[int] = set()  # cameras a set waited the timeout for, silent since
         self._drops: list[Drop] = []
 
     def add(self, stamp_ns: int, camera: int, item: Any, now: float) -> list[SyncedSet]:
@@ -106,6 +114,7 @@ class ApproximateSync:
         if not 0 <= camera < self.cameras:
             raise ValueError(f'camera {camera} is not in 0..{self.cameras - 1}')
         stamp_ns = int(stamp_ns)
+        self._absent.discard(camera)  # it is sending again (even a late message says so)
         floor = self._floor[camera]
         if floor is not None and stamp_ns <= floor:
             self._count(camera, 'late')
@@ -117,9 +126,6 @@ class ApproximateSync:
             self._count(camera, 'duplicate')
             raise ValueError(f'camera {camera} delivered stamp {stamp_ns} ns twice (duplicate)')
         queue.insert(i, _Message(stamp_ns, now, item))
-        if self._start is None:
-            self._start = now
-        self._heard[camera] = now
         newest = self._newest[camera]
         self._newest[camera] = stamp_ns if newest is None else max(newest, stamp_ns)
         if len(queue) > self.queue_size:
@@ -129,7 +135,7 @@ class ApproximateSync:
         return self._release(now)
 
     def expire(self, now: float) -> list[SyncedSet]:
-        """Sets released because a camera went silent or a wait ran out (call this periodically)."""
+        """Sets released because a wait ran out (call this periodically)."""
         return self._release(now)
 
     def flush(self) -> list[SyncedSet]:
@@ -141,13 +147,10 @@ class ApproximateSync:
         drops, self._drops = self._drops, []
         return drops
 
-    def silent(self, now: float) -> list[int]:
-        """Cameras silent at `now`: nothing from them for timeout seconds (never heard from: since
-        the first message of all)."""
-        if self._start is None:
-            return []
-        return [c for c, heard in enumerate(self._heard)
-                if now - (self._start if heard is None else heard) >= self.timeout]
+    @property
+    def absent(self) -> list[int]:
+        """Cameras not waited for: a set went without them after the timeout, nothing since."""
+        return sorted(self._absent)
 
     def _count(self, camera: int, reason: str) -> None:
         self.dropped[reason] += 1
@@ -155,16 +158,16 @@ class ApproximateSync:
 
     def _release(self, now: float) -> list[SyncedSet]:
         out: list[SyncedSet] = []
-        silent = set(self.silent(now))
         while any(self._pending):
             pivot = min(q[0].stamp for q in self._pending if q)
             end = pivot + self.max_skew_ns
             members = [c for c, q in enumerate(self._pending) if q and q[0].stamp <= end]
-            undecided = [c for c in range(self.cameras) if c not in members and c not in silent
+            undecided = [c for c in range(self.cameras) if c not in members and c not in self._absent
                          and not (self._newest[c] is not None and self._newest[c] > end)]
             first_arrival = min(self._pending[c][0].arrival for c in members)
             if undecided and now - first_arrival < self.timeout:
                 break
+            self._absent.update(undecided)
             messages = {c: self._pending[c].pop(0) for c in members}
             for c in range(self.cameras):
                 passed = messages[c].stamp if c in messages else end

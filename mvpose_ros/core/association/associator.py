@@ -68,7 +68,9 @@ def rough_centres(cameras: Sequence[Camera], people: Sequence[dict[int, Person2D
 class Associator:
     """Stateful association over a stream of synchronised frames from a fixed rig."""
 
-    def __init__(self, cameras: Sequence[Camera], config: AssociationConfig) -> None:
+    def __init__(self, cameras: Sequence[Camera | None], config: AssociationConfig) -> None:
+        """cameras: the rig in order; None for a camera not known yet (its people must be None),
+        to be filled in `cameras` once it is."""
         self.cameras = list(cameras)
         self.config = config
         self._trackers = [IouTracker(config.track_iou) for _ in self.cameras]

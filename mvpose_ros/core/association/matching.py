@@ -31,15 +31,9 @@ class MatchingConfig:
             raise ValueError(f'min_shared must be >= 1, got {self.min_shared}')
 
 
-def view_distance(cam_a: Camera, people_a: Sequence[Person2D], cam_b: Camera, people_b: Sequence[Person2D],
-                  config: MatchingConfig) -> np.ndarray:
-    """Mean ray-to-ray distance (Na, Nb) between every skeleton pair; inf when too few shared joints."""
-    return all_view_distances([cam_a, cam_b], [people_a, people_b], config)[:len(people_a), len(people_a):]
-
-
 def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
                        config: MatchingConfig) -> np.ndarray:
-    """view_distance between every two skeletons of all cameras at once (N, N), N = all
+    """Mean ray-to-ray distance between every two skeletons of all cameras at once (N, N), N = all
     skeletons in camera order; inf within a camera and where too few joints are shared."""
     owner = np.repeat(np.arange(len(cameras)), [len(p) for p in people])
     if len(owner) == 0:

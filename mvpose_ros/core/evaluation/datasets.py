@@ -15,7 +15,9 @@ import numpy as np
 import scipy.io
 
 from mvpose_ros.core.geometry.body import NUM_JOINTS
-from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rig import Rig, load_rig_file
+from mvpose_ros.package_files import package_path
 
 DATA_ROOT_ENV = 'MVPOSE_DATA_ROOT'
 
@@ -24,8 +26,6 @@ CAMPUS_TEST_FRAMES = [*range(350, 471), *range(650, 751)]
 SHELF_ACTORS = (0, 1, 2)
 CAMPUS_ACTORS = (0, 1, 2)
 
-# (width, height) in pixels; the calibration json files do not record it.
-IMAGE_SIZES = {'shelf': (1032, 776), 'campus': (360, 288)}
 FRAME_RATE = 25.0  # Hz, both datasets; frame f is stamped f / FRAME_RATE s in the bags
 
 
@@ -68,10 +68,19 @@ def calibration_file(name: str, root: str | None = None) -> Path:
     return data_root(root) / calibration_path(name)
 
 
+def dataset_rig(name: str, root: str | None = None) -> Rig:
+    """The rig of dataset `name` ('shelf', 'campus'): the package's config/rigs/<name>.yaml, which
+    gives the image size the calibration json does not record."""
+    return load_rig_file(package_path(f'config/rigs/{name}.yaml'), data_root=data_root(root))
+
+
 def dataset_cameras(name: str, root: str | None = None, calibration: str | Path | None = None) -> list[Camera]:
-    """The cameras of dataset `name` at its image size, from its shared calibration or from
-    `calibration` (e.g. a CampusSeq1 folder's copy)."""
-    return load_rig(calibration or calibration_file(name, root), *IMAGE_SIZES[name])
+    """The cameras of dataset `name`, from its shared calibration or from `calibration` (e.g. a
+    CampusSeq1 folder's copy), at the image size of its rig file."""
+    cameras = dataset_rig(name, root).calibrated_cameras()
+    if calibration is None:
+        return cameras
+    return load_rig_file(calibration, cameras[0].width, cameras[0].height).calibrated_cameras()
 
 
 def shelf_cameras(root: str | None = None) -> list[Camera]:

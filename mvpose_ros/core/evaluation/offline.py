@@ -2,7 +2,9 @@
 
 The expensive front half (2D people, association, hypotheses, data term) is computed once by
 `prepare`; `infer` then runs BP over it with any set of terms, window and lag, so an ablation
-costs only the BP part again.
+costs only the BP part again. Frame f is taken at f / FRAME_RATE seconds (the datasets' own
+timeline), so a sequence with frames left out (`drop_frames`, as a graph dropping sets under load
+would) has uneven gaps that the temporal term bridges with the real times.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import numpy as np
 
 from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.solver import person_frames
@@ -63,6 +65,19 @@ def shelf_openpose(root: str | None, detector: OpenPoseDetectorConfig, frames: S
     return detect_sequence(cameras, raw, frames, detector)
 
 
+def drop_frames(seq: Sequence2D, every: int = 0, fraction: float = 0.0, seed: int = 0) -> Sequence2D:
+    """seq without some of its frames: every `every`-th (positions every-1, 2 every-1, ...; 0 = none)
+    and then round(fraction x n) of the rest chosen at random (seeded)."""
+    if every < 0 or not 0 <= fraction < 1:
+        raise ValueError(f'drop every N >= 0 and a fraction in [0, 1), got {every}, {fraction}')
+    keep = [k for k in range(len(seq.frames)) if not (every and k % every == every - 1)]
+    n_drop = round(fraction * len(keep))
+    if n_drop:
+        gone = set(np.random.default_rng(seed).choice(len(keep), n_drop, replace=False).tolist())
+        keep = [k for i, k in enumerate(keep) if i not in gone]
+    return replace(seq, frames=[seq.frames[k] for k in keep], people=[seq.people[k] for k in keep])
+
+
 def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
     """Association, hypotheses and data term of every frame, in order."""
     stage = Stage3D(seq.cameras, config)
@@ -72,13 +87,16 @@ def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
 
 
 def infer(prepared: Prepared, inference: InferenceConfig, head_model: str,
-          timer: StageTimer | None = None) -> list[FrameResult]:
-    """Decoded frames (one per prepared frame, in order); timer gets 'factors', 'bp' and 'decoding'."""
+          timer: StageTimer | None = None, real_time: bool = True) -> list[FrameResult]:
+    """Decoded frames (one per prepared frame, in order); timer gets 'factors', 'bp' and 'decoding'.
+    Frame f is at f / FRAME_RATE s; real_time False takes the k-th prepared frame to be at
+    k / FRAME_RATE s instead (evenly spaced whatever was dropped: what a solver blind to the real
+    times would assume)."""
     timer = timer or StageTimer()
     window = SlidingWindow(inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), timer)
     results = []
-    for frame, people in zip(prepared.frames, prepared.person_frames):
-        results += window.push(frame, people)
+    for k, (frame, people) in enumerate(zip(prepared.frames, prepared.person_frames)):
+        results += window.push(frame, people, (frame if real_time else k) / FRAME_RATE)
     results += window.flush()
     t0 = time.perf_counter()
     out = [replace(r, joints=finalize_head(r.joints, head_model)) for r in results]

@@ -23,7 +23,9 @@ class FactorConfig:
     The paper writes the temporal factor as exp(-||d|| / (2 sigma^2)) with sigma = 2 cm, which is
     only dimensionally sensible with ||d|| in centimetres: a Laplace kernel exp(-||d|| / 8 cm).
     `temporal_form='laplace', temporal_scale=0.08` is that reading; 'gauss' uses
-    exp(-||d||^2 / (2 scale^2)). The collision sigmoid is 1 / (1 + exp((centre - d) / width)).
+    exp(-||d||^2 / (2 scale^2)). temporal_scale holds for frames one nominal period apart
+    (window.InferenceConfig.frame_rate) and grows with the real step (temporal_table). The
+    collision sigmoid is 1 / (1 + exp((centre - d) / width)).
     """
 
     temporal_form: str = 'laplace'
@@ -77,13 +79,27 @@ def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple
     return list(out)
 
 
-def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: FactorConfig) -> np.ndarray:
+def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: FactorConfig,
+                   steps: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
     """Ternary constant-velocity factor f(a, b, c) on (y^{t-1}=a, y^t=b, y^{t+1}=c).
 
-    prev, cur, nxt: (J, M, 3) hypotheses of frames t-1, t, t+1. Returns (J, M, M, M) indexed
-    [j, a, c, b]: the centre state is last so that messages contract with plain matmuls.
+    prev, cur, nxt: (J, M, 3) hypotheses of frames t-1, t, t+1. steps: the times from t-1 to t
+    and from t to t+1, in nominal frame periods (the period temporal_scale is defined for). The
+    prediction of y^t is the constant-velocity point between a and c at the time of t,
+    a + s0 / (s0 + s1) (c - a), and the kernel scale is temporal_scale x (s0 + s1) / 2, so a
+    longer step tolerates a proportionally larger deviation; steps (1, 1) is the evenly spaced
+    factor, midpoint and temporal_scale. Returns (J, M, M, M) indexed [j, a, c, b]: the centre
+    state is last so that messages contract with plain matmuls.
     """
-    mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])  # (J, Ma, Mc, 3)
+    s0, s1 = (float(s) for s in steps)
+    if not (s0 > 0 and s1 > 0):
+        raise ValueError(f'temporal steps must be positive, got {steps}')
+    if s0 == s1:
+        mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])  # (J, Ma, Mc, 3)
+    else:
+        w = s0 / (s0 + s1)
+        mid = prev[:, :, None, :] + w * (nxt[:, None, :, :] - prev[:, :, None, :])
+    scale = config.temporal_scale if s0 == s1 == 1.0 else config.temporal_scale * 0.5 * (s0 + s1)
     j, ma, mc = mid.shape[:3]
     mid = mid.reshape(j, ma * mc, 3)
     # |b - mid|^2 expanded so the M^3 part is a single batched matmul
@@ -92,9 +108,9 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
     sq = np.maximum(sq, 0.0, out=sq).astype(np.float32)
     if config.temporal_form == 'laplace':
-        table = np.exp(np.sqrt(sq) * np.float32(-1.0 / config.temporal_scale))
+        table = np.exp(np.sqrt(sq) * np.float32(-1.0 / scale))
     else:
-        table = np.exp(sq * np.float32(-0.5 / config.temporal_scale ** 2))
+        table = np.exp(sq * np.float32(-0.5 / scale ** 2))
     return _normalised(table.reshape(j, ma, mc, cur.shape[1]), axes=(1, 2, 3))
 
 

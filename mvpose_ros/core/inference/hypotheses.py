@@ -46,12 +46,6 @@ def split_draws(total: int, n_subsets: int) -> np.ndarray:
 View = tuple[Camera, PersonHeatmap]
 
 
-def sample_hypotheses(views: Sequence[View], rng: np.random.Generator, config: SamplingConfig) -> np.ndarray | None:
-    """Hypotheses (J, M, 3) in metres for one person, or None when no joint is seen twice
-    (sample_people for one person)."""
-    return sample_people([views], HeatmapStack.of([hm for _, hm in views]), [rng], config)[0]
-
-
 def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
                   rngs: Sequence[np.random.Generator], config: SamplingConfig) -> list[np.ndarray | None]:
     """Hypotheses (J, M, 3) in metres of each person of a frame (None when no joint of theirs is

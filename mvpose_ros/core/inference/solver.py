@@ -69,12 +69,14 @@ class Inference3D:
         self.timer = StageTimer()
         self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), self.timer)
 
-    def push(self, frame: int, people: Sequence[Bundle]) -> list[FrameResult]:
-        """people: (person id, camera index -> 2D person) of this frame; returns the frames due."""
+    def push(self, frame: int, people: Sequence[Bundle], time_s: float | None = None) -> list[FrameResult]:
+        """people: (person id, camera index -> 2D person) of this frame, taken at time_s seconds
+        (None: frame / the nominal frame rate; see window.SlidingWindow.push); returns the frames due."""
         frames = person_frames(self.cameras, people, frame, self.config, self.timer)
-        return [self._finish(r) for r in self.window.push(frame, frames)]
+        return [self._finish(r) for r in self.window.push(frame, frames, time_s)]
 
     def flush(self) -> list[FrameResult]:
+        """Every frame not yet output (end of stream)."""
         return [self._finish(r) for r in self.window.flush()]
 
     def _finish(self, result: FrameResult) -> FrameResult:

@@ -1,8 +1,12 @@
 """Temporal inference over a sliding window of frames (or over a whole clip), per person.
 
 Frames are pushed as they arrive; every pushed frame comes out exactly once, `lag` frames later
-(or at `flush`), with the decoded 3D joints of each person present in it. A person's chain is
-the run of consecutive buffered frames in which that person is present; a gap breaks it.
+(or at `flush`), with the decoded 3D joints of each person present in it. Each frame has a time
+(seconds; by default its number over the nominal frame rate). A person's chain is the run of
+successive pushed frames in which that person is present, with no more than `max_gap` seconds
+between two of them: an absence or a longer gap breaks it. Frames need not be evenly spaced (a
+graph that drops frames under load): the temporal factor predicts with constant velocity over the
+real times and widens with the real step (factors.temporal_table).
 Factor tables depend only on hypotheses, which never change once a frame is in, so they are
 computed once per frame and reused while the window slides.
 
@@ -34,7 +38,10 @@ class InferenceConfig:
     between a frame's arrival and its output; bp_hypotheses: keep only this many hypotheses per
     joint (those with the highest data term) inside BP, None = all M; slide_iterations: in window
     mode, warm-start each slide from the previous one with this many iterations (None: re-solve
-    every window from scratch with `iterations`)."""
+    every window from scratch with `iterations`); frame_rate: nominal frames per second, the
+    period the temporal factor's scale is defined for, and the time of a frame pushed without one
+    (frame / frame_rate s); max_gap: seconds between two successive frames beyond which every
+    chain breaks (no temporal link across it)."""
 
     terms: tuple[str, ...] = ('data', 'temp', 'col')
     window: int | None = 15
@@ -43,6 +50,8 @@ class InferenceConfig:
     bp_hypotheses: int | None = 16
     slide_iterations: int | None = 1
     factors: FactorConfig = field(default_factory=FactorConfig)
+    frame_rate: float = 25.0
+    max_gap: float = 0.2
 
     def __post_init__(self) -> None:
         unknown = set(self.terms) - set(TERMS)
@@ -56,11 +65,20 @@ class InferenceConfig:
             raise ValueError(f'iterations must be >= 1, got {self.iterations}')
         if self.slide_iterations is not None and self.slide_iterations < 1:
             raise ValueError(f'slide_iterations must be >= 1 or None, got {self.slide_iterations}')
+        if not (0 < self.frame_rate < float('inf') and self.max_gap > 0):
+            raise ValueError(f'frame_rate and max_gap must be positive, got {self.frame_rate}, {self.max_gap}')
+
+
+STEP_TOLERANCE = 1e-6  # relative: steps this close to a nominal period (or to each other) are taken as equal
 
 
 @dataclass
 class _Slot:
+    """A pushed frame; linked: it follows the frame pushed before it within max_gap."""
+
     frame: int
+    time: float
+    linked: bool
     people: dict[int, PersonFrame]
     temporal: dict[int, np.ndarray] = field(default_factory=dict)
     collision: dict[int, np.ndarray] = field(default_factory=dict)
@@ -69,17 +87,17 @@ class _Slot:
 
 @dataclass
 class _Chain:
-    """Warm-started BP of one person over the consecutive frames first .. first + len(bp) - 1;
-    best: each frame's best-data joints (J, 3), for the limb lengths."""
+    """Warm-started BP of one person over the linked frames `frames` (one per BP row); best:
+    each frame's best-data joints (J, 3), for the limb lengths."""
 
-    first: int
+    frames: deque[int] = field(default_factory=deque)
     bp: ChainBP | None = None
     hypotheses: deque[np.ndarray] = field(default_factory=deque)
     best: deque[np.ndarray] = field(default_factory=deque)
 
     @property
     def last(self) -> int:
-        return self.first + len(self.bp) - 1
+        return self.frames[-1]
 
 
 class SlidingWindow:
@@ -101,13 +119,20 @@ class SlidingWindow:
     def _warm(self) -> bool:
         return self.config.window is not None and self.config.slide_iterations is not None
 
-    def push(self, frame: int, people: list[PersonFrame]) -> list[FrameResult]:
-        """Add a frame (frames must increase; a skipped number breaks every chain); returns the
-        frames whose output is due (at most one in window mode)."""
-        if self._slots and frame <= self._slots[-1].frame:
-            raise ValueError(f'frame {frame} pushed after frame {self._slots[-1].frame}: frames must increase')
+    def push(self, frame: int, people: list[PersonFrame], time_s: float | None = None) -> list[FrameResult]:
+        """Add a frame taken at time_s seconds (None: frame / frame_rate); frames and times must
+        increase, and a gap of more than max_gap seconds breaks every chain. Returns the frames
+        whose output is due (at most one in window mode)."""
+        time_s = frame / self.config.frame_rate if time_s is None else float(time_s)
+        last = self._slots[-1] if self._slots else None
+        if last is not None and frame <= last.frame:
+            raise ValueError(f'frame {frame} pushed after frame {last.frame}: frames must increase')
+        if last is not None and not time_s > last.time:
+            raise ValueError(f'frame {frame} at {time_s} s pushed after frame {last.frame} at {last.time} s: '
+                             f'times must increase')
+        linked = last is not None and time_s - last.time <= self.config.max_gap * (1 + STEP_TOLERANCE)
         k = self.config.bp_hypotheses
-        slot = _Slot(frame, {p.person_id: _pruned(p, k) if k else p for p in people})
+        slot = _Slot(frame, time_s, linked, {p.person_id: _pruned(p, k) if k else p for p in people})
         self._slots.append(slot)
         self._unsent += 1
         if 'temp' in self.config.terms and len(self._slots) >= 3:
@@ -139,13 +164,15 @@ class SlidingWindow:
         """Extend each present person's chain with the frame at buffer position i and warm-start
         its BP; a person absent here, or back after a gap, ends its chain."""
         slot = self._slots[i]
+        before = self._slots[i - 1].frame if i > 0 and slot.linked else None
         for pid in list(self._chains):
-            if pid not in slot.people or self._chains[pid].last != slot.frame - 1:
+            if pid not in slot.people or self._chains[pid].last != before:
                 self._ended.append((pid, self._chains.pop(pid)))
         for pid, p in slot.people.items():
             chain = self._chains.get(pid)
             if chain is None:
-                chain = self._chains[pid] = _Chain(slot.frame)
+                chain = self._chains[pid] = _Chain()
+            chain.frames.append(slot.frame)
             chain.hypotheses.append(p.hypotheses)
             chain.best.append(np.take_along_axis(p.hypotheses, p.data.argmax(-1)[:, None, None], axis=1)[:, 0])
             t0 = time.perf_counter()
@@ -159,9 +186,9 @@ class SlidingWindow:
             if excess > 0:
                 chain.bp.drop_front(excess)
                 for _ in range(excess):
+                    chain.frames.popleft()
                     chain.hypotheses.popleft()
                     chain.best.popleft()
-                chain.first += excess
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
         run_chains([self._chains[pid].bp for pid in slot.people], self.config.slide_iterations)
@@ -182,27 +209,28 @@ class SlidingWindow:
 
     def _add_temporal(self, i: int) -> None:
         """Temporal tables of the frame at buffer position i, now that its successor is in; none
-        across a gap in frame numbers."""
+        across a gap (max_gap). The steps are the real times between the three frames."""
         prev, cur, nxt = self._slots[i - 1], self._slots[i], self._slots[i + 1]
-        if not prev.frame + 1 == cur.frame == nxt.frame - 1:
+        if not (cur.linked and nxt.linked):
             return
         pids = sorted(cur.people.keys() & prev.people.keys() & nxt.people.keys())
         if not pids:
             return
         # every person's joints in one call: the table of a joint depends on that joint alone
         n_j = len(cur.people[pids[0]].hypotheses)
+        steps = _steps(cur.time - prev.time, nxt.time - cur.time, self.config.frame_rate)
         tables = temporal_table(*(np.concatenate([s.people[pid].hypotheses for pid in pids]) for s in (prev, cur, nxt)),
-                                self.config.factors)
+                                self.config.factors, steps)
         for k, pid in enumerate(pids):
             cur.temporal[pid] = tables[k * n_j:(k + 1) * n_j]
 
     def _run(self, pid: int, i: int) -> range:
-        """Buffer positions of the chain of person pid through position i (consecutive frames)."""
+        """Buffer positions of the chain of person pid through position i (linked frames)."""
         s = self._slots
         lo, hi = i, i
-        while lo > 0 and pid in s[lo - 1].people and s[lo - 1].frame == s[lo].frame - 1:
+        while lo > 0 and pid in s[lo - 1].people and s[lo].linked:
             lo -= 1
-        while hi + 1 < len(s) and pid in s[hi + 1].people and s[hi + 1].frame == s[hi].frame + 1:
+        while hi + 1 < len(s) and pid in s[hi + 1].people and s[hi + 1].linked:
             hi += 1
         return range(lo, hi + 1)
 
@@ -224,8 +252,8 @@ class SlidingWindow:
     def _decode_warm(self, pid: int, frame: int) -> np.ndarray:
         """Joints (J, 3) of person pid at `frame` from the current beliefs of its chain."""
         chains = [c for q, c in self._ended if q == pid] + ([self._chains[pid]] if pid in self._chains else [])
-        chain = next(c for c in chains if c.first <= frame <= c.last)
-        row = frame - chain.first
+        chain = next(c for c in chains if c.frames[0] <= frame <= c.last)
+        row = chain.frames.index(frame)
         best = chain.bp.total[row].argmax(axis=-1)  # (J,)
         return np.take_along_axis(chain.hypotheses[row], best[:, None, None], axis=1)[:, 0]
 
@@ -294,6 +322,17 @@ def limb_table_from(dist: np.ndarray, hyp: np.ndarray, data: np.ndarray, bones: 
     best = np.take_along_axis(hyp, data.argmax(-1)[..., None, None], axis=2)[:, :, 0]  # (T, J, 3)
     lengths = np.median(np.linalg.norm(best[:, bones[:, 0]] - best[:, bones[:, 1]], axis=-1), axis=0)
     return limb_table(dist, lengths, config)
+
+
+def _steps(dt_prev: float, dt_next: float, rate: float) -> tuple[float, float]:
+    """Two successive time steps (s) in nominal periods; steps within STEP_TOLERANCE of one period
+    are exactly 1 and nearly equal steps exactly equal, so evenly spaced frames give the evenly
+    spaced factor bit for bit whatever the rounding of their times."""
+    steps = [dt * rate for dt in (dt_prev, dt_next)]
+    steps = [1.0 if abs(s - 1.0) <= STEP_TOLERANCE else s for s in steps]
+    if abs(steps[0] - steps[1]) <= STEP_TOLERANCE * max(steps):
+        steps[1] = steps[0]
+    return steps[0], steps[1]
 
 
 def _pruned(p: PersonFrame, k: int) -> PersonFrame:

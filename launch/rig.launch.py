@@ -1,0 +1,41 @@
+"""Your own live cameras: `ros2 launch mvpose_ros rig.launch.py rig:=FILE [params:=FILE] [namespace:=NS]`.
+
+Starts the graph for N cameras that are already publishing (their drivers, or a bag played by
+`ros2 bag play` / bag_player): ONE heatmap_detector for the whole rig (camera 'all': every camera's
+image topic from the rig file, synchronised into sets, the newest set detected while older ones
+are dropped), association and bp_solver, each with the parameter file (default: the package's
+config/rig_template.yaml) and the rig file, and the package's Fast DDS profile (large heatmap
+messages). Outputs: <camera>/people2d, people/bundles, skeletons and skeletons/markers (RViz),
+relative to `namespace` (default: the root).
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+PACKAGE = 'mvpose_ros'
+NODES = ('heatmap_detector', 'association', 'bp_solver')
+
+
+def generate_launch_description():
+    config = os.path.join(get_package_share_directory(PACKAGE), 'config')
+    rig = LaunchConfiguration('rig')
+    params = LaunchConfiguration('params')
+    namespace = LaunchConfiguration('namespace')
+    overrides = {'heatmap_detector': {'rig': rig, 'camera': 'all'}, 'association': {'rig': rig},
+                 'bp_solver': {'rig': rig}}
+    nodes = [Node(package=PACKAGE, executable=name, name=name, namespace=namespace,
+                  parameters=[params, overrides[name]], output='screen')
+             for name in NODES]
+    return LaunchDescription([
+        DeclareLaunchArgument('rig', description='rig file (YAML): cameras, topics, extrinsics; see README'),
+        DeclareLaunchArgument('params', default_value=os.path.join(config, 'rig_template.yaml'),
+                              description='parameter file (a copy of config/rig_template.yaml)'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description="the graph's namespace (relative topics of the rig move with it)"),
+        SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(config, 'fastdds.xml')),
+        *nodes,
+    ])

@@ -1,0 +1,157 @@
+"""The heatmap detector's input handling without processes: every image encoding and both
+compressed formats decoded with the node's checks (decode_image: the calibrated size, a compressed
+header checked before decoding), the image type from the graph or by image_transport's naming,
+rig topics resolved in the rig's namespace, the `camera` parameter, and unusable inputs logged
+once per camera and cause."""
+from __future__ import annotations
+
+import struct
+
+import cv2
+import numpy as np
+import pytest
+from rclpy.qos import HistoryPolicy, ReliabilityPolicy
+from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Header
+
+from msg_adapters.image_msg import ENCODINGS, image_to_compressed_msg, image_to_msg
+from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
+from mvpose_ros.core.geometry.rig import load_rig_file
+from mvpose_ros.nodes.heatmap_detector import (DropLog, _camera_indices, decode_image, image_type, image_type_by_name,
+                                               in_namespace, rig_namespace)
+from mvpose_ros.nodes.runtime import StartupError, camera_qos
+from mvpose_ros.package_files import package_path
+
+HEADER = Header(frame_id='cam1')
+
+
+@pytest.fixture(scope='module')
+def shelf_image():
+    """Shelf camera 1, frame 572, and its Camera (1032 x 776)."""
+    bgr = cv2.imread(str(dataset_dir('shelf') / 'frames' / 'cam1_000572.png'))
+    return bgr, shelf_cameras()[1]
+
+
+@pytest.mark.parametrize('encoding', ENCODINGS)
+def test_every_image_encoding_decodes_through_the_node_checks(shelf_image, encoding):
+    bgr, camera = shelf_image
+    got = decode_image(image_to_msg(bgr, HEADER, encoding, padding=3), camera)
+    assert got.shape == bgr.shape and got.dtype == np.uint8
+    if encoding.startswith('mono'):
+        want = np.repeat(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)[..., None], 3, axis=2)
+        np.testing.assert_array_equal(got, want)
+    elif encoding in ('yuv422', 'uyvy', 'yuv422_yuy2', 'yuyv'):  # chroma shared by pixel pairs
+        assert np.abs(got.astype(int) - bgr).mean() < 6
+    else:
+        np.testing.assert_array_equal(got, bgr)
+
+
+@pytest.mark.parametrize('fmt', ['jpeg', 'png'])
+def test_compressed_images_decode_through_the_node_checks(shelf_image, fmt):
+    bgr, camera = shelf_image
+    got = decode_image(image_to_compressed_msg(bgr, HEADER, fmt), camera)
+    assert got.shape == bgr.shape
+    if fmt == 'png':
+        np.testing.assert_array_equal(got, bgr)
+    else:
+        assert np.abs(got.astype(int) - bgr).mean() < 3
+
+
+def test_images_of_another_size_or_undecodable_are_refused_with_their_cause(shelf_image):
+    bgr, camera = shelf_image
+    with pytest.raises(ValueError, match=r'^Image size: 320x240, expected 1032x776$'):
+        decode_image(image_to_msg(bgr[:240, :320], HEADER), camera)
+    with pytest.raises(ValueError, match=r'^image size 320x240 is not the calibrated 1032x776$'):
+        decode_image(image_to_compressed_msg(bgr[:240, :320], HEADER), camera)  # smaller: decoded, then refused
+    big = image_to_compressed_msg(cv2.resize(bgr, (1040, 776)), HEADER)
+    with pytest.raises(ValueError, match='declares 1040x776, larger than the expected 1032x776'):
+        decode_image(big, camera)
+    jpeg = image_to_compressed_msg(bgr, HEADER)
+    data = bytes(jpeg.data)
+    with pytest.raises(ValueError, match=r'no end marker \(truncated\)'):
+        decode_image(CompressedImage(header=HEADER, format=jpeg.format, data=data[:len(data) // 2]), camera)
+    # a header declaring a huge image: refused from the header, nothing decoded
+    sof = data.index(b'\xff\xc0')
+    bomb = data[:sof + 5] + struct.pack('>HH', 60000, 60000) + data[sof + 9:]
+    with pytest.raises(ValueError, match='declares 60000x60000, larger than the expected'):
+        decode_image(CompressedImage(header=HEADER, format=jpeg.format, data=bomb), camera)
+    with pytest.raises(ValueError, match='not a JPEG or PNG'):
+        decode_image(CompressedImage(header=HEADER, format='jpeg', data=b'\x00' * 64), camera)
+    with pytest.raises(ValueError, match='expected one of'):
+        decode_image(Image(header=HEADER, height=776, width=1032, encoding='bayer_rggb8', step=1032,
+                           data=bytes(1032 * 776)), camera)
+
+
+def test_the_image_type_comes_from_the_graph_else_from_the_topic_name():
+    assert image_type_by_name('/rig/left/image_raw/compressed') is CompressedImage
+    assert image_type_by_name('/rig/left/image_raw') is Image
+    assert image_type_by_name('/rig/left/compressed_image') is Image
+    graph = [('/rig/left/image_raw/compressed', ['sensor_msgs/msg/CompressedImage']),
+             ('/rig/right/frames', ['sensor_msgs/msg/CompressedImage']),
+             ('/rig/odd/compressed', ['sensor_msgs/msg/Image']),
+             ('/rig/both', ['sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'])]
+    assert image_type('/rig/right/frames', graph) == (CompressedImage, 'graph')
+    assert image_type('/rig/odd/compressed', graph) == (Image, 'graph')  # the graph wins over the name
+    assert image_type('/rig/both', graph) == (Image, 'name')  # ambiguous: by the name
+    assert image_type('/rig/absent/compressed', graph) == (CompressedImage, 'name')
+
+
+def test_rig_topics_resolve_in_the_rig_namespace():
+    assert rig_namespace('/', None) == '/'
+    assert rig_namespace('/cam1', 'cam1') == '/'  # the Shelf graph: a detector in its camera's namespace
+    assert rig_namespace('/rig/cam1', 'cam1') == '/rig'
+    assert rig_namespace('/rig', 'cam1') == '/rig'
+    assert rig_namespace('/rig/cam1', None) == '/rig/cam1'  # the whole rig: the node's own
+    assert in_namespace('/', 'cam1/image_raw') == '/cam1/image_raw'
+    assert in_namespace('/rig', 'cam1/image_raw') == '/rig/cam1/image_raw'
+    assert in_namespace('/rig', '/drivers/left/image_raw/compressed') == '/drivers/left/image_raw/compressed'
+
+
+def test_the_camera_parameter_names_a_camera_an_index_or_the_whole_rig():
+    rig = load_rig_file(package_path('config/rigs/shelf.yaml'), data_root=data_root())
+    assert _camera_indices(2, rig) == [2]
+    assert _camera_indices('2', rig) == [2]
+    assert _camera_indices('cam3', rig) == [3]
+    assert _camera_indices('', rig) == _camera_indices('all', rig) == [0, 1, 2, 3, 4]
+    with pytest.raises(StartupError, match=r'parameter camera: 9 is not in 0..4 .* cam0, cam1'):
+        _camera_indices(9, rig)
+    with pytest.raises(StartupError, match=r"parameter camera: 'left' is not a camera of"):
+        _camera_indices('left', rig)
+    with pytest.raises(StartupError, match='parameter camera'):
+        _camera_indices(True, rig)
+
+
+def test_camera_inputs_are_best_effort_keep_last():
+    qos = camera_qos(3)
+    assert (qos.reliability, qos.history, qos.depth) == (ReliabilityPolicy.BEST_EFFORT, HistoryPolicy.KEEP_LAST, 3)
+    assert camera_qos() is not camera_qos()  # fresh: the overriding options write into it
+
+
+class _Logger:
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, str]] = []
+
+    def error(self, text: str, **_) -> None:
+        self.lines.append(('error', text))
+
+    def warning(self, text: str, **_) -> None:
+        self.lines.append(('warning', text))
+
+
+def test_an_unusable_input_is_logged_once_per_camera_and_cause_then_counted():
+    logger = _Logger()
+    drops = DropLog(logger)
+    assert drops.report('left', 'image', 1, 'CompressedImage data: truncated')
+    assert not drops.report('left', 'image', 2, 'CompressedImage data:  truncated')  # the same cause
+    assert drops.report('right', 'image', 3, 'CompressedImage data: truncated')  # another camera
+    assert drops.report('left', 'image', 4, 'Image encoding: bayer')  # another cause
+    assert not drops.report('left', 'image', 5, 'CompressedImage data: truncated')
+    errors = [text for level, text in logger.lines if level == 'error']
+    assert errors == ['left: image stamp 1 ns dropped: CompressedImage data: truncated (said once per camera and '
+                      'cause; later ones are counted)',
+                      'right: image stamp 3 ns dropped: CompressedImage data: truncated (said once per camera and '
+                      'cause; later ones are counted)',
+                      'left: image stamp 4 ns dropped: Image encoding: bayer (said once per camera and cause; later '
+                      'ones are counted)']
+    assert drops.summary() == ('left: 3 x CompressedImage data: truncated; left: 1 x Image encoding: bayer; '
+                               'right: 1 x CompressedImage data: truncated')

@@ -1,0 +1,199 @@
+"""The heatmap detector on a rig that is not Shelf's layout, as its own process fed over DDS by an
+in-test probe: driver-style topic and frame names from a rig file, JPEG CompressedImages of the
+real Shelf frame 572, a best-effort and a reliable publisher both reaching it, unusable images
+logged once per camera and cause while the node goes on; and the whole-rig mode, fed synchronised
+sets faster than it detects them: whole sets dropped and counted, the newest detected, every
+published set complete with each camera's own stamp."""
+from __future__ import annotations
+
+import re
+import time
+from typing import Callable
+
+import cv2
+import numpy as np
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, PointCloud2
+from std_msgs.msg import Header
+
+from msg_adapters.camera_info_msg import camera_to_info
+from msg_adapters.image_msg import image_to_compressed_msg, to_bgr
+from msg_adapters.people_msg import msg_to_people
+from msg_adapters.stamp import stamp_ns
+from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
+from mvpose_ros.core.geometry.rig import matrix_to_quaternion
+from mvpose_ros.nodes.runtime import DATA_QOS
+from ros_harness import probe, spin_until, start_node, stop
+
+RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+MS = 1_000_000
+
+
+def _frame(camera: int) -> np.ndarray:
+    return cv2.imread(str(dataset_dir('shelf') / 'frames' / f'cam{camera}_000572.png'))
+
+
+def _header(ns: int, frame_id: str) -> Header:
+    h = Header(frame_id=frame_id)
+    h.stamp.sec, h.stamp.nanosec = divmod(ns, 1_000_000_000)
+    return h
+
+
+def _stream_until(executor, publish: Callable[[], None], done: Callable[[], bool], period: float = 0.5,
+                  timeout: float = 60.0) -> bool:
+    """Publish a new message every `period` s, as a camera streams, until done(): a best-effort
+    reader loses what was sent before it matched the writer, so the first ones may not arrive."""
+    deadline = time.monotonic() + timeout
+    due = 0.0
+    while not done() and time.monotonic() < deadline:
+        if time.monotonic() >= due:
+            publish()
+            due = time.monotonic() + period
+        executor.spin_once(timeout_sec=0.02)
+    return done()
+
+
+def _collect(node, topic: str, into: dict[int, list[PointCloud2]]) -> None:
+    node.create_subscription(PointCloud2, topic, lambda m: into.setdefault(stamp_ns(m.header.stamp), []).append(m),
+                             DATA_QOS)
+
+
+def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(domain, tmp_path):
+    rig = tmp_path / 'rig.yaml'
+    entries = '\n'.join(f'  - {{name: cam_{c}, image: /drivers/cam_{c}/image_raw/compressed, '
+                        f'camera_info: /drivers/cam_{c}/camera_info, frame_id: cam_{c}_optical}}' for c in range(5))
+    rig.write_text("calibration: '{data_root}/data/shelf/calibration/calibration_shelf.json'\n"
+                   f'width: 1032\nheight: 776\ncameras:\n{entries}\n')
+    jpeg = image_to_compressed_msg(_frame(1), Header())
+    data = bytes(jpeg.data)
+    log = tmp_path / 'detector.log'
+    topic = '/drivers/cam_1/image_raw/compressed'
+    with probe(domain, 'rig_detector_probe') as (node, executor):
+        out: dict[int, list[PointCloud2]] = {}
+        _collect(node, '/rig/cam_1/people2d', out)
+        sensor = node.create_publisher(CompressedImage, topic, qos_profile_sensor_data)  # a driver's QoS
+        proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=cam_1',
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}')
+        sent = iter(range(1000 * MS, 2000 * MS, 40 * MS))
+
+        def image(pub, frame_id='cam_1_optical', payload=data):
+            pub.publish(CompressedImage(header=_header(next(sent), frame_id), format=jpeg.format, data=payload))
+
+        try:
+            # 1. the best-effort publisher reaches it
+            assert _stream_until(executor, lambda: image(sensor), lambda: bool(out)), log.read_text()
+            first = min(out)
+            # 2. unusable images: logged once per camera and cause, counted, the node goes on
+            image(sensor, payload=data[:len(data) // 2])
+            truncated = next(sent) - 40 * MS
+            image(sensor, payload=data[:len(data) // 3])  # the same cause again
+            assert spin_until(executor, lambda: 'no end marker' in log.read_text()), log.read_text()
+            image(sensor, payload=b'\x00' * 64)
+            image(sensor, frame_id='cam_2_optical')
+            assert spin_until(executor, lambda: 'not a JPEG or PNG' in log.read_text()
+                              and 'is not this camera' in log.read_text()), log.read_text()
+            bad = set(range(truncated, truncated + 4 * 40 * MS, 40 * MS))
+            # 3. a reliable publisher reaches it too
+            reliable = node.create_publisher(CompressedImage, topic, RELIABLE)
+            since = len(out)
+            assert _stream_until(executor, lambda: image(reliable), lambda: len(out) > since), log.read_text()
+            spin_until(executor, lambda: False, 0.5)
+        finally:
+            stop(proc)
+    text = log.read_text()
+    assert 'cam_1: backend onnx, /drivers/cam_1/image_raw/compressed (CompressedImage, by' in text
+    assert '-> /rig/cam_1/people2d' in text
+    assert not bad & set(out) and all(len(v) == 1 for v in out.values())
+    for msg in (m for v in out.values() for m in v):
+        assert msg.header.frame_id == 'cam_1_optical'
+    # the same people as the ROS-free detector on the same JPEG (the node's settings: threads 1)
+    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', threads=1))
+    expected = detector.detect(to_bgr(jpeg))
+    got = msg_to_people(out[first][0])
+    assert len(got) == len(expected) >= 3
+    for a, b in zip(got, expected):
+        np.testing.assert_allclose(a.keypoints, b.keypoints, atol=0.05)
+    errors = [line for line in text.splitlines() if '[ERROR]' in line]
+    assert sum('no end marker (truncated)' in line for line in errors) == 1, text
+    assert f'cam_1: image stamp {truncated} ns dropped: CompressedImage data: the jpeg (1032x776) has no end ' \
+           'marker (truncated)' in text
+    assert sum('not a JPEG or PNG' in line for line in errors) == 1
+    assert sum("frame_id 'cam_2_optical' is not this camera ('cam_1_optical')" in line for line in errors) == 1
+    assert 'cam_1: 2 x CompressedImage data: the jpeg (1032x776) has no end marker (truncated)' in text  # counted
+    assert 'Traceback' not in text
+
+
+def _explicit_rig(path, names: list[str], with_intrinsics: list[bool]) -> None:
+    """A rig file of Shelf cameras 0.. under driver-style names, intrinsics where asked."""
+    lines = ['world_frame: world', 'cameras:']
+    for cam, name, intrinsics in zip(shelf_cameras(), names, with_intrinsics):
+        position = (-cam.R.T @ cam.t).tolist()
+        q = matrix_to_quaternion(cam.R.T).tolist()
+        lines += [f'  - name: {name}', f'    image: {name}/image/compressed', f'    camera_info: {name}/camera_info',
+                  f'    frame_id: {name}_optical', f'    position: {position}', f'    orientation: {q}']
+        if intrinsics:
+            lines += [f'    width: {cam.width}', f'    height: {cam.height}', f'    K: {cam.K.ravel().tolist()}',
+                      f'    D: {cam.dist.tolist()}']
+    path.write_text('\n'.join(lines) + '\n')
+
+
+def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(domain, tmp_path):
+    names = ['left', 'middle', 'right']
+    rig = tmp_path / 'rig.yaml'
+    _explicit_rig(rig, names, [True, True, False])  # right's intrinsics come from its CameraInfo
+    jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
+    offsets = [0, 6 * MS, -7 * MS]  # each camera stamps its own capture time
+    jitter = [[0, 1 * MS, -1 * MS, 0, 1 * MS, 0, -1 * MS, 0], [1 * MS, 0, 0, -1 * MS, 0, 1 * MS, 0, -1 * MS],
+              [0, -1 * MS, 1 * MS, 0, 0, -1 * MS, 1 * MS, 0]]
+    sets = 8
+    stamps = [[1000 * MS + k * 40 * MS + offsets[c] + jitter[c][k] for k in range(sets)] for c in range(3)]
+    log = tmp_path / 'detector.log'
+    # every image reaches the synchroniser here (reliable, deep): what is dropped, the node drops. A
+    # burst of images can overflow the transport, and reliable DDS repairs that only at its next
+    # heartbeat (seconds): sync_timeout covers it, so a set waits for its late images.
+    overrides = [a for name in names for a in
+                 ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
+                  '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+    with probe(domain, 'rig_sets_probe') as (node, executor):
+        out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
+        for name, into in zip(names, out):
+            _collect(node, f'/rig/{name}/people2d', into)
+        pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
+        info = node.create_publisher(CameraInfo, '/rig/right/camera_info', qos_profile_sensor_data)
+        proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', '-p', 'sync_timeout:=5.0',
+                          *overrides)
+        try:
+            assert _stream_until(executor, lambda: info.publish(camera_to_info(shelf_cameras()[2],
+                                                                               _header(0, 'right_optical'))),
+                                 lambda: 'right: intrinsics from /rig/right/camera_info' in log.read_text(),
+                                 period=0.1), log.read_text()
+            assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs), 30.0)
+            for k in range(sets):  # all at once: far faster than three detections per set
+                for c, pub in enumerate(pubs):
+                    pub.publish(CompressedImage(header=_header(stamps[c][k], f'{names[c]}_optical'),
+                                                format=jpegs[c].format, data=jpegs[c].data))
+            last = [stamps[c][-1] for c in range(3)]
+            assert spin_until(executor, lambda: all(s in o for s, o in zip(last, out)), 60.0), log.read_text()
+            spin_until(executor, lambda: False, 0.5)
+        finally:
+            stop(proc)
+    text = log.read_text()
+    detected = []
+    for c, into in enumerate(out):
+        assert all(len(v) == 1 for v in into.values())
+        assert set(into) <= set(stamps[c]), 'each output carries its camera\'s own image stamp'
+        detected.append(sorted(stamps[c].index(s) for s in into))
+        for [msg] in into.values():
+            assert msg.header.frame_id == f'{names[c]}_optical'
+            assert len(msg_to_people(msg)) >= 2
+    assert detected[0] == detected[1] == detected[2], 'every published set has all cameras'
+    assert detected[0][-1] == sets - 1, 'the newest set is detected'
+    assert 1 <= len(detected[0]) < sets, 'sets came faster than detection: some were dropped'
+    summary = re.search(r'sets: (\d+) released, (\d+) detected, (\d+) dropped whole while detecting', text)
+    assert summary, text
+    assert [int(g) for g in summary.groups()] == [sets, len(detected[0]), sets - len(detected[0])]
+    assert 'detection is slower than the cameras' in text
+    assert 'Traceback' not in text and 'dropped: ' not in text, text

@@ -1,0 +1,203 @@
+"""Running the graph on a recorded rig, without ROS processes: the synchronised sets of a rig bag
+(offset and jittered stamps, a late camera, dropped frames), the shelf_rig recipe's stamps, the
+`mvpose-graph --rig` arguments, the nodes and parameter files it runs, its report and its
+predictions lines."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+
+from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_stamps
+from mvpose_ros.bags.replay import InFlight, group_sets, header_stamp_ns
+from mvpose_ros.cli.graph import main as graph_main, rig_run_plan
+from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,
+                                     rig_graph_nodes, rig_sync, write_overrides)
+from mvpose_ros.graph.report import rig_prediction_lines, rig_report, set_skews_ms
+from mvpose_ros.package_files import package_path
+
+S = 1_000_000_000
+MS = 1_000_000
+PERIOD = 40 * MS
+
+
+def _cdr(stamp: int) -> bytes:
+    """A little-endian CDR message whose header stamp is `stamp` (ns)."""
+    sec, nsec = divmod(stamp, S)
+    return b'\x00\x01\x00\x00' + sec.to_bytes(4, 'little', signed=True) + nsec.to_bytes(4, 'little') + b'frame'
+
+
+def _messages(stamps: dict[str, list[int | None]]):
+    """Driver-style: per camera and capture a camera_info and an image of that stamp, logged then."""
+    out = []
+    for name, per_set in stamps.items():
+        for stamp in per_set:
+            if stamp is not None:
+                out.append((stamp, 0, f'/rig/{name}/camera_info', 'sensor_msgs/msg/CameraInfo', _cdr(stamp)))
+                out.append((stamp, 1, f'/rig/{name}/image', 'sensor_msgs/msg/CompressedImage', _cdr(stamp)))
+    out.sort(key=lambda m: m[:2])
+    return [(topic, kind, stamp, cdr) for stamp, _, topic, kind, cdr in out]
+
+
+def test_sets_of_a_driver_rig_follow_the_approximate_sync_rules():
+    stamps = shelf_rig_stamps()
+    names = list(stamps)
+    cameras = [f'/rig/{n}/image' for n in names]
+    sets = list(group_sets(_messages(stamps), cameras, max_skew=0.02))
+    assert [s.index for s in sets] == list(range(ForeignRig.SETS))
+    for k, s in enumerate(sets):
+        expected = {f'/rig/{n}/image': stamps[n][k] for n in names if stamps[n][k] is not None}
+        assert s.members == expected  # one capture per set, whatever the offsets
+        assert s.stamp_ns == min(expected.values())  # the set's stamp: its earliest member's
+        assert s.skew_ns == max(expected.values()) - min(expected.values()) <= 20 * MS
+        # each camera's CameraInfo goes with its image, before it (bag order)
+        topics = [m[0] for m in s.messages]
+        assert sorted(topics) == sorted([t.replace('/image', '/camera_info') for t in expected] + list(expected))
+        for t in expected:
+            assert topics.index(t.replace('/image', '/camera_info')) < topics.index(t)
+        assert {header_stamp_ns(m[2]) for m in s.messages} == set(expected.values())
+    assert [len(s.members) for s in sets[:4]] == [4, 4, 4, 5]  # the late camera
+    assert [k for k, s in enumerate(sets) if len(s.members) == 4] == [0, 1, 2, *ForeignRig.DROPPED_SETS]
+
+
+def test_shelf_rig_stamps_have_offsets_jitter_a_late_camera_and_three_drops():
+    stamps = shelf_rig_stamps()
+    assert list(stamps) == list(ForeignRig.NAMES) and all(len(v) == 40 for v in stamps.values())
+    for c, name in enumerate(ForeignRig.NAMES):
+        offsets = np.array([s - ForeignRig.START_NS - k * PERIOD for k, s in enumerate(stamps[name]) if s is not None])
+        assert np.abs(offsets).max() <= 9 * MS
+        assert abs(np.median(offsets) - ForeignRig.OFFSETS_MS[c] * MS) <= 1 * MS
+        assert offsets.std() > 0.1 * MS  # jittered, not a constant offset
+    assert [k for k, s in enumerate(stamps['back']) if s is None] == [0, 1, 2]
+    assert [k for k, s in enumerate(stamps['door']) if s is None] == [11, 22, 33]
+    assert shelf_rig_stamps() == stamps  # seeded
+
+
+def test_out_of_order_or_duplicate_images_are_still_played_with_the_next_set():
+    a, b = '/a/image', '/b/image'
+    msgs = [(a, 'x', 0, _cdr(100 * MS)), (b, 'x', 0, _cdr(101 * MS)), (a, 'x', 0, _cdr(140 * MS)),
+            (b, 'x', 0, _cdr(141 * MS)), (b, 'x', 0, _cdr(101 * MS)),  # a late repeat
+            ('/tf', 'y', 0, b'no header'), (a, 'x', 0, _cdr(180 * MS))]
+    sets = list(group_sets(msgs, [a, b], 0.02, stamped=lambda t: t != 'y'))
+    assert [s.stamp_ns for s in sets] == [100 * MS, 140 * MS, 180 * MS]
+    assert sum(len(s.messages) for s in sets) == len(msgs)
+    with pytest.raises(ValueError, match='no header'):
+        list(group_sets([(a, 'y', 0, b'')], [a], 0.02, stamped=lambda t: t != 'y'))
+    with pytest.raises(ValueError, match='camera topic'):
+        list(group_sets([], [], 0.02))
+
+
+def test_in_flight_give_up():
+    flight = InFlight(1)
+    flight.published(5)
+    assert flight.full and flight.give_up() == 5 and not flight.full
+    with pytest.raises(ValueError):
+        flight.give_up()
+
+
+@pytest.fixture
+def rig_file(tmp_path) -> Path:
+    path = tmp_path / 'rig.yaml'
+    path.write_text(yaml.safe_dump({'cameras': [
+        {'name': n, 'image': f'/rig/{n}/image', 'camera_info': f'/rig/{n}/camera_info', 'position': [0, 0, i],
+         'orientation': [0, 0, 0, 1]} for i, n in enumerate(('a', 'b'))]}))
+    return path
+
+
+@pytest.mark.parametrize('argv, needle', [
+    (['--rig', 'RIG'], '--rig needs --bag'),
+    ([], 'one of --config'),
+    (['--config', 'config/shelf.yaml', '--lockstep'], '--lockstep needs --rig'),
+    (['--config', 'config/shelf.yaml', '--qos', 'sensor'], '--qos needs --rig'),
+    (['--rig', 'RIG', '--bag', 'B', '--lockstep', '--rate', '2'], 'exclude each other'),
+    (['--rig', 'RIG', '--bag', 'B', '--loops', '0'], '--loops must be >= 1'),
+    (['--rig', 'RIG', '--bag', 'B', '--ground-truth', 'shelf'], '--frame'),
+    (['--rig', 'nowhere.yaml', '--bag', 'B'], 'nowhere.yaml'),
+    (['--rig', 'RIG', '--bag', 'BAG', '--rate', '0'], '--rate must be > 0'),
+    (['--rig', 'RIG', '--bag', 'OTHER'], 'no topic /rig/b/image'),
+])
+def test_rig_arguments_are_one_line_errors(argv, needle, rig_file, tmp_path, capsys):
+    from mvpose_ros.bags.io import write_bag
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import Header
+    bag, other = tmp_path / 'bag', tmp_path / 'other'
+    write_bag(bag, [(f'/rig/{n}/image', CompressedImage(header=Header(frame_id=n)), 1) for n in 'ab'])
+    write_bag(other, [('/rig/a/image', CompressedImage(header=Header(frame_id='a')), 1)])
+    subst = {'RIG': str(rig_file), 'BAG': str(bag), 'OTHER': str(other)}
+    assert graph_main([subst.get(a, a) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
+    from mvpose_ros.bags.io import write_bag
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import Header
+    items = []
+    for k in range(3):
+        for c, n in enumerate('ab'):
+            header = Header(frame_id=n)
+            header.stamp.sec, header.stamp.nanosec = divmod(S + k * PERIOD + c * 5 * MS, S)
+            items.append((f'/rig/{n}/image', CompressedImage(header=header), S + k * PERIOD + c * 5 * MS))
+    write_bag(tmp_path / 'bag', items)
+    config = tmp_path / 'mine.yaml'
+    config.write_text('/**/association:\n  ros__parameters:\n    max_skew: 0.01\n'
+                      'mvpose_graph:\n  ros__parameters:\n    rate: 2.0\n')
+    args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=config, data_root=None, lockstep=False,
+                           rate=None, qos=None, predictions=None, loops=2)
+    rig, run, settings, files, sets = rig_run_plan(args)
+    assert files == [package_path(RIG_TEMPLATE), config.resolve()]
+    assert run.rate == 2.0 and run.qos == 'sensor' and run.max_skew == 0.01 and not run.lockstep
+    # two passes: the second moved on by the bag's log span plus a period, as the player moves it
+    span = 2 * PERIOD + 5 * MS + PERIOD
+    assert [s.stamp_ns for s in sets] == [S + k * PERIOD + p * span for p in range(2) for k in range(3)]
+    assert [s.index for s in sets] == list(range(6)) and settings.cameras == 2 and run.loops == 2
+    assert rig_connections(rig) == {'/rig/a/image': ('sub',), 'a/people2d': ('pub', 'sub'), '/rig/b/image': ('sub',),
+                                    'b/people2d': ('pub', 'sub'), 'people/bundles': ('pub', 'sub'),
+                                    'skeletons': ('pub',)}
+    # --rig alone: the template's defaults (association max_skew 0 = half a 25 Hz period)
+    assert rig_sync([load_params(package_path(RIG_TEMPLATE))]) == (0.02, 0.5)
+
+
+def test_lockstep_nodes_and_their_overrides_file(tmp_path):
+    run = RigRun('/r/rig.yaml', '/b', True, 0.0, 'sensor', 0.02, 0.5, 10.0)
+    nodes = rig_graph_nodes(run, start_topic='bag_player/start')
+    assert [(n.executable, n.namespace) for n in nodes] == [
+        ('heatmap_detector', ''), ('association', ''), ('bp_solver', ''), ('bag_player', '')]
+    detector, association, solver, player = (n.parameters for n in nodes)
+    assert detector['camera'] == 'all' and detector['rig'] == association['rig'] == solver['rig'] == '/r/rig.yaml'
+    assert player | {} == {'bag': '/b', 'qos': 'sensor', 'max_skew': 0.02, 'sync_timeout': 0.5, 'loops': 1, 'rate': 0.0,
+                           'sets': True, 'max_in_flight': 1, 'ack_topic': LOCKSTEP_ACK, 'ack_timeout': 10.0,
+                           'start_topic': 'bag_player/start'}
+    paced = rig_graph_nodes(RigRun('/r/rig.yaml', '/b', False, 1.0, 'reliable', 0.02, 0.5, 10.0))[-1].parameters
+    assert paced['rate'] == 1.0 and paced['sets'] is False and 'max_in_flight' not in paced
+    written = load_params(write_overrides(nodes, tmp_path / 'o.yaml'))
+    assert written['/**/heatmap_detector'] == detector and written['/**/bag_player'] == player
+
+
+def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
+    stamps = [S + k * PERIOD for k in range(4)]
+    joints = np.arange(2 * 14 * 3, dtype=float).reshape(2, 14, 3) / 100
+    node = SimpleNamespace(outputs={stamps[0]: (np.array([3, 7]), joints), stamps[2]: (np.array([3]), joints[:1])},
+                           output_at={stamps[0]: 1_000 * MS, stamps[2]: 1_500 * MS},
+                           info_at={stamps[0]: 900 * MS, stamps[2]: 1_300 * MS}, received={stamps[0]: 1, stamps[2]: 1},
+                           bad=[])
+    people = {'a/people2d': [stamps[0], stamps[2]], 'b/people2d': [stamps[0] + 6 * MS, stamps[2] + 12 * MS]}
+    assert set_skews_ms([stamps[0], stamps[2]], people, 20 * MS).tolist() == [6.0, 12.0]
+    lines = []
+    problems = rig_report(stamps, [6 * MS] * 4, node, people, 20 * MS, True, SimpleNamespace(write=lines.append))
+    text = ''.join(lines)
+    assert 'sets in 4, processed 2, dropped 2 (set numbers 1, 3)' in text
+    assert 'p50 6.0 ms, max 6.0 ms' in text and 'p50 9.0 ms, max 12.0 ms' in text
+    assert 'p50 150.0 ms' in text and problems == ['2 of 4 sets got no /skeletons']
+    assert rig_report(stamps, [0] * 4, node, people, 20 * MS, False, SimpleNamespace(write=lambda s: None)) == []
+    records = [json.loads(line) for line in rig_prediction_lines(stamps, node.outputs)]
+    assert [(r['frame'], r['stamp']) for r in records] == [(0, stamps[0]), (2, stamps[2])]
+    assert list(records[0]) == ['frame', 'stamp', 'people']
+    assert [p['id'] for p in records[0]['people']] == [3, 7]
+    assert np.allclose(records[0]['people'][1]['joints'], joints[1], atol=1e-3)
+    assert np.array(records[1]['people'][0]['joints']).shape == (14, 3)
