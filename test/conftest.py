@@ -8,7 +8,7 @@ import pytest
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.camera import Camera
-from ros_harness import acquire_domain, release_domain
+from ros_harness import STARTED, acquire_domain, release_domain, stop
 
 
 @pytest.fixture(scope='session')
@@ -31,3 +31,12 @@ def domain() -> Iterator[int]:
         yield held
     finally:
         release_domain(held)
+
+
+@pytest.fixture(autouse=True)
+def no_node_outlives_its_test() -> Iterator[None]:
+    """Stop any node process a test left running (a failed assertion before its own stop), so it
+    cannot load the machine for the tests after it."""
+    yield
+    while STARTED:
+        stop(STARTED.pop())

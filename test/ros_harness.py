@@ -120,13 +120,18 @@ def probe(domain_id: int, name: str) -> Iterator[tuple[Node, SingleThreadedExecu
         context.try_shutdown()
 
 
+STARTED: list[subprocess.Popen] = []  # every node process a test started (conftest stops leftovers)
+
+
 def start_node(module: str, domain_id: int, log: Path, *ros_args: str,
                env: Mapping[str, str] | None = None) -> subprocess.Popen:
     """`python -m mvpose_ros.nodes.<module> --ros-args ...` with stdout and stderr to log."""
     with open(log, 'w') as err:
-        return subprocess.Popen([sys.executable, '-m', f'mvpose_ros.nodes.{module}', '--ros-args', *ros_args],
+        proc = subprocess.Popen([sys.executable, '-m', f'mvpose_ros.nodes.{module}', '--ros-args', *ros_args],
                                 env=dict(env) if env is not None else node_env(domain_id), stdout=err,
                                 stderr=subprocess.STDOUT, cwd=REPO)
+    STARTED.append(proc)
+    return proc
 
 
 def spin_until(executor: SingleThreadedExecutor, done: Callable[[], bool], timeout: float = 20.0) -> bool:

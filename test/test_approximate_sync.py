@@ -7,8 +7,10 @@ S1. A set holds at most one message per camera, all within max_skew of each othe
     skew_ns = newest - oldest member stamp.
 S2. A set is released as soon as every camera is a member, has moved past the window (delivered a
     later stamp), or is absent (an earlier set waited the whole timeout for it, and nothing has
-    come from it since); otherwise it waits for the missing cameras at most `timeout` s from its
-    first member's arrival, then goes without them (listed in `missing`), and they are absent.
+    come from it since) and max_skew s have passed since the set's last member arrived (a grace
+    for a camera coming back); otherwise it waits for the missing cameras at most `timeout` s
+    from its first member's arrival, then goes without them (listed in `missing`), and they are
+    absent.
 S3. Sets leave in strictly increasing stamp order and are numbered 0, 1, 2, ... in that order.
 S4. Each message is used at most once; nothing is lost silently: a message at or before a stamp
     its camera has passed ('late'), a repeat of a pending stamp ('duplicate'), a set smaller than
@@ -150,8 +152,9 @@ def test_a_camera_starting_late_beyond_the_timeout_is_left_out_until_it_starts()
     assert (3 in frames[25]) == (sync.dropped['late'] == 0) and sync.dropped['late'] <= 1
     start = events[0].arrival
     for f, r in enumerate(released[:25]):
-        # until start + timeout the sets wait for camera 3; after it, camera 3 is silent
-        ready = max(e.arrival for e in events if e.frame == f)
+        # set 0 waits for camera 3 until start + timeout; camera 3 is then absent, and every set
+        # goes without it once its grace (max_skew after its last member) has passed
+        ready = max(e.arrival for e in events if e.frame == f) + (MAX_SKEW if f else 0.0)
         assert r.at == pytest.approx(max(ready, start + TIMEOUT), abs=0.0101)
 
 
@@ -180,10 +183,12 @@ def test_a_camera_gone_for_good_is_waited_for_once_then_left_out_without_delay()
     for f, r in enumerate(released):
         ready = max(e.arrival for e in events if e.frame == f)
         if f >= 20:
-            assert r.at == pytest.approx(max(ready, waited), abs=0.0101)
+            grace = MAX_SKEW if f > 20 else 0.0
+            assert r.at == pytest.approx(max(ready + grace, waited), abs=0.0101)
         else:
             assert r.at == ready
-    assert released[-1].at == max(e.arrival for e in events)  # no delay once it is absent
+    # once it is absent, a set waits only the grace for it
+    assert released[-1].at == pytest.approx(max(e.arrival for e in events) + MAX_SKEW, abs=0.0101)
     assert sync.absent == [4]
 
 
@@ -346,21 +351,28 @@ def test_bad_construction_is_refused(kw):
         ApproximateSync(**args)
 
 
-def test_an_absent_camera_whose_messages_come_late_is_waited_for_again():
-    """Camera 4 misses set 1 (the set goes without it after the timeout); its next message comes
-    after the other cameras' (so set 2 goes without it and that message is late), but it is
-    sending again: set 3 waits for it and has it."""
-    sync = _sync()
-    released, now = [], 0.0
-    for k in range(4):
-        stamp = T0_NS + k * PERIOD_NS
-        now = k * 1.0
-        order = range(4) if k in (1, 2) else range(5)
-        for c in order:
-            released += sync.add(stamp, c, c, now)
-        if k == 1:
-            released += sync.expire(now + TIMEOUT)  # the wait for camera 4 runs out
-        if k == 2:
-            with pytest.raises(ValueError, match='late'):
-                sync.add(stamp, 4, 4, now + 0.01)
-    assert [s.missing for s in released] == [[], [4], [4], []] and sync.absent == []
+def test_an_absent_camera_coming_back_joins_within_the_grace_or_is_waited_for_after():
+    """Camera 4 misses set 1 (the set goes without it after the timeout). Back at set 2, its image
+    comes after the other cameras': within the grace (max_skew after the set's last member) it
+    joins set 2; after the grace set 2 has gone without it, its image is late, and set 3 waits
+    for it again (a late message says the camera is sending)."""
+    for delay, set2_missing in ((0.5 * MAX_SKEW, []), (3 * MAX_SKEW, [4])):
+        sync = _sync()
+        released: list[SyncedSet] = []
+        for k in range(4):
+            stamp, now = T0_NS + k * PERIOD_NS, k * 1.0
+            for c in range(4):
+                released += sync.add(stamp, c, c, now)
+            if k == 1:
+                released += sync.expire(now + TIMEOUT)  # the wait for camera 4 runs out
+            elif k == 2:
+                released += sync.expire(now + delay - 0.001)
+                if set2_missing:
+                    released += sync.expire(now + delay)
+                    with pytest.raises(ValueError, match='late'):
+                        sync.add(stamp, 4, 4, now + delay)
+                else:
+                    released += sync.add(stamp, 4, 4, now + delay)
+            else:
+                released += sync.add(stamp, 4, 4, now)
+        assert [s.missing for s in released] == [[], [4], set2_missing, []] and sync.absent == []

@@ -268,9 +268,10 @@ def _rig_bag(path: Path, sets: int = 6, offsets_ms=(0.0, 7.0, -6.0)) -> tuple[Pa
 
 
 def test_sensor_qos_reaches_best_effort_readers_and_reliable_reaches_both(probe, tmp_path):
-    """qos sensor publishes best effort like a camera driver: a best-effort reader gets every image
-    (DDS does not let a reliable reader match a best-effort writer: it stays unmatched); qos
-    reliable reaches best-effort and reliable readers alike."""
+    """qos sensor publishes best effort like a camera driver: a best-effort reader gets the images
+    (best effort may lose some, never reorders them; DDS does not let a reliable reader match a
+    best-effort writer: it stays unmatched); qos reliable reaches a reliable reader with every
+    image, and best-effort readers too."""
     node, executor = probe
     bag, members = _rig_bag(tmp_path / 'bag', sets=4)
     topic = '/rig/cam_0/image_raw/compressed'
@@ -282,12 +283,13 @@ def test_sensor_qos_reaches_best_effort_readers_and_reliable_reaches_both(probe,
         # the player waits for a reader on every camera's images: the other two cameras' readers
         others = [node.create_subscription(CompressedImage, f'/rig/cam_{c}/image_raw/compressed', lambda m: None,
                                            qos_profile_sensor_data) for c in (1, 2)]
-        proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=0.0', 'sets:=true', 'ack_topic:=ack',
-                            'max_in_flight:=100', f'qos:={qos}', 'wait_subscribers:=60.0', f'start_topic:={START}')
+        proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=1.0', 'sets:=true', f'qos:={qos}',
+                            'wait_subscribers:=60.0', f'start_topic:={START}')
         _start_when_matched(node, executor, proc, log, (subs if qos == 'reliable' else subs[:1]) + others)
         assert _run_to_end(executor, proc, lambda: len(best_effort) >= 4 and (qos == 'sensor' or len(reliable) >= 4)) \
             == 0, log.read_text()
-        assert [stamp_ns(m.header.stamp) for m in best_effort] == [m[0] for m in members]
+        got = [stamp_ns(m.header.stamp) for m in best_effort]
+        assert got and got == [m[0] for m in members if m[0] in got], 'in order, each once'
         if qos == 'sensor':
             assert reliable == [] and subs[1].get_publisher_count() == 0
         else:

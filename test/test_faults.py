@@ -156,7 +156,10 @@ def test_bad_parameter_or_calibration_file_is_one_fatal_line_and_exit_2(domain, 
     params.write_text(content.replace('CALIBRATION', str(calibration)).replace('RIG', str(rig)))
     log = tmp_path / 'bp.log'
     proc = start_node('bp_solver', domain, log, '--params-file', str(params))
-    assert proc.wait(30) == 2
+    try:
+        assert proc.wait(30) == 2
+    finally:
+        stop(proc)  # a node that did not stop must not outlive the test
     text = log.read_text()
     fatal = [line for line in text.splitlines() if '[FATAL]' in line]
     assert len(fatal) == 1 and str(params) in fatal[0] and problem in fatal[0], text

@@ -16,7 +16,10 @@ Semantics (stamps are integer nanoseconds, times monotonic seconds passed in by 
   in the window is coming), or *absent* (an earlier set already waited the whole timeout for it
   and it has sent nothing since). An undecided camera is waited for at most `timeout` s from the
   arrival of the set's first member; the set then goes without it and the camera is absent until
-  its next message (a late one too), so a camera gone for good delays one set, not every set. Silence is not
+  its next message (a late one too), so a camera gone for good delays one set, not every set.
+  An absent camera is still waited for a *grace* of max_skew seconds after the set's last member
+  arrived (a capture's images arrive about as spread as their stamps), so a camera coming back
+  joins the first set it sends for; a dead camera delays each set by that much. Silence is not
   judged by the clock alone: where sets arrive in bursts far apart (people from a detector that
   needs a second per set), every camera is quiet between bursts, yet each burst is whole.
   Cameras not in a set are listed in `missing`.
@@ -97,6 +100,7 @@ class ApproximateSync:
         self.cameras = cameras
         self.timeout = float(timeout)
         self.max_skew_ns = round(max_skew * 1e9)
+        self.grace = float(max_skew)  # s an absent camera is waited for once the others are in
         self.min_cameras = min_cameras
         self.queue_size = queue_size
         self.sets = 0  # sets released so far (the next set's index)
@@ -162,11 +166,15 @@ class ApproximateSync:
             pivot = min(q[0].stamp for q in self._pending if q)
             end = pivot + self.max_skew_ns
             members = [c for c, q in enumerate(self._pending) if q and q[0].stamp <= end]
-            undecided = [c for c in range(self.cameras) if c not in members and c not in self._absent
-                         and not (self._newest[c] is not None and self._newest[c] > end)]
+            open_ = [c for c in range(self.cameras) if c not in members
+                     and not (self._newest[c] is not None and self._newest[c] > end)]
+            undecided = [c for c in open_ if c not in self._absent]
             first_arrival = min(self._pending[c][0].arrival for c in members)
+            last_arrival = max(self._pending[c][0].arrival for c in members)
             if undecided and now - first_arrival < self.timeout:
                 break
+            if open_ and not undecided and now - last_arrival < self.grace:
+                break  # an absent camera coming back: its image comes about with the others'
             self._absent.update(undecided)
             messages = {c: self._pending[c].pop(0) for c in members}
             for c in range(self.cameras):
