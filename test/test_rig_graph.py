@@ -14,7 +14,8 @@ import yaml
 
 from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_stamps
 from mvpose_ros.bags.replay import InFlight, group_sets, header_stamp_ns
-from mvpose_ros.cli.graph import main as graph_main, rig_run_plan
+from mvpose_ros.cli.graph import main as graph_main
+from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,
                                      rig_graph_nodes, rig_sync, write_overrides)
 from mvpose_ros.graph.report import rig_prediction_lines, rig_report, set_skews_ms

@@ -1,0 +1,226 @@
+"""A run of the whole graph on a bag, as `mvpose-graph` asks for it: the Shelf-style graph (one
+detector per camera) or a recorded rig (one whole-rig detector), each node its own process, a
+recorder in this process, then the report, the predictions file and the exit code. The command
+line is in cli.graph; processes, waits and playing in graph.runner; what is printed in
+graph.report.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import TextIO
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from rclpy.qos import qos_profile_sensor_data
+
+from mvpose_ros.bags.io import bag_summary, has_header, read_bag
+from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
+from mvpose_ros.core.geometry.rig import Rig, load_rig_file
+from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, GraphSettings, RigRun, detector_backend,
+                                     graph_nodes, graph_settings, load_params, rig_connections, rig_graph_nodes,
+                                     rig_sync, runner_section, unknown_nodes, write_overrides)
+from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
+from mvpose_ros.graph.report import OUTPUT_NAME, frame_of, report, rig_prediction_lines, rig_report, score, score_sets
+from mvpose_ros.graph.runner import input_stamps, run_graph, save_predictions
+from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
+from mvpose_ros.package_files import package_path
+from mvpose_ros.topics import PEOPLE2D, camera_topic
+
+PROG = 'mvpose-graph'
+RECORDER_NAME = 'mvpose_graph'
+# Fast DDS settings beside the parameter file (config/fastdds.xml: a shared-memory segment large
+# enough for the heatmap messages), used by this process and every node unless already chosen.
+DDS_PROFILE = 'fastdds.xml'
+DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+RATE_QUIET_S = 5.0  # a rig run is over this long after the player's end without output
+
+
+def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
+    """Run the graph as the command line's `args` say (checked); returns the exit code."""
+    out, err = out or sys.stdout, err or sys.stderr
+    if args.rig is not None:
+        return run_rig(args, out, err)
+    settings = graph_settings(args.config)
+    settings = replace(settings, bag=args.bag or settings.bag, predictions=args.predictions or settings.predictions,
+                       rate=settings.rate if args.rate is None else args.rate)
+    root = None if args.data_root is None else str(data_root(args.data_root).resolve())
+    config = args.config.resolve()
+    bag = Path(settings.bag).resolve()
+    predictions = Path(settings.predictions)
+    log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
+    params = load_params(args.config)
+    try:
+        backend = detector_backend(params)
+        if backend not in INPUT_TOPICS:
+            raise ValueError(f'heatmap_detector backend {backend!r} is not one of {", ".join(INPUT_TOPICS)}')
+    except ValueError as exc:
+        raise ValueError(f'{args.config}: {exc}') from None
+    input_topic = INPUT_TOPICS[backend]
+    if args.loops < 1:
+        raise ValueError(f'--loops must be >= 1, got {args.loops}')
+    stamps = input_stamps(bag, '/' + camera_topic(0, input_topic), args.loops)
+    per_loop = len(stamps) // args.loops
+    nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root, args.loops, start_topic=START_TOPIC)
+    for section in unknown_nodes(params, nodes):
+        print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
+
+    _environment(config.parent, args.domain_id)
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = SkeletonRecorder(RECORDER_NAME, context=context, frame_rate=settings.frame_rate)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
+        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic, per_loop)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+    if outcome.failure is not None:
+        return _failed(outcome, err)
+    problems = report(outcome.stamps, node, settings, out)
+    n = save_predictions(outcome.stamps, node, settings.frame_rate, predictions)
+    print(f'wrote {n} frames to {predictions}', file=out)
+    if outcome.interrupted is not None:
+        print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped, '
+              f'{n} of {len(stamps)} frames written', file=err)
+        return 128 + outcome.interrupted
+    if args.loops > 1:
+        print('resident memory per process:', file=out)
+        for line in outcome.memory.lines():
+            print(f'  {line}', file=out)
+    if settings.dataset == 'shelf' and n:
+        score(predictions, [frame_of(s, settings.frame_rate) for s in stamps[:per_loop]], root, out, args.loops)
+    if outcome.stalled:
+        problems.insert(0, f'stopped: no {OUTPUT_NAME} for {settings.timeout:g} s')
+    if problems:
+        print(f'{PROG}: error: {"; ".join(problems)}', file=err)
+        return 1
+    return 0
+
+
+def _environment(config_dir: Path, domain_id: int | None) -> None:
+    """Set before the first rclpy context: it and every child read them."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if (config_dir / DDS_PROFILE).is_file():
+        os.environ.setdefault(DDS_PROFILE_ENV, str(config_dir / DDS_PROFILE))
+    if domain_id is not None:
+        os.environ['ROS_DOMAIN_ID'] = str(domain_id)
+
+
+def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, list[Path], list[SyncSet]]:
+    """What a --rig run will do: the rig, the run, the runner settings, the parameter files (the
+    template, then --config) and the bag's synchronised sets. ValueError naming what is wrong."""
+    root = data_root(args.data_root)
+    rig_path = args.rig.resolve()
+    if not rig_path.is_file():
+        raise FileNotFoundError(f'--rig: no such file: {args.rig}')
+    rig = load_rig_file(rig_path, data_root=root)
+    files = [package_path(RIG_TEMPLATE)] + ([args.config.resolve()] if args.config else [])
+    params_list = [load_params(f) for f in files]
+    section = RIG_RUNNER_DEFAULTS | {k: v for k, v in runner_section(params_list).items() if k in RIG_RUNNER_DEFAULTS}
+    max_skew, sync_timeout = rig_sync(params_list)
+    bag = Path(args.bag).resolve()
+    summary = bag_summary(bag)
+    topics = summary.topics
+    images = [c.image for c in rig.cameras]
+    missing = [t for t in images if t not in topics]
+    if missing:
+        raise ValueError(f'{bag}: no topic {", ".join(missing)} of the rig {args.rig} (the bag has '
+                         f'{", ".join(topics)})')
+    grouped = group_sets(read_bag(bag, images), images, max_skew, sync_timeout, has_header)
+    sets = [_stamps_only(s) for s in grouped]
+    if not sets:
+        raise ValueError(f'{bag}: no image messages on the rig\'s topics')
+    # later passes: stamps moved on as the player moves them (by its sets in lockstep, else by log time)
+    first, last = (sets[0].stamp_ns, sets[-1].stamp_ns) if args.lockstep else (summary.first_ns, summary.last_ns)
+    n = len(sets)
+    sets += [SyncSet(s.stamp_ns + loop_offset_ns(k, first, last), index=k * n + s.index, members=s.members,
+                     skew_ns=s.skew_ns) for k in range(1, args.loops) for s in sets[:n]]
+    rate = 0.0 if args.lockstep else float(section['rate'] if args.rate is None else args.rate)
+    if not (rate > 0 or args.lockstep):
+        raise ValueError(f'--rate must be > 0 (or use --lockstep), got {rate:g}')
+    run = RigRun(str(rig_path), str(bag), args.lockstep, rate, args.qos or str(section['qos']), max_skew,
+                 sync_timeout, float(section['ack_timeout']), args.loops)
+    settings = GraphSettings('rig', len(rig.cameras), str(bag), args.predictions or str(section['predictions']),
+                             FRAME_RATE, rate, float(section['timeout']))
+    return rig, run, settings, files, sets
+
+
+def _stamps_only(s: SyncSet) -> SyncSet:
+    """The set without its message bytes (the runner keeps only stamps)."""
+    s.messages = []
+    return s
+
+
+def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
+    """mvpose-graph --rig: the graph on a recorded rig; returns the exit code."""
+    rig, run, settings, files, sets = rig_run_plan(args)
+    root = None if args.data_root is None else str(data_root(args.data_root).resolve())
+    nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC)
+    if args.config is not None:
+        for section in unknown_nodes(load_params(args.config), nodes):
+            print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
+    predictions = Path(settings.predictions)
+    log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
+    stamps = [s.stamp_ns for s in sets]
+    files = [*files, write_overrides(nodes, log_dir / 'runner_overrides.yaml')]
+    _environment(files[0].parent, args.domain_id)
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = SkeletonRecorder(RECORDER_NAME, context=context, timing_topics=[c.camera_info for c in rig.cameras],
+                                timing_qos=qos_profile_sensor_data,
+                                people_topics=[camera_topic(c.name, PEOPLE2D) for c in rig.cameras])
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
+        print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
+              f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
+        outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
+                            expected=rig_connections(rig), quiet=RATE_QUIET_S)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+    if outcome.failure is not None:
+        return _failed(outcome, err)
+    problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
+                          round(run.max_skew * 1e9), run.lockstep, out)
+    lines = rig_prediction_lines(stamps, node.outputs)
+    predictions.parent.mkdir(parents=True, exist_ok=True)
+    partial = predictions.with_name(predictions.name + '.partial')
+    partial.write_text(''.join(line + '\n' for line in lines), encoding='utf-8')
+    os.replace(partial, predictions)
+    print(f'wrote {len(lines)} sets to {predictions}', file=out)
+    if outcome.interrupted is not None:
+        print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped', file=err)
+        return 128 + outcome.interrupted
+    if args.ground_truth == 'shelf' and lines:
+        score_sets(predictions, args.frame, root, out)
+    if outcome.stalled:
+        problems.insert(0, f'stopped: no {OUTPUT_NAME} for {settings.timeout:g} s')
+    if problems:
+        print(f'{PROG}: error: {"; ".join(problems)}', file=err)
+        return 1
+    return 0
+
+
+def _failed(outcome, err: TextIO) -> int:
+    """Print why the graph could not run, with the end of the failing node's log; exit code 1."""
+    print(f'{PROG}: error: {outcome.failure}', file=err)
+    for line in outcome.log_tail.splitlines():
+        print(f'  | {line}', file=err)
+    return 1
