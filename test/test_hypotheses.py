@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
-from mvpose_ros.core.inference.factors import data_term
+from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_people,
                                                   split_draws)
@@ -14,6 +14,11 @@ from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
 SAMPLE_RADIUS_PX = np.sqrt(2) * (MARGIN_SIGMAS * SIGMA + STRIDE)
+
+
+def data_term(hypotheses, views):
+    """(J, M) data term of one person (data_terms of one)."""
+    return data_terms([hypotheses], [views], HeatmapStack.of([hm for _, hm in views]))[0]
 
 
 def sample_hypotheses(views, rng, config):

@@ -47,20 +47,13 @@ def _normalised(table: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
     return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32)
 
 
-def data_term(hypotheses: np.ndarray, views: Sequence[tuple[Camera, PersonHeatmap]]) -> np.ndarray:
-    """Mean heatmap value at the projections of each hypothesis, normalised per joint.
-
-    hypotheses: (J, M, 3) world points. views: the cameras that see this person, each with the
-    person's heatmaps in that camera. Returns (J, M), each row summing to one (uniform where no
-    view has any evidence). data_terms for one person.
-    """
-    return data_terms([hypotheses], [views], HeatmapStack.of([hm for _, hm in views]))[0]
-
-
 def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple[Camera, PersonHeatmap]]],
                stack: HeatmapStack) -> list[np.ndarray]:
-    """data_term of every person of a frame, batched: hypotheses[p] (J, M, 3) of person p seen by
-    views people[p]; stack: every view's heatmap, person after person (as for sampling)."""
+    """The data term of every person of a frame: per hypothesis, the mean heatmap value at its
+    projections, normalised per joint. hypotheses[p]: (J, M, 3) world points of person p, seen by
+    the views people[p] (camera, that person's heatmaps in it); stack: every view's heatmap,
+    person after person (as for sampling). Returns (J, M) per person, each row summing to one
+    (uniform where no view has any evidence)."""
     if not people:
         return []
     cameras = [cam for views in people for cam, _ in views]
