@@ -54,6 +54,18 @@ def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.n
                    - np.array([info_at[s] for s in common], dtype=np.int64))
 
 
+def print_latency(lat: np.ndarray, start: str, unit: str, out: TextIO) -> None:
+    """Print latency (N,) ms from `start` to the skeletons: p50, p95, max, and p50 by quarter of
+    the run (a graph that falls behind real time shows it growing)."""
+    if not lat.size:
+        return
+    p50, p95 = np.percentile(lat, [50, 95])
+    print(f'latency {start} -> {OUTPUT_NAME}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {lat.max():.1f} ms '
+          f'({lat.size} {unit})', file=out)
+    quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
+    print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
+
+
 def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: TextIO) -> list[str]:
     """Print counts and latency of the input `stamps` (ns, bag order); returns the problems
     (missing, duplicate, unexpected, bad outputs)."""
@@ -67,14 +79,8 @@ def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: 
     print(f'missing {len(missing)}: {frame_ranges([frame_of(s, fr) for s in missing])}; '
           f'duplicate {len(duplicate)}: {frame_ranges([frame_of(s, fr) for s in duplicate])}; '
           f'unexpected {len(unexpected)}: {frame_ranges([frame_of(s, fr) for s in unexpected])}', file=out)
-    lat = latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted})
-    if lat.size:
-        p50, p95 = np.percentile(lat, [50, 95])
-        print(f'latency {TIMING_NAME} -> {OUTPUT_NAME}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, '
-              f'max {lat.max():.1f} ms ({lat.size} frames)', file=out)
-        # a graph that falls behind real time shows latency growing through the run
-        quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
-        print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
+    print_latency(latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted}),
+                  TIMING_NAME, 'frames', out)
     problems = [f'{len(missing)} of {len(stamps)} input stamps got no {OUTPUT_NAME}'] if missing else []
     problems += [f'{len(duplicate)} stamps got more than one {OUTPUT_NAME}'] if duplicate else []
     problems += [f'{len(unexpected)} {OUTPUT_NAME} stamps are not in the bag'] if unexpected else []
@@ -137,13 +143,8 @@ def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Rec
         print(f'sync skew (newest - oldest member stamp): bag sets p50 {np.median(bag):.1f} ms, max {bag.max():.1f} ms'
               + (f'; sets the graph processed (people2d stamps) p50 {np.median(graph):.1f} ms, max '
                  f'{graph.max():.1f} ms' if graph.size else ''), file=out)
-    lat = latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted})
-    if lat.size:
-        p50, p95 = np.percentile(lat, [50, 95])
-        print(f'latency first camera_info of a set -> {OUTPUT_NAME}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, '
-              f'max {lat.max():.1f} ms ({lat.size} sets)', file=out)
-        quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
-        print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
+    print_latency(latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted}),
+                  'first camera_info of a set', 'sets', out)
     problems = []
     if lockstep and len(processed) < len(set_stamps):
         problems.append(f'{len(set_stamps) - len(processed)} of {len(set_stamps)} sets got no {OUTPUT_NAME}')

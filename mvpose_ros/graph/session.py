@@ -12,7 +12,8 @@ import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import TextIO
+from contextlib import contextmanager
+from typing import Any, Iterator, TextIO
 
 import rclpy
 from rclpy.context import Context
@@ -74,19 +75,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
 
     _environment(config.parent, args.domain_id)
-    context = Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = SkeletonRecorder(RECORDER_NAME, context=context, frame_rate=settings.frame_rate)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
+    with _recording(frame_rate=settings.frame_rate) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic, per_loop)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        context.try_shutdown()
     if outcome.failure is not None:
         return _failed(outcome, err)
     problems = report(outcome.stamps, node, settings, out)
@@ -177,24 +168,13 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     stamps = [s.stamp_ns for s in sets]
     files = [*files, write_overrides(nodes, log_dir / 'runner_overrides.yaml')]
     _environment(files[0].parent, args.domain_id)
-    context = Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = SkeletonRecorder(RECORDER_NAME, context=context, timing_topics=[c.camera_info for c in rig.cameras],
-                                timing_qos=qos_profile_sensor_data,
-                                people_topics=[camera_topic(c.name, PEOPLE2D) for c in rig.cameras])
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
+    with _recording(timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
+                    people_topics=[camera_topic(c.name, PEOPLE2D) for c in rig.cameras]) as (node, executor):
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
         print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
               f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
                             expected=rig_connections(rig), quiet=RATE_QUIET_S)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        context.try_shutdown()
     if outcome.failure is not None:
         return _failed(outcome, err)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
@@ -216,6 +196,24 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         print(f'{PROG}: error: {"; ".join(problems)}', file=err)
         return 1
     return 0
+
+
+@contextmanager
+def _recording(**options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreadedExecutor]]:
+    """The recorder node (SkeletonRecorder options) in an rclpy context of its own, with its
+    executor; node and context are destroyed on leaving, what it recorded stays readable."""
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = SkeletonRecorder(RECORDER_NAME, context=context, **options)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        yield node, executor
+    finally:
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
 
 
 def _failed(outcome, err: TextIO) -> int:
