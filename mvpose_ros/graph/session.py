@@ -93,12 +93,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
             print(f'  {line}', file=out)
     if settings.dataset == 'shelf' and n:
         score(predictions, [frame_of(s, settings.frame_rate) for s in stamps[:per_loop]], root, out, args.loops)
-    if outcome.stalled:
-        problems.insert(0, f'stopped: no {OUTPUT_NAME} for {settings.timeout:g} s')
-    if problems:
-        print(f'{PROG}: error: {"; ".join(problems)}', file=err)
-        return 1
-    return 0
+    return _verdict(outcome, problems, settings.timeout, err)
 
 
 def _environment(config_dir: Path, domain_id: int | None) -> None:
@@ -190,12 +185,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         return 128 + outcome.interrupted
     if args.ground_truth == 'shelf' and lines:
         score_sets(predictions, args.frame, root, out)
-    if outcome.stalled:
-        problems.insert(0, f'stopped: no {OUTPUT_NAME} for {settings.timeout:g} s')
-    if problems:
-        print(f'{PROG}: error: {"; ".join(problems)}', file=err)
-        return 1
-    return 0
+    return _verdict(outcome, problems, settings.timeout, err)
 
 
 @contextmanager
@@ -214,6 +204,16 @@ def _recording(**options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreade
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
+
+
+def _verdict(outcome, problems: list[str], timeout: float, err: TextIO) -> int:
+    """The exit code of a run that finished: 1 with every problem on one line, else 0."""
+    if outcome.stalled:
+        problems.insert(0, f'stopped: no {OUTPUT_NAME} for {timeout:g} s')
+    if problems:
+        print(f'{PROG}: error: {"; ".join(problems)}', file=err)
+        return 1
+    return 0
 
 
 def _failed(outcome, err: TextIO) -> int:
