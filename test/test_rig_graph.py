@@ -202,3 +202,22 @@ def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
     assert [p['id'] for p in records[0]['people']] == [3, 7]
     assert np.allclose(records[0]['people'][1]['joints'], joints[1], atol=1e-3)
     assert np.array(records[1]['people'][0]['joints']).shape == (14, 3)
+
+
+def test_sets_are_scored_one_line_each_against_the_frame_they_show(tmp_path):
+    from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
+    from mvpose_ros.graph.report import score_sets
+    truth = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', [572]).poses[0]  # (A, 14, 3)
+    actors = [a for a in range(len(truth)) if not np.isnan(truth[a]).any()]
+    off = np.array([0.1, 0.0, 0.0])  # 100 mm on every joint
+    sets = [[{'id': 5 + a, 'joints': (truth[a] + k * off).tolist()} for a in actors] for k in range(2)] + [[]]
+    path = tmp_path / 'p.jsonl'
+    path.write_text(''.join(json.dumps({'frame': k, 'stamp': k, 'people': p}) + '\n' for k, p in enumerate(sets)))
+    lines = []
+    score_sets(path, 572, None, SimpleNamespace(write=lines.append))
+    text = ''.join(lines).splitlines()
+    first = actors[0] + 1
+    assert text[0].startswith('set   0: ') and f'actor {first}   0.0 mm (id {5 + actors[0]})' in text[0]
+    assert f'actor {actors[1] + 1} 100.0 mm (id {5 + actors[1]})' in text[1]
+    assert text[2] == 'set   2: ' + ', '.join(f'actor {a + 1} not found' for a in actors)
+    assert 'found in 2 of 3 sets' in text[3]

@@ -39,6 +39,7 @@ from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
                                                  load_actors_gt)
 from mvpose_ros.core.detection.openpose import read_body25
+from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 
@@ -63,24 +64,29 @@ class Recipe:
     inputs: tuple[Path, ...]
     items: Callable[[], Iterator[Item]]
     rig_text: Callable[[], str] | None = None
+    variant: str = ''  # e.g. the frames dropped (FrameDrop.label)
 
     def fingerprint(self) -> str:
-        """Hash of the recipe version and each input's path, size and modification time."""
-        h = hashlib.sha256(f'{self.name} v{RECIPE_VERSION}'.encode())
+        """Hash of the recipe version and variant and each input's path, size and modification time."""
+        h = hashlib.sha256(f'{self.name} v{RECIPE_VERSION} {self.variant}'.encode())
         for path in self.inputs:
             st = path.stat()
             h.update(f'\n{path.resolve()} {st.st_size} {st.st_mtime_ns}'.encode())
         return h.hexdigest()
 
 
-def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path | None = None) -> Recipe:
-    """The recipe `name` (one of RECIPES); campus needs campus_dir, the others the data root."""
+def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path | None = None,
+                drop: FrameDrop = FrameDrop()) -> Recipe:
+    """The recipe `name` (one of RECIPES); campus needs campus_dir, the others the data root.
+    `drop` leaves frames of the shelf bag out, as sets dropped upstream (the others refuse it)."""
+    if drop and name != 'shelf':
+        raise ValueError(f'dropping frames is for the shelf bag, not {name}')
     if name == 'campus':
         if campus_dir is None:
             raise ValueError('the campus bag needs a CampusSeq1 folder (--campus-dir)')
         return campus_recipe(campus_dir)
     if name in ('shelf', 'shelf_images'):
-        return shelf_recipe(dataset_dir('shelf', data_root), images_only=name == 'shelf_images')
+        return shelf_recipe(dataset_dir('shelf', data_root), images_only=name == 'shelf_images', drop=drop)
     if name in ('shelf_rig', 'shelf_rig_raw'):
         return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name == 'shelf_rig')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
@@ -98,8 +104,9 @@ def _headers(frame: int, n_cameras: int) -> tuple[int, list[Header]]:
     return stamp_ns(stamp), [Header(stamp=stamp, frame_id=f'cam{c}') for c in range(n_cameras)]
 
 
-def shelf_recipe(shelf: Path, images_only: bool = False) -> Recipe:
-    """The `shelf` bag (or `shelf_images` with images_only) from the Shelf folder `shelf`."""
+def shelf_recipe(shelf: Path, images_only: bool = False, drop: FrameDrop = FrameDrop()) -> Recipe:
+    """The `shelf` bag (or `shelf_images` with images_only) from the Shelf folder `shelf`, without
+    the frames `drop` leaves out."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
     _require(calibration)
     rig = dataset_cameras('shelf', calibration=calibration)
@@ -108,6 +115,7 @@ def shelf_recipe(shelf: Path, images_only: bool = False) -> Recipe:
     detections = [] if images_only else [shelf / 'openpose_body25' / f'{c}.txt' for c in range(len(rig))]
     _require(*images.values(), *detections)
     frames: Sequence[int] = SHELF_IMAGE_FRAMES if images_only else SHELF_TEST_FRAMES
+    frames = [frames[k] for k in drop.kept(len(frames))]
 
     def items() -> Iterator[Item]:
         openpose = [read_body25(path, cam.width, cam.height) for path, cam in zip(detections, rig)]
@@ -127,7 +135,7 @@ def shelf_recipe(shelf: Path, images_only: bool = False) -> Recipe:
                                                            headers[c]), ns
 
     name = 'shelf_images' if images_only else 'shelf'
-    return Recipe(name, (calibration, *images.values(), *detections), items)
+    return Recipe(name, (calibration, *images.values(), *detections), items, variant=drop.label)
 
 
 class ForeignRig:

@@ -22,6 +22,7 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
 from mvpose_ros.core.evaluation.campus import campus_sequence
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
                                                  dataset_dir, load_actors_gt)
+from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.predictions import read_predictions, write_predictions
@@ -96,7 +97,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.dataset == 'shelf':
         gt = load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', SHELF_TEST_FRAMES)
         actors, reference = SHELF_ACTORS, PAPER_SHELF_PCP
-    dropping = bool(args.drop_every or args.drop_fraction)
+    drop = FrameDrop(args.drop_every, args.drop_fraction, args.drop_seed)
     if args.score:
         if args.dataset != 'shelf':
             raise ValueError('--score is for shelf')
@@ -113,9 +114,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
         config = replace(config, solver=replace(config.solver, head_model=head_model))
-    if dropping:
+    if drop:
         n_all = len(seq.frames)
-        seq = drop_frames(seq, args.drop_every, args.drop_fraction, args.drop_seed)
+        seq = drop_frames(seq, drop)
         gt = _restricted(gt, seq.frames)
     prepared = prepare(seq, config)
     bp_timer = StageTimer()
@@ -125,7 +126,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     mode = f'window {args.window}, lag {args.lag}' if args.window else 'whole clip'
     print(f'{args.dataset}: {len(seq.frames)} frames, {len(seq.cameras)} cameras, terms {",".join(args.terms)}, '
           f'{mode}, M={args.hypotheses}, head model {config.solver.head_model}', file=out)
-    if dropping:
+    if drop:
         print(f'uneven frames: {n_all - len(seq.frames)} of {n_all} left out (every {args.drop_every or "-"}, '
               f'fraction {args.drop_fraction}, seed {args.drop_seed}), scored on the {len(seq.frames)} left; '
               f'temporal term {"with the real times" if real_time else "blind to the times (evenly spaced)"}, '

@@ -1,6 +1,7 @@
 """`mvpose-make-bag`: build a rosbag2 (MCAP) bag of the real data for the ROS graph.
 
     mvpose-make-bag shelf|shelf_images|shelf_rig|shelf_rig_raw [--data-root DIR] [--output DIR] [--force]
+    mvpose-make-bag shelf --drop-every N | --drop-fraction F [--drop-seed S]   (bags/shelf_every2, ...)
     mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]
 
 A bag that is complete and made from the current inputs by the current recipe is left alone
@@ -19,6 +20,7 @@ from typing import Sequence, TextIO
 
 from mvpose_ros.bags.io import bag_summary, write_bag
 from mvpose_ros.bags.recipes import RECIPES, RIG_FILE, Recipe, make_recipe
+from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 
 RECIPE_KEY = 'mvpose_recipe'
 FINGERPRINT_KEY = 'mvpose_fingerprint'
@@ -33,6 +35,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--campus-dir', help='CampusSeq1 folder (Camera0..2/, actorsGT.mat, calibration_campus.json)')
     p.add_argument('--output', help='bag folder to write (default: bags/<recipe>)')
     p.add_argument('--force', action='store_true', help='replace an existing bag folder')
+    p.add_argument('--drop-every', type=int, default=0, metavar='N',
+                   help='shelf: leave out every N-th frame, as sets dropped upstream (as mvpose-eval --drop-every)')
+    p.add_argument('--drop-fraction', type=float, default=0.0, metavar='F',
+                   help='shelf: then leave out this fraction of the rest at random (as mvpose-eval)')
+    p.add_argument('--drop-seed', type=int, default=0, metavar='S', help='seed of --drop-fraction')
     return p
 
 
@@ -78,8 +85,9 @@ def _write_rig(output: Path, recipe: Recipe, out: TextIO) -> None:
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """Make the bag `args` name; returns the exit code."""
     out = out or sys.stdout
-    recipe = make_recipe(args.recipe, args.data_root, args.campus_dir)
-    output = Path(args.output or Path('bags') / args.recipe)
+    drop = FrameDrop(args.drop_every, args.drop_fraction, args.drop_seed)
+    recipe = make_recipe(args.recipe, args.data_root, args.campus_dir, drop)
+    output = Path(args.output or Path('bags') / '_'.join(filter(None, (args.recipe, drop.label))))
     fingerprint = recipe.fingerprint()
     if output.exists():
         reason = _stale_reason(output, recipe, fingerprint)

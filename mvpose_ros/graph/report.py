@@ -171,7 +171,8 @@ def rig_prediction_lines(set_stamps: Sequence[int], outputs: Mapping[int, tuple[
 def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextIO) -> None:
     """Every set of a rig predictions file scored against Shelf's actorsGT frame `frame` (a bag of
     that one scene repeated): per annotated actor, the sets it is found in, MPJPE (mean, min, max
-    over those sets) and the ids it got (the same id throughout is the tracking working)."""
+    over those sets) and the ids it got (the same id throughout is the tracking working), after a
+    line per set."""
     gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [frame])
     actors = np.flatnonzero(gt.present[0]).tolist()
     records = [json.loads(line) for line in Path(predictions).read_text(encoding='utf-8').splitlines() if line]
@@ -182,7 +183,7 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
         people = rec['people']
         joints = np.array([p['joints'] for p in people], dtype=float).reshape(-1, 14, 3)
         ev = evaluate({frame: joints}, gt, actors)
-        found = 0
+        found, line = 0, []
         for a, actor in enumerate(ev.actors):
             if ev.missed[a] == 0:
                 found += 1
@@ -190,7 +191,11 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
                 truth = gt.poses[0, actor]
                 nearest = int(np.argmin(np.linalg.norm(joints - truth, axis=-1).mean(axis=-1)))
                 ids[actor].add(int(people[nearest]['id']))
+                line.append(f'actor {actor + 1} {ev.mpjpe[a]:5.1f} mm (id {people[nearest]["id"]})')
+            else:
+                line.append(f'actor {actor + 1} not found')
         complete += found == len(actors)
+        print(f'set {rec["frame"]:3d}: {", ".join(line)}', file=out)
     print(f'ground truth Shelf frame {frame} (actors {", ".join(str(a + 1) for a in actors)}): every annotated '
           f'actor found in {complete} of {len(records)} sets', file=out)
     for actor in actors:

@@ -17,6 +17,7 @@ import numpy as np
 from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
+from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.solver import person_frames
@@ -65,16 +66,9 @@ def shelf_openpose(root: str | None, detector: OpenPoseDetectorConfig, frames: S
     return detect_sequence(cameras, raw, frames, detector)
 
 
-def drop_frames(seq: Sequence2D, every: int = 0, fraction: float = 0.0, seed: int = 0) -> Sequence2D:
-    """seq without some of its frames: every `every`-th (positions every-1, 2 every-1, ...; 0 = none)
-    and then round(fraction x n) of the rest chosen at random (seeded)."""
-    if every < 0 or not 0 <= fraction < 1:
-        raise ValueError(f'drop every N >= 0 and a fraction in [0, 1), got {every}, {fraction}')
-    keep = [k for k in range(len(seq.frames)) if not (every and k % every == every - 1)]
-    n_drop = round(fraction * len(keep))
-    if n_drop:
-        gone = set(np.random.default_rng(seed).choice(len(keep), n_drop, replace=False).tolist())
-        keep = [k for i, k in enumerate(keep) if i not in gone]
+def drop_frames(seq: Sequence2D, drop: FrameDrop) -> Sequence2D:
+    """seq without the frames `drop` leaves out."""
+    keep = drop.kept(len(seq.frames))
     return replace(seq, frames=[seq.frames[k] for k in keep], people=[seq.people[k] for k in keep])
 
 
