@@ -30,6 +30,8 @@ def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, in
     if msg.distortion_model != DISTORTION_MODEL:
         raise ValueError(f'CameraInfo distortion_model: expected {DISTORTION_MODEL!r} (k1 k2 p1 p2 k3), '
                          f'got {msg.distortion_model!r}')
+    if len(msg.d) not in (0, 5):  # before copying: a message can carry millions
+        raise ValueError(f'CameraInfo d: expected 5 values (or none), got {len(msg.d)}')
     dist = np.array(msg.d, dtype=np.float64)
     if dist.size == 0:
         dist = np.zeros(5)

@@ -7,23 +7,25 @@ them. Rows may be padded (step > width * bytes per pixel).
 
 CompressedImage: jpeg and png, the format string as image_transport writes it ('jpeg', 'png',
 'bgr8; jpeg compressed bgr8', 'rgb8; png compressed rgb8', ...). The image size is read from the
-data's own header (JPEG frame header, PNG IHDR) and checked against the caller's expected size
-and MAX_PIXELS before anything is decoded: a small message declaring a huge image is refused
-without allocating it.
+data's own header (JPEG frame header, PNG IHDR: core.detection.encoded_image) and checked against
+the caller's expected size and MAX_PIXELS before anything is decoded: a small message declaring a
+huge image is refused without allocating it.
+
+Bounded input: with an expected size, a message's data may hold at most max_image_bytes of it
+(either type), checked first; check_camera_image runs every check short of decoding.
 
 Every failure is a ValueError with a one-line reason.
 """
 from __future__ import annotations
 
 import array
-import struct
 
 import cv2
 import numpy as np
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-MAX_PIXELS = 1 << 25  # 33.5 megapixels: above 8K (7680 x 4320), far below what a bomb declares
+from mvpose_ros.core.detection.encoded_image import MAX_PIXELS, check_encoded, decode_encoded, max_image_bytes
 
 # encoding -> (channels, bytes per channel, channel order to BGR or a cv2 4:2:2 conversion)
 _PLAIN = {
@@ -39,12 +41,6 @@ _YUV422 = {  # encoding -> (decode, encode) cv2 conversions
 }
 ENCODINGS = tuple(_PLAIN) + tuple(_YUV422)
 COMPRESSED_FORMATS = ('jpeg', 'png')
-
-_PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
-_END_SEARCH = 64  # bytes at the end searched for the end marker (JPEG EOI, PNG IEND): padding allowed
-# JPEG start-of-frame markers (baseline, extended, progressive, lossless, arithmetic...): not
-# DHT (C4), JPG (C8) or DAC (CC)
-_SOF_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 
 
 def _bytes_per_pixel(encoding: str) -> int:
@@ -94,9 +90,13 @@ def image_to_msg(bgr: np.ndarray, header: Header, encoding: str = 'bgr8', paddin
                  step=rows.shape[1], data=array.array('B', rows.tobytes()))
 
 
-def msg_to_image(msg: Image, expected: tuple[int, int] | None = None) -> np.ndarray:
-    """(H, W, 3) uint8 BGR of an Image in any of ENCODINGS; step may exceed the packed row
-    (padding). expected: (width, height) pixels the image must have, if given."""
+def check_image(msg: Image, expected: tuple[int, int] | None = None) -> None:
+    """Every check of msg_to_image short of converting: the data at most max_image_bytes of
+    expected (width, height) (first, if given), the encoding, exactly that size, step and data
+    length. ValueError otherwise."""
+    if expected is not None and len(msg.data) > max_image_bytes(*expected):
+        raise ValueError(f'Image data: {len(msg.data)} bytes, more than a {expected[0]}x{expected[1]} image takes '
+                         f'({max_image_bytes(*expected)})')
     encoding = msg.encoding
     if encoding not in ENCODINGS:
         raise ValueError(f'Image encoding: expected one of {list(ENCODINGS)}, got {encoding!r}')
@@ -108,13 +108,21 @@ def msg_to_image(msg: Image, expected: tuple[int, int] | None = None) -> np.ndar
     packed = _bytes_per_pixel(encoding) * w
     if step < packed:
         raise ValueError(f'Image step: {step} is less than {_bytes_per_pixel(encoding)} * width = {packed}')
-    data = np.frombuffer(msg.data, dtype=np.uint8)
-    if len(data) != step * h:
-        raise ValueError(f'Image data: expected step * height = {step * h} bytes, got {len(data)}')
-    rows = np.ascontiguousarray(data.reshape(h, step)[:, :packed])
+    if len(msg.data) != step * h:
+        raise ValueError(f'Image data: expected step * height = {step * h} bytes, got {len(msg.data)}')
+    if encoding in _YUV422 and w % 2:
+        raise ValueError(f'Image width: {encoding} packs pixel pairs, so the width must be even, got {w}')
+
+
+def msg_to_image(msg: Image, expected: tuple[int, int] | None = None) -> np.ndarray:
+    """(H, W, 3) uint8 BGR of an Image in any of ENCODINGS; step may exceed the packed row
+    (padding). expected: (width, height) pixels the image must have, if given (check_image)."""
+    check_image(msg, expected)
+    encoding = msg.encoding
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    packed = _bytes_per_pixel(encoding) * w
+    rows = np.ascontiguousarray(np.frombuffer(msg.data, dtype=np.uint8).reshape(h, step)[:, :packed])
     if encoding in _YUV422:
-        if w % 2:
-            raise ValueError(f'Image width: {encoding} packs pixel pairs, so the width must be even, got {w}')
         return cv2.cvtColor(rows.reshape(h, w, 2), _YUV422[encoding][0])
     channels, depth, order = _PLAIN[encoding]
     if depth == 2:
@@ -147,84 +155,49 @@ def compressed_format(fmt: str) -> str:
     return found.pop()
 
 
-def compressed_size(data: bytes) -> tuple[str, int, int]:
-    """('jpeg' | 'png', width, height) declared by the header of compressed image data, read
-    without decoding; ValueError when it is neither or the header is truncated or corrupt."""
-    data = memoryview(data).cast('B')
-    if data[:8].tobytes() == _PNG_SIGNATURE:
-        head = data[8:24].tobytes()
-        if len(head) < 16 or head[4:8] != b'IHDR':
-            raise ValueError('CompressedImage data: PNG without an IHDR header (truncated or corrupt)')
-        width, height = struct.unpack('>II', head[8:16])
-        return 'png', width, height
-    if data[:2].tobytes() == b'\xff\xd8':
-        width, height = _jpeg_size(data)
-        return 'jpeg', width, height
-    raise ValueError(f'CompressedImage data: not a JPEG or PNG (starts with {data[:8].hex()})')
+def _with_prefix(what: str, exc: ValueError) -> ValueError:
+    return ValueError(f'{what} {exc}')
 
 
-def _jpeg_size(data: memoryview) -> tuple[int, int]:
-    """Width, height from the first JPEG frame header (SOF), walking the marker segments."""
-    i, n = 2, len(data)
-    while True:
-        while i < n and data[i] == 0xFF:  # fill bytes before a marker
-            i += 1
-        if i >= n:
-            raise ValueError('CompressedImage data: JPEG ends before its frame header (truncated)')
-        marker = data[i]
-        i += 1
-        if marker == 0x01 or 0xD0 <= marker <= 0xD7:  # TEM, RSTn: no length
-            continue
-        if marker in (0xD9, 0xDA):
-            raise ValueError('CompressedImage data: JPEG without a frame header before its scan (corrupt)')
-        if i + 2 > n:
-            raise ValueError('CompressedImage data: JPEG ends inside a segment header (truncated)')
-        length = (data[i] << 8) | data[i + 1]
-        if length < 2:
-            raise ValueError(f'CompressedImage data: JPEG segment of length {length} (corrupt)')
-        if marker in _SOF_MARKERS:
-            if i + 7 > n or length < 7:
-                raise ValueError('CompressedImage data: JPEG frame header truncated')
-            height = (data[i + 3] << 8) | data[i + 4]
-            width = (data[i + 5] << 8) | data[i + 6]
-            return width, height
-        i += length
+def check_compressed(msg: CompressedImage, expected: tuple[int, int] | None = None,
+                     max_pixels: int = MAX_PIXELS) -> str:
+    """'jpeg' or 'png': the kind of a CompressedImage whose format string and data agree, whose
+    data is at most what an image of expected (width, height) takes and whose header declares
+    exactly that size (if given; at most max_pixels anyway), with its end marker: every check
+    short of decoding. ValueError otherwise."""
+    fmt = compressed_format(msg.format)
+    data = np.frombuffer(msg.data, dtype=np.uint8)
+    try:
+        kind, _, _ = check_encoded(data, expected, max_pixels)
+    except ValueError as exc:
+        raise _with_prefix('CompressedImage', exc) from None
+    if kind != fmt:
+        raise ValueError(f'CompressedImage data: format {msg.format!r} says {fmt}, the data is a {kind.upper()}')
+    return kind
 
 
 def compressed_to_image(msg: CompressedImage, expected: tuple[int, int] | None = None,
                         max_pixels: int = MAX_PIXELS) -> np.ndarray:
-    """(H, W, 3) uint8 BGR of a jpeg or png CompressedImage. Before decoding, the size its header
-    declares must be at least 1x1, within expected (width, height) pixels if given, and at most
-    max_pixels; the decoded image must have that size."""
-    fmt = compressed_format(msg.format)
-    data = np.frombuffer(msg.data, dtype=np.uint8)
-    kind, width, height = compressed_size(data)
-    if kind != fmt:
-        raise ValueError(f'CompressedImage data: format {msg.format!r} says {fmt}, the data is a {kind.upper()}')
-    if width < 1 or height < 1:
-        raise ValueError(f'CompressedImage size: the {kind} header declares {width}x{height}')
-    if expected is not None and (width > expected[0] or height > expected[1]):
-        raise ValueError(f'CompressedImage size: the {kind} header declares {width}x{height}, larger than the '
-                         f'expected {expected[0]}x{expected[1]}')
-    if width * height > max_pixels:
-        raise ValueError(f'CompressedImage size: the {kind} header declares {width}x{height}, more than '
-                         f'{max_pixels} pixels')
-    # A decoder fills a cut-off image with grey rather than failing: refuse one without its end.
-    end = {'jpeg': b'\xff\xd9', 'png': b'IEND'}[kind]
-    if end not in data[-_END_SEARCH:].tobytes():
-        raise ValueError(f'CompressedImage data: the {kind} ({width}x{height}) has no end marker (truncated)')
-    bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise ValueError(f'CompressedImage data: the {kind} ({width}x{height}) does not decode (truncated or corrupt)')
-    if bgr.shape[:2] != (height, width):
-        raise ValueError(f'CompressedImage size: decoded {bgr.shape[1]}x{bgr.shape[0]}, the header declares '
-                         f'{width}x{height}')
-    return bgr
+    """(H, W, 3) uint8 BGR of a jpeg or png CompressedImage, decoded once check_compressed passes."""
+    check_compressed(msg, expected, max_pixels)
+    try:
+        return decode_encoded(np.frombuffer(msg.data, dtype=np.uint8), expected, max_pixels)
+    except ValueError as exc:
+        raise _with_prefix('CompressedImage', exc) from None
+
+
+def check_camera_image(msg: Image | CompressedImage, expected: tuple[int, int]) -> None:
+    """Every check of to_bgr short of decoding, for a camera of expected (width, height) pixels:
+    cheap enough for every message that arrives, before it is queued or decoded. ValueError."""
+    if isinstance(msg, CompressedImage):
+        check_compressed(msg, expected)
+    else:
+        check_image(msg, expected)
 
 
 def to_bgr(msg: Image | CompressedImage, expected: tuple[int, int] | None = None) -> np.ndarray:
-    """(H, W, 3) uint8 BGR of an Image or CompressedImage (expected: (width, height) pixels: an
-    Image must have exactly that size, a CompressedImage at most that before decoding)."""
+    """(H, W, 3) uint8 BGR of an Image or CompressedImage (expected: (width, height) pixels the
+    image must have; a CompressedImage's header is checked before it is decoded)."""
     if isinstance(msg, CompressedImage):
         return compressed_to_image(msg, expected)
     return msg_to_image(msg, expected)

@@ -6,6 +6,7 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
+from msg_adapters.people_msg import MAX_PEOPLE
 from msg_adapters.records import UINT16_MAX, from_cloud, to_cloud
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 
@@ -16,8 +17,18 @@ OPENPOSE_DTYPE = np.dtype([
 KIND_CANDIDATE = 0
 KIND_AFFINITY = 1
 MAX_CANDIDATES = UINT16_MAX + 1  # candidate indices are UINT16
+# An input message's bound (max_openpose_bytes): candidates of one joint type in one image, twice
+# the people a camera can show (people_msg.MAX_PEOPLE; OpenPose also proposes stray candidates).
+MAX_INPUT_CANDIDATES = 2 * MAX_PEOPLE
 _PAIRS = np.array(BODY25_PAF_PAIRS)  # (26, 2)
 _NUM_LIMBS = len(BODY25_PAF_PAIRS)
+
+
+def max_openpose_bytes() -> int:
+    """The most data bytes an encoding A message of one image can honestly carry:
+    MAX_INPUT_CANDIDATES of every joint type and every PAF entry between them (7.7 MB)."""
+    c = MAX_INPUT_CANDIDATES
+    return (BODY25_NUM_JOINTS * c + _NUM_LIMBS * c * c) * OPENPOSE_DTYPE.itemsize
 
 
 def _limb_layout(n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -15,12 +15,25 @@ from mvpose_ros.core.types import Person2D
 
 J = NUM_INFERENCE_JOINTS  # 16 keypoints and maps per person
 BUNDLE_KEYS = [('person', '<u4'), ('camera', '<u2')]
+# Bounds of an input message (max_people_bytes): people one camera can show (MoveNet MultiPose
+# finds at most 6, Shelf has 4, the crowd benchmark 20), and the finest heatmap cells the
+# detectors write (their default stride; the Shelf graph uses 8 px).
+MAX_PEOPLE = 64
+MIN_STRIDE = 4.0  # pixels
 
 
 def people_dtype(n_cells: int, keys: Sequence[tuple[str, str]] = ()) -> np.dtype:
     """Record dtype of encoding B (after keys, for C), heatmap count n_cells = 16 * h * w."""
     return np.dtype([*keys, ('keypoints', '<f4', (3 * J,)), ('origin', '<f4', (2 * J,)),
                      ('stride', '<f4'), ('grid', '<u2', (2,)), ('heatmap', 'u1', (n_cells,))])
+
+
+def max_people_bytes(width: int, height: int) -> int:
+    """The most data bytes an encoding B message of a width x height camera can honestly carry:
+    MAX_PEOPLE records whose maps cover the whole image in MIN_STRIDE px cells (1032 x 776:
+    52 MB). A larger message is refused before it is decoded (decoding quadruples it)."""
+    cells = (int(np.ceil(height / MIN_STRIDE)) + 1) * (int(np.ceil(width / MIN_STRIDE)) + 1)
+    return MAX_PEOPLE * people_dtype(J * cells).itemsize
 
 
 def quantise(maps: np.ndarray) -> np.ndarray:

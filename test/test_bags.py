@@ -265,7 +265,7 @@ def test_campus_recipe_errors(campus_dir, tmp_path):
     bad = tmp_path / 'bad'
     shutil.copytree(root, bad)
     cv2.imwrite(str(campus_image(bad, 1, 700)), np.zeros((100, 100, 3), np.uint8))
-    with pytest.raises(ValueError, match='image size 100x100'):
+    with pytest.raises(ValueError, match='image size: the png header declares 100x100'):
         write_bag(tmp_path / 'bag', campus_recipe(bad).items())
     assert not (tmp_path / 'bag').exists()
 

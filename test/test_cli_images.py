@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import json
 import re
+import struct
+import subprocess
+import sys
+import time
+import zlib
 from pathlib import Path
 
 import cv2
@@ -63,7 +68,53 @@ def test_a_rig_file_checks_the_image_sizes_it_gives(tmp_path, capsys):
     cv2.imwrite(str(small), cv2.resize(cv2.imread(FRAMES[2]), (516, 388)))
     rig = str(REPO / 'config' / 'rigs' / 'shelf.yaml')
     assert images.main(['--rig', rig, '--images', *FRAMES[:2], str(small), *FRAMES[3:]]) == 2
-    assert f'{small}: image size 516x388, camera 2 is calibrated for 1032x776' in capsys.readouterr().err
+    assert (f"{small}: image size: the png header declares 516x388, expected 1032x776 (camera 2's calibrated size)"
+            in capsys.readouterr().err)
     with pytest.raises(SystemExit) as exit_info:  # one or the other
         images.main(['--rig', rig, '--calibration', CALIBRATION, '--images', *FRAMES])
     assert exit_info.value.code == 2 and 'not allowed with argument' in capsys.readouterr().err
+
+
+def _png_bomb(path: Path, width: int, height: int) -> None:
+    """A PNG of a few hundred bytes whose IHDR declares width x height (8-bit RGB)."""
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack('>I', len(body)) + kind + body + struct.pack('>I', zlib.crc32(kind + body))
+    path.write_bytes(b'\x89PNG\r\n\x1a\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', width, height, 8, 2, 0, 0, 0))
+                     + chunk(b'IDAT', zlib.compress(bytes(4000))) + chunk(b'IEND', b''))
+
+
+def _jpeg_bomb(path: Path, width: int, height: int) -> None:
+    """A real 16 x 16 JPEG whose frame header is changed to declare width x height."""
+    data = bytearray(cv2.imencode('.jpg', np.full((16, 16, 3), 90, np.uint8))[1].tobytes())
+    sof = data.index(b'\xff\xc0')
+    data[sof + 5:sof + 9] = struct.pack('>HH', height, width)
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize('make', [_png_bomb, _jpeg_bomb])
+def test_an_image_file_declaring_a_huge_size_is_refused_before_decoding(tmp_path, capsys, make):
+    """30000 x 30000 is under OpenCV's own limit (2^30 pixels): cv2.imread would decode it to
+    2.7 GB. Refused from the file's header, with a rig file (the camera's size) and without (the
+    pixel bound), before the models are even loaded; nothing big is allocated."""
+    bomb = tmp_path / 'bomb.img'
+    make(bomb, 30000, 30000)
+    assert bomb.stat().st_size < 1000
+    kind = 'png' if make is _png_bomb else 'jpeg'
+    rig = str(REPO / 'config' / 'rigs' / 'shelf.yaml')
+    started = time.perf_counter()
+    assert images.main(['--rig', rig, '--images', str(bomb), *FRAMES[1:]]) == 2
+    assert (f"{bomb}: image size: the {kind} header declares 30000x30000, expected 1032x776 (camera 0's "
+            'calibrated size)') in capsys.readouterr().err
+    assert images.main(['--calibration', CALIBRATION, '--images', *FRAMES[:4], str(bomb)]) == 2
+    assert (f'{bomb}: image size: the {kind} header declares 30000x30000, more than 33554432 pixels'
+            in capsys.readouterr().err)
+    assert time.perf_counter() - started < 2.0  # four real frames read; decoding the bomb alone takes longer
+    # in a fresh process, so that its peak resident size (VmHWM: ru_maxrss would carry over this
+    # process's own through fork and exec) is this read's alone
+    code = ('import re, sys; from mvpose_ros.core.detection.image_file import read_image\n'
+            'try:\n    read_image(sys.argv[1])\nexcept ValueError as exc:\n    print(exc)\n'
+            'print(re.search(r"VmHWM:\\s+(\\d+)", open("/proc/self/status").read()).group(1))')
+    out = subprocess.run([sys.executable, '-c', code, str(bomb)], capture_output=True, text=True, cwd=REPO,
+                         check=True).stdout.splitlines()
+    assert 'more than 33554432 pixels' in out[0]
+    assert int(out[1]) < 400 * 1024, out  # KiB: the imports alone; decoding would take 2.7 GB

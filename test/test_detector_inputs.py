@@ -14,10 +14,12 @@ from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from msg_adapters.image_msg import ENCODINGS, image_to_compressed_msg, image_to_msg
+from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compressed_msg, image_to_msg
+from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.heatmap_detector import (DropLog, _camera_indices, decode_image, image_type, image_type_by_name,
+from mvpose_ros.nodes.heatmap_detector import (MAX_CAUSE_CHARS, MAX_CAUSES, OTHER_CAUSES, DropLog,
+                                               _camera_indices, decode_image, image_type, image_type_by_name,
                                                in_namespace, rig_namespace)
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
@@ -61,10 +63,11 @@ def test_images_of_another_size_or_undecodable_are_refused_with_their_cause(shel
     bgr, camera = shelf_image
     with pytest.raises(ValueError, match=r'^Image size: 320x240, expected 1032x776$'):
         decode_image(image_to_msg(bgr[:240, :320], HEADER), camera)
-    with pytest.raises(ValueError, match=r'^image size 320x240 is not the calibrated 1032x776$'):
-        decode_image(image_to_compressed_msg(bgr[:240, :320], HEADER), camera)  # smaller: decoded, then refused
+    with pytest.raises(ValueError, match=r'^CompressedImage size: the jpeg header declares 320x240, expected '
+                                         r'1032x776$'):
+        decode_image(image_to_compressed_msg(bgr[:240, :320], HEADER), camera)  # smaller: refused undecoded too
     big = image_to_compressed_msg(cv2.resize(bgr, (1040, 776)), HEADER)
-    with pytest.raises(ValueError, match='declares 1040x776, larger than the expected 1032x776'):
+    with pytest.raises(ValueError, match='declares 1040x776, expected 1032x776'):
         decode_image(big, camera)
     jpeg = image_to_compressed_msg(bgr, HEADER)
     data = bytes(jpeg.data)
@@ -73,7 +76,7 @@ def test_images_of_another_size_or_undecodable_are_refused_with_their_cause(shel
     # a header declaring a huge image: refused from the header, nothing decoded
     sof = data.index(b'\xff\xc0')
     bomb = data[:sof + 5] + struct.pack('>HH', 60000, 60000) + data[sof + 9:]
-    with pytest.raises(ValueError, match='declares 60000x60000, larger than the expected'):
+    with pytest.raises(ValueError, match='declares 60000x60000, expected 1032x776'):
         decode_image(CompressedImage(header=HEADER, format=jpeg.format, data=bomb), camera)
     with pytest.raises(ValueError, match='not a JPEG or PNG'):
         decode_image(CompressedImage(header=HEADER, format='jpeg', data=b'\x00' * 64), camera)
@@ -155,3 +158,41 @@ def test_an_unusable_input_is_logged_once_per_camera_and_cause_then_counted():
                       'ones are counted)']
     assert drops.summary() == ('left: 3 x CompressedImage data: truncated; left: 1 x Image encoding: bayer; '
                                'right: 1 x CompressedImage data: truncated')
+
+
+def test_junk_with_ever_new_causes_keeps_the_drop_log_bounded():
+    """Every junk message can carry a cause of its own (its size, its frame_id): past MAX_CAUSES
+    per camera they are counted together, and a long cause is cut, so neither the error lines nor
+    the counts grow with a flood."""
+    logger = _Logger()
+    drops = DropLog(logger)
+    for k in range(1000):
+        drops.report('left', 'image', k, f"frame_id '{k}{'x' * 5000}' is not this camera")
+    assert drops.report('right', 'image', 0, 'Image data: 9 bytes')  # other cameras keep their own causes
+    assert len(drops.counts) == MAX_CAUSES + 2
+    assert drops.counts['left', OTHER_CAUSES] == 1000 - MAX_CAUSES
+    assert max(len(cause) for _, cause in drops.counts) <= MAX_CAUSE_CHARS
+    assert sum(level == 'error' for level, _ in logger.lines) == MAX_CAUSES + 2  # the others counted, not told
+    assert max(len(text) for _, text in logger.lines if _ == 'error') < MAX_CAUSE_CHARS + 200
+
+
+def test_admission_checks_every_input_before_it_is_queued_and_decodes_nothing(shelf_image):
+    """The whole-rig mode admits an image into the synchroniser only after check_camera_image:
+    data beyond the camera's byte bound, a header of another size, a truncated one are refused
+    without decoding; a good image passes (and is then decodable)."""
+    bgr, camera = shelf_image
+    size = (camera.width, camera.height)
+    jpeg = image_to_compressed_msg(bgr, HEADER)
+    check_camera_image(jpeg, size)
+    check_camera_image(image_to_msg(bgr, HEADER, 'rgb16'), size)  # 6 bytes a pixel: within the bound
+    limit = max_image_bytes(*size)
+    junk = Image(header=HEADER, height=776, width=1032, encoding='bgr8', step=limit // 776 + 1,
+                 data=bytes((limit // 776 + 1) * 776))
+    with pytest.raises(ValueError, match=f'^Image data: {len(junk.data)} bytes, more than a 1032x776 image takes'):
+        check_camera_image(junk, size)
+    padded = CompressedImage(header=HEADER, format=jpeg.format, data=bytes(jpeg.data) + bytes(limit))
+    with pytest.raises(ValueError, match='^CompressedImage size: .* bytes, more than a 1032x776 image takes'):
+        check_camera_image(padded, size)
+    small = image_to_compressed_msg(bgr[:100, :100], HEADER, 'png')
+    with pytest.raises(ValueError, match='declares 100x100, expected 1032x776'):
+        check_camera_image(small, size)

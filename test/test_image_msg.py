@@ -15,8 +15,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from msg_adapters.image_msg import (ENCODINGS, compressed_size, compressed_to_image, image_to_compressed_msg,
+from msg_adapters.image_msg import (ENCODINGS, compressed_to_image, image_to_compressed_msg,
                                     image_to_msg, msg_to_image, to_bgr)
+from mvpose_ros.core.detection.encoded_image import declared_size, max_image_bytes
 from mvpose_ros.core.evaluation.datasets import dataset_dir
 
 HEADER = Header(frame_id='left_optical')
@@ -126,7 +127,7 @@ def test_compressed_round_trip(fmt):
     bgr = _smooth()
     msg = _through_the_wire(image_to_compressed_msg(bgr, HEADER, fmt))
     assert msg.format == f'bgr8; {fmt} compressed bgr8'
-    assert compressed_size(msg.data) == (fmt, 128, 96)
+    assert declared_size(msg.data) == (fmt, 128, 96)
     back = compressed_to_image(msg, expected=(128, 96))
     assert back.shape == (96, 128, 3) and back.dtype == np.uint8
     if fmt == 'png':
@@ -175,7 +176,7 @@ def test_progressive_jpeg_and_app_segments():
     # an APP1 segment (as EXIF adds) before the frame header, holding bytes that look like markers
     app1 = b'\xff\xe1' + struct.pack('>H', 2 + 40) + b'\xff\xc0\x00\x11\x08\x99\x99' + b'\0' * 33
     data = data[:2] + app1 + data[2:]
-    assert compressed_size(data) == ('jpeg', 128, 96)
+    assert declared_size(data) == ('jpeg', 128, 96)
     msg = CompressedImage(format='jpeg', data=data)
     assert np.abs(compressed_to_image(msg).astype(int) - bgr).mean() < 2.0
 
@@ -194,11 +195,11 @@ def _png_bomb(width: int, height: int) -> bytes:
 
 def test_a_png_declaring_a_huge_image_is_refused_before_decoding():
     msg = CompressedImage(format='png', data=_png_bomb(20000, 20000))
-    assert len(msg.data) < 200 and compressed_size(msg.data) == ('png', 20000, 20000)
+    assert len(msg.data) < 200 and declared_size(msg.data) == ('png', 20000, 20000)
     started = time.perf_counter()
     with pytest.raises(ValueError, match='the png header declares 20000x20000, more than 33554432 pixels'):
         compressed_to_image(msg)
-    with pytest.raises(ValueError, match='declares 20000x20000, larger than the expected 1032x776'):
+    with pytest.raises(ValueError, match='declares 20000x20000, expected 1032x776'):
         compressed_to_image(msg, expected=(1032, 776))
     # refused from the header: decoding 20000 x 20000 x 3 would allocate 1.2 GB and take seconds
     assert time.perf_counter() - started < 0.05
@@ -214,8 +215,34 @@ def test_a_jpeg_declaring_a_huge_image_is_refused_before_decoding():
         compressed_to_image(msg)
     assert time.perf_counter() - started < 0.05
     big = image_to_compressed_msg(_smooth(96, 200), HEADER, 'jpeg')
-    with pytest.raises(ValueError, match='declares 200x96, larger than the expected 128x96'):
+    with pytest.raises(ValueError, match='declares 200x96, expected 128x96'):
         compressed_to_image(big, expected=(128, 96))
+    small = image_to_compressed_msg(_smooth(96, 100), HEADER, 'jpeg')  # smaller: refused undecoded too
+    with pytest.raises(ValueError, match='declares 100x96, expected 128x96'):
+        compressed_to_image(small, expected=(128, 96))
+
+
+@pytest.mark.parametrize('compressed', [False, True])
+def test_data_larger_than_the_expected_image_can_take_is_refused_unread(compressed):
+    """The byte bound of a w x h camera: max_image_bytes = 8 w h + 1 MiB (16-bit RGBA PNG, the
+    largest pixel); one byte more is refused before the header or fields are looked at."""
+    w, h = 128, 96
+    limit = max_image_bytes(w, h)
+    assert limit == 8 * w * h + 2 ** 20
+    if compressed:
+        data = bytes(image_to_compressed_msg(_smooth(), HEADER, 'png').data)
+        fits = CompressedImage(format='png', data=data + bytes(limit - len(data)))  # padding after IEND
+        over = CompressedImage(format='png', data=data + bytes(limit + 1 - len(data)))
+        with pytest.raises(ValueError, match='no end marker'):  # within the bound: the next checks run
+            compressed_to_image(fits, expected=(w, h))
+    else:
+        fits = Image(encoding='bgr8', width=w, height=h, step=limit // h, data=bytes(limit // h * h))
+        assert msg_to_image(fits, expected=(w, h)).shape == (h, w, 3)  # padded rows, within the bound
+        over = Image(encoding='bgr8', width=w, height=h, step=limit // h + 1, data=bytes((limit // h + 1) * h))
+    kind = 'CompressedImage size' if compressed else 'Image data'
+    with pytest.raises(ValueError, match=f'^{kind}: {len(over.data)} bytes, more than a 128x96 image takes '
+                                         f'\\({limit}\\)$'):
+        to_bgr(over, expected=(w, h))
 
 
 @pytest.mark.parametrize('fmt', ['jpeg', 'png'])

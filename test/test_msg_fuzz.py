@@ -1,11 +1,14 @@
 """Property-based tests of every msg_adapters decoder: arbitrary record bytes under a correct
 PointCloud2 field layout, and arbitrary Image and CameraInfo fields, either decode to a valid
 result (which re-encodes to the same thing) or raise ValueError, never another exception; and
-random valid inputs survive encode -> decode."""
+random valid inputs survive encode -> decode. The image decoders, raw and compressed, also on random
+sizes (headers declaring up to 65535 x 65535): nothing larger than the expected size or
+MAX_PIXELS is ever decoded."""
 from __future__ import annotations
 
 import array
 import dataclasses
+import struct
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings
@@ -22,6 +25,7 @@ from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles
                                      people_dtype, people_to_msg)
 from msg_adapters.records import to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
+from mvpose_ros.core.detection.encoded_image import MAX_PIXELS, decode_encoded, max_image_bytes
 from mvpose_ros.core.evaluation.datasets import shelf_cameras
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
@@ -285,6 +289,59 @@ def test_compressed_decoder_on_random_bytes(fmt, data):
         msg = CompressedImage(header=HEADER, format=fmt, data=array.array('B', head + data))
         bgr = _decodes_or_value_error(compressed_to_image, msg)
         assert bgr is None or (bgr.dtype == np.uint8 and bgr.shape[2] == 3)
+
+
+SMALL = (16, 12)  # (width, height) of the small real images the header fuzzing starts from
+
+
+def _small_encoded(kind: str) -> bytes:
+    return bytes(image_to_compressed_msg(np.full((SMALL[1], SMALL[0], 3), 90, np.uint8), HEADER, kind).data)
+
+
+@FUZZ
+@given(st.sampled_from(['jpeg', 'png']), st.integers(0, 2 ** 16 - 1), st.integers(0, 2 ** 16 - 1),
+       st.booleans(), st.binary(max_size=32))
+def test_decoders_on_random_declared_sizes(kind, width, height, with_expected, junk):
+    """A real small jpeg or png whose header is changed to declare any size (up to 65535 x 65535,
+    4.3 gigapixels): refused with a ValueError unless the size is exactly the expected one (given)
+    or within MAX_PIXELS; so what is decoded is never larger than that bound (and decoding takes
+    no longer than such an image). The message path and the file path (decode_encoded) alike."""
+    data = bytearray(_small_encoded(kind))
+    if kind == 'png':
+        data[16:24] = struct.pack('>II', width, height)  # IHDR width, height (its CRC is not checked first)
+    else:
+        sof = data.index(b'\xff\xc0')
+        data[sof + 5:sof + 9] = struct.pack('>HH', height, width)
+    data = bytes(data) + junk
+    expected = SMALL if with_expected else None
+    for decode in (lambda: compressed_to_image(CompressedImage(format=kind, data=data), expected),
+                   lambda: decode_encoded(np.frombuffer(data, np.uint8), expected)):
+        bgr = _decodes_or_value_error(lambda _: decode(), None)
+        if bgr is not None:
+            assert bgr.shape[:2] == (height, width) and width * height <= MAX_PIXELS
+            assert not with_expected or (width, height) == SMALL
+
+
+@FUZZ
+@given(st.binary(max_size=300), st.sampled_from([b'', b'\x89PNG\r\n\x1a\n', b'\xff\xd8']), st.booleans())
+def test_the_file_decoder_on_random_bytes(data, head, with_expected):
+    """What read_image decodes: random bytes, bare or behind a PNG or JPEG signature."""
+    bgr = _decodes_or_value_error(lambda d: decode_encoded(np.frombuffer(d, np.uint8), SMALL if with_expected
+                                                           else None), head + data)
+    assert bgr is None or (bgr.dtype == np.uint8 and bgr.shape[2] == 3)
+
+
+@FUZZ
+@given(st.sampled_from(ENCODINGS), st.integers(0, 2 ** 20), st.integers(0, 2 ** 20), st.integers(0, 2 ** 22),
+       st.integers(0, 3000))
+def test_the_image_decoder_on_random_sizes_with_an_expected_size(encoding, width, height, step, length):
+    """Any width, height and step an Image declares, with any data length (up to 3000 bytes): with
+    an expected size it is refused unless it is exactly that size and within the byte bound."""
+    msg = Image(header=HEADER, encoding=encoding, width=width, height=height, step=step, data=bytes(length))
+    bgr = _decodes_or_value_error(lambda m: msg_to_image(m, SMALL), msg)
+    if bgr is not None:
+        assert (width, height) == SMALL and bgr.shape == (SMALL[1], SMALL[0], 3)
+        assert length <= max_image_bytes(*SMALL)
 
 
 @FUZZ

@@ -11,8 +11,10 @@ set goes on without it (logged). A set needs `min_cameras` members (default 2: a
 seen twice to be triangulated, so a smaller set could only give an empty bundle); the messages of
 a smaller one are dropped. Every set yields exactly one bundle message, empty when nobody is
 seen twice, stamped with the set's stamp (its earliest member stamp) in the rig's world frame.
-Frames are numbered by set order, not by stamp x rate. Every dropped message is counted by
-reason (late, duplicate, unmatched, overflow, frame_id, malformed, no intrinsics) and logged,
+Frames are numbered by set order, not by stamp x rate. A message larger than a people2d of its
+camera can be (people_msg.max_people_bytes of the camera's image size) is dropped before it is
+decoded. Every dropped message is counted by
+reason (late, duplicate, unmatched, overflow, frame_id, oversize, malformed, no intrinsics) and logged,
 at most every few seconds per camera and reason; every REPORT_EVERY sets the achieved skew
 (median, max) and the drops so far are logged. A rig without intrinsics in its file takes them
 from each camera's CameraInfo: until every camera's is known, inputs are dropped (no intrinsics).
@@ -29,7 +31,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.people_msg import bundles_to_msg, msg_to_people
+from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_people
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros import topics
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
@@ -120,6 +122,12 @@ class AssociationNode(Node):
         expected = self._rig.cameras[camera].frame_id
         if msg.header.frame_id != expected:
             self._drop(camera, stamp, 'frame_id', f'frame_id {msg.header.frame_id!r}, the rig says {expected!r}')
+            return
+        seen_by = self._associator.cameras[camera]
+        limit = max_people_bytes(seen_by.width, seen_by.height)
+        if len(msg.data) > limit:
+            self._drop(camera, stamp, 'oversize', f'{len(msg.data)} data bytes, more than a people2d of a '
+                                                  f'{seen_by.width}x{seen_by.height} camera carries ({limit})')
             return
         try:
             people = msg_to_people(msg)

@@ -38,8 +38,14 @@ Intrinsics: from the rig file, else from the camera's first usable CameraInfo (i
 for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use is logged
 once per camera and problem and never acted on.
 
-An input that cannot be used (another frame_id, an encoding or size that does not decode, no
-intrinsics yet, out of sync) is logged once per camera and cause, with its stamp, and counted
+Bounded input: every input is checked before it is queued or worked on (_admit, no decoding):
+the camera's frame_id; an image against its camera's size (the data at most what such an image
+takes, encoded_image.max_image_bytes; the Image fields or the JPEG/PNG header declaring exactly that
+size), OpenPose output against openpose_msg.max_openpose_bytes. A flood of junk costs a check
+per message; what the middleware keeps is bounded by the keep-last depth of the subscriptions.
+
+An input that cannot be used (another frame_id, too large, an encoding or size that does not decode,
+no intrinsics yet, out of sync) is logged once per camera and cause, with its stamp, and counted
 after that (a throttled summary, and the totals when the node stops); the node goes on. That
 camera is left out of that stamp: nothing is published for it, so the synchronisation downstream
 leaves it out of its set. An empty people2d would instead claim the camera saw nobody.
@@ -64,8 +70,8 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
 from msg_adapters.camera_info_msg import check_info, info_to_intrinsics
-from msg_adapters.image_msg import to_bgr
-from msg_adapters.openpose_msg import msg_to_openpose
+from msg_adapters.image_msg import check_camera_image, to_bgr
+from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
@@ -87,6 +93,11 @@ WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
 IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
 TYPE_RECHECK = 2.0  # s between graph look-ups of an image topic typed by its name
 SUMMARY_PERIOD = 10.0  # s, at most one summary of counted drops per period
+# Distinct causes a DropLog keeps per camera, and the characters of one: junk can make every cause
+# new (random sizes, frame_ids), and neither the log nor the counts may grow with it.
+MAX_CAUSES = 32
+MAX_CAUSE_CHARS = 300
+OTHER_CAUSES = f'other causes (beyond {MAX_CAUSES} distinct ones)'
 
 
 def image_type_by_name(topic: str) -> type:
@@ -122,29 +133,33 @@ def in_namespace(namespace: str, topic: str) -> str:
 
 
 def decode_image(msg: Image | CompressedImage, camera: Camera) -> Any:
-    """(H, W, 3) uint8 BGR of a camera image of the calibrated size camera.width x camera.height:
-    an Image's header, a CompressedImage's jpeg/png header checked before decoding (to_bgr), and
-    the decoded size after it. ValueError of one line otherwise."""
-    size = (camera.width, camera.height)
-    bgr = to_bgr(msg, size)
-    if bgr.shape[:2] != (camera.height, camera.width):
-        raise ValueError(f'image size {bgr.shape[1]}x{bgr.shape[0]} is not the calibrated {size[0]}x{size[1]}')
-    return bgr
+    """(H, W, 3) uint8 BGR of a camera image of the calibrated size camera.width x camera.height
+    (to_bgr: an Image's fields, a CompressedImage's jpeg/png header checked before decoding, the
+    data's size against what such an image takes first). ValueError of one line otherwise."""
+    return to_bgr(msg, (camera.width, camera.height))
 
 
 class DropLog:
     """Inputs that could not be used: the first of each (camera, cause) is logged as an error
-    with its stamp; later ones are counted, with a summary at most every SUMMARY_PERIOD s."""
+    with its stamp; later ones are counted, with a summary at most every SUMMARY_PERIOD s. At most
+    MAX_CAUSES causes per camera (of at most MAX_CAUSE_CHARS) are told apart; the rest are
+    counted together as OTHER_CAUSES."""
 
     def __init__(self, logger: Any) -> None:
         self._logger = logger
         self.counts: Counter[tuple[str, str]] = Counter()
+        self._causes: Counter[str] = Counter()  # camera -> distinct causes counted
         self._lock = threading.Lock()  # the worker thread reports too
 
     def report(self, camera: str, what: str, stamp: int, cause: str) -> bool:
         """Count one dropped input; True when this was logged (the first of its camera and cause)."""
-        cause = ' '.join(cause.split())
+        cause = ' '.join(cause[:4 * MAX_CAUSE_CHARS].split())[:MAX_CAUSE_CHARS]
         with self._lock:
+            if (camera, cause) not in self.counts:
+                if self._causes[camera] >= MAX_CAUSES:
+                    cause = OTHER_CAUSES
+                else:
+                    self._causes[camera] += 1
             self.counts[camera, cause] += 1
             first = self.counts[camera, cause] == 1
         if first:
@@ -361,15 +376,26 @@ class HeatmapDetectorNode(Node):
 
     # --- detection ----------------------------------------------------------------------------
 
-    def _people(self, cam: _Camera, msg: Any) -> PointCloud2:
-        """The people2d message of one input; ValueError (one line) when it cannot be used."""
+    def _admit(self, cam: _Camera, msg: Any) -> None:
+        """The checks of an input before it is queued or worked on, none of them decoding (see the
+        module's "Bounded input"); ValueError (one line) when it cannot be used."""
         if msg.header.frame_id != cam.rig.frame_id:
             raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
         if self._backend == 'openpose':
-            return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
+            if len(msg.data) > max_openpose_bytes():
+                raise ValueError(f'OpenPose output of {len(msg.data)} bytes, more than one image can have '
+                                 f'({max_openpose_bytes()})')
+            return
         if cam.camera is None:
             raise ValueError(f'no intrinsics yet (the rig file has none: waiting for a CameraInfo on '
                              f'{cam.info_topic})')
+        check_camera_image(msg, (cam.camera.width, cam.camera.height))
+
+    def _people(self, cam: _Camera, msg: Any) -> PointCloud2:
+        """The people2d message of one input; ValueError (one line) when it cannot be used."""
+        self._admit(cam, msg)
+        if self._backend == 'openpose':
+            return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
         return people_to_msg(self._detector.detect(decode_image(msg, cam.camera)), msg.header)
 
     def _what(self) -> str:
@@ -396,6 +422,11 @@ class HeatmapDetectorNode(Node):
 
     def _on_set_input(self, cam: _Camera, msg: Any) -> None:
         stamp = stamp_ns(msg.header.stamp)
+        try:
+            self._admit(cam, msg)  # before the synchroniser holds it: refused junk takes no real image's place
+        except ValueError as exc:
+            self._drops.report(cam.rig.name, self._what(), stamp, str(exc))
+            return
         before = Counter(self._sync.dropped)
         try:
             released = self._sync.add(stamp, cam.index, msg, time.monotonic())  # every rig camera: sync index
