@@ -15,7 +15,8 @@ PEOPLE2D = 'people2d'  # 2D people with heatmaps (encoding B)
 
 # the rig's
 BUNDLES = 'people/bundles'  # associated people, every view (encoding C)
-SKELETONS = 'skeletons'  # 3D skeletons (encoding D)
+SKELETONS = 'skeletons'  # 3D skeletons (encoding D), `lag` frames late
+SKELETONS_LIVE = 'skeletons/live'  # the same with no lag: each frame's causal estimate
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
 
 

@@ -189,7 +189,8 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
 def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_core(domain, shelf, tmp_path):
     """Bundles of Shelf frames with some frames missing upstream (gaps of 40 to 120 ms): frames
     are numbered by arrival and the temporal term uses the real times, exactly as the core fed
-    the same numbers and times; one skeleton message per bundle with its stamp; a late and a
+    the same numbers and times; one skeleton message per bundle with its stamp, and one causal
+    estimate on skeletons/live as the core's live(); a late and a
     repeated stamp are dropped with a logged reason; an unreadable bundle gives an empty one."""
     cameras, raw = shelf
     frames = [300, 301, 303, 304, 305, 308, 309, 311, 312, 313, 314, 315]
@@ -201,8 +202,10 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
         wire[f] = bundles_to_msg(bundles, _header(f, 'world'))
     core = Inference3D(cameras, StageConfig.from_params({'window': 6, 'lag': 2}).solver)
     first = stamp_ns(wire[frames[0]].header.stamp)
-    pushed = [core.push(k, msg_to_bundles(wire[f]), (stamp_ns(wire[f].header.stamp) - first) / 1e9)
-              for k, f in enumerate(frames)]
+    pushed, live_expected = [], {}
+    for k, f in enumerate(frames):
+        pushed.append(core.push(k, msg_to_bundles(wire[f]), (stamp_ns(wire[f].header.stamp) - first) / 1e9))
+        live_expected[f] = core.live()
     expected = {frames[r.frame]: r for out in pushed for r in out}
     expected.update({frames[r.frame]: r for r in core.flush()})
 
@@ -210,7 +213,9 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     with probe(domain, 'bp_probe') as (node, executor):
         skeletons: dict[int, list] = {}
         markers: dict[int, list] = {}
+        live: dict[int, list] = {}
         _collect(node, '/skeletons', PointCloud2, skeletons)
+        _collect(node, '/skeletons/live', PointCloud2, live)
         _collect(node, '/skeletons/markers', MarkerArray, markers)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
         proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=2', '-p', 'idle_flush:=0.3')
@@ -222,7 +227,7 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
                     pub.publish(wire[304])  # late
                     pub.publish(wire[305])  # repeated
             pub.publish(PointCloud2(header=_header(316, 'world')))  # no fields at all
-            assert spin_until(executor, lambda: len(skeletons) == len(frames) + 1), log.read_text()
+            assert spin_until(executor, lambda: len(skeletons) == len(live) == len(frames) + 1), log.read_text()
             spin_until(executor, lambda: False, 0.5)
         finally:
             stop(proc)
@@ -234,7 +239,12 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
         assert skeletons[f][0].header.stamp == wire[f].header.stamp
         assert skeletons[f][0].header.frame_id == 'world'
         assert len(markers[f]) == 1
-    assert msg_to_skeletons(skeletons[316][0])[0].size == 0
+        live_ids, live_joints = msg_to_skeletons(live[f][0])  # the causal estimate, at once
+        assert live_ids.tolist() == live_expected[f].person_ids and len(live[f]) == 1
+        np.testing.assert_allclose(live_joints, live_expected[f].joints, atol=1e-5)
+    assert any(not np.allclose(msg_to_skeletons(live[f][0])[1], msg_to_skeletons(skeletons[f][0])[1])
+               for f in frames)  # the lagged output saw the frames after
+    assert msg_to_skeletons(skeletons[316][0])[0].size == 0 and msg_to_skeletons(live[316][0])[0].size == 0
     text = log.read_text()
     assert 'bundles stamp 12160000000 ns came after stamp 12200000000 ns: late or duplicate, dropped' in text
     assert 'bundles stamp 12200000000 ns came after stamp 12200000000 ns: late or duplicate, dropped' in text

@@ -184,7 +184,7 @@ def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
     stamps = [S + k * PERIOD for k in range(4)]
     joints = np.arange(2 * 14 * 3, dtype=float).reshape(2, 14, 3) / 100
     node = SimpleNamespace(outputs={stamps[0]: (np.array([3, 7]), joints), stamps[2]: (np.array([3]), joints[:1])},
-                           output_at={stamps[0]: 1_000 * MS, stamps[2]: 1_500 * MS},
+                           output_at={stamps[0]: 1_000 * MS, stamps[2]: 1_500 * MS}, live_at={},
                            info_at={stamps[0]: 900 * MS, stamps[2]: 1_300 * MS}, received={stamps[0]: 1, stamps[2]: 1},
                            bad=[])
     people = {'a/people2d': [stamps[0], stamps[2]], 'b/people2d': [stamps[0] + 6 * MS, stamps[2] + 12 * MS]}

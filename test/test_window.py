@@ -380,3 +380,33 @@ def test_write_predictions_streams_one_line_per_frame():
     write_predictions(results, stream)
     lines = stream.getvalue().splitlines()
     assert [json.loads(line)['frame'] for line in lines] == [r.frame for r in results]
+
+
+@pytest.mark.parametrize('slide', [None, 1])
+def test_live_estimate_is_the_lag_0_output_and_uses_no_future_frame(slide):
+    frames, truth, _ = _clip(seed=3)
+    other, _, _ = _clip(seed=4)  # other frames after t: another future for the same past
+    t_cut = 12
+    lagged = _window(window=6, lag=3, slide_iterations=slide)
+    causal = _window(window=6, lag=0, slide_iterations=slide)
+    changed = _window(window=6, lag=3, slide_iterations=slide)
+    live, live_changed, lag0 = [], [], []
+    for t in range(T):
+        lagged.push(FRAME0 + t, frames[t])
+        live.append(lagged.live())
+        lag0 += causal.push(FRAME0 + t, frames[t])
+        changed.push(FRAME0 + t, frames[t] if t <= t_cut else other[t])
+        live_changed.append(changed.live())
+    for a, b in zip(live, lag0):  # the same BP state: the live estimate is what lag 0 outputs
+        assert a.frame == b.frame and a.person_ids == b.person_ids and np.array_equal(a.joints, b.joints)
+    for a, b in zip(live[:t_cut + 1], live_changed[:t_cut + 1]):
+        assert np.array_equal(a.joints, b.joints)
+    # the lagged output of a frame before the cut does see the changed future
+    assert any(not np.array_equal(a.joints, b.joints) for a, b in
+               zip(_all(*_run(_window(window=6, lag=3, slide_iterations=slide), frames))[t_cut - 2:t_cut + 1],
+                   _all(*_run(_window(window=6, lag=3, slide_iterations=slide),
+                              frames[:t_cut + 1] + other[t_cut + 1:]))[t_cut - 2:t_cut + 1]))
+
+
+def test_live_before_any_frame_is_none():
+    assert _window(window=6, lag=3).live() is None

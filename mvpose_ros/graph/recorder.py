@@ -56,7 +56,8 @@ from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
 from mvpose_ros.nodes.bag_player import START_QOS
 from mvpose_ros.nodes.runtime import DATA_QOS
-from mvpose_ros.topics import BUNDLES, CAMERA_INFO, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS, camera_topic
+from mvpose_ros.topics import (BUNDLES, CAMERA_INFO, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS, SKELETONS_LIVE,
+                               camera_topic)
 
 TIMING_TOPIC = camera_topic(0, CAMERA_INFO)  # a frame's latency is timed from its arrival here
 OUTPUT_TOPIC = SKELETONS
@@ -92,6 +93,7 @@ class SkeletonRecorder(Node):
         self.info_at: dict[int, int] = {}
         self.outputs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.output_at: dict[int, int] = {}
+        self.live_at: dict[int, int] = {}  # stamp -> receipt (ns) of its skeletons/live
         self.received: Counter[int] = Counter()
         self.bad: list[str] = []
         self.last_activity = 0.0  # monotonic s of the last message, for stall timeouts
@@ -105,6 +107,8 @@ class SkeletonRecorder(Node):
                                      raw=True)
         self._outputs = [self.create_subscription(PointCloud2, OUTPUT_TOPIC, self._on_skeletons, DATA_QOS,
                                                   raw=True)]
+        # timed when there, not waited for: only bp_solver publishes it
+        self.create_subscription(PointCloud2, SKELETONS_LIVE, self._on_live, DATA_QOS, raw=True)
         for topic, msg_type in (graph_topics(measure_cameras) if measure_cameras > 0 else {}).items():
             name = self.resolve_topic_name(topic)
             self.sizes[name] = []
@@ -127,6 +131,9 @@ class SkeletonRecorder(Node):
         else:
             stamp = header_stamp_ns(cdr)
         self.sizes[topic].append((stamp, len(cdr)))
+
+    def _on_live(self, cdr: bytes, info: Any) -> None:
+        self.live_at.setdefault(header_stamp_ns(cdr), info['received_timestamp'])
 
     def _on_skeletons(self, cdr: bytes, info: Any) -> None:
         self.last_activity = self.last_output = time.monotonic()

@@ -16,10 +16,12 @@ from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC
+from mvpose_ros.topics import SKELETONS_LIVE
 
 # As printed: the graph runs in the root namespace.
 TIMING_NAME = '/' + TIMING_TOPIC
 OUTPUT_NAME = '/' + OUTPUT_TOPIC
+LIVE_NAME = '/' + SKELETONS_LIVE
 
 
 class Recorded(Protocol):
@@ -28,6 +30,7 @@ class Recorded(Protocol):
     info_at: Mapping[int, int]
     outputs: Mapping[int, object]
     output_at: Mapping[int, int]
+    live_at: Mapping[int, int]
     received: Mapping[int, int]
     bad: Sequence[str]
 
@@ -54,13 +57,13 @@ def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.n
                    - np.array([info_at[s] for s in common], dtype=np.int64))
 
 
-def print_latency(lat: np.ndarray, start: str, unit: str, out: TextIO) -> None:
-    """Print latency (N,) ms from `start` to the skeletons: p50, p95, max, and p50 by quarter of
-    the run (a graph that falls behind real time shows it growing)."""
+def print_latency(lat: np.ndarray, start: str, unit: str, out: TextIO, output: str = OUTPUT_NAME) -> None:
+    """Print latency (N,) ms from `start` to `output`: p50, p95, max, and p50 by quarter of the run
+    (a graph that falls behind real time shows it growing)."""
     if not lat.size:
         return
     p50, p95 = np.percentile(lat, [50, 95])
-    print(f'latency {start} -> {OUTPUT_NAME}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {lat.max():.1f} ms '
+    print(f'latency {start} -> {output}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {lat.max():.1f} ms '
           f'({lat.size} {unit})', file=out)
     quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
     print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
@@ -79,8 +82,9 @@ def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: 
     print(f'missing {len(missing)}: {frame_ranges([frame_of(s, fr) for s in missing])}; '
           f'duplicate {len(duplicate)}: {frame_ranges([frame_of(s, fr) for s in duplicate])}; '
           f'unexpected {len(unexpected)}: {frame_ranges([frame_of(s, fr) for s in unexpected])}', file=out)
-    print_latency(latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted}),
-                  TIMING_NAME, 'frames', out)
+    for output, at in ((OUTPUT_NAME, node.output_at), (LIVE_NAME, node.live_at)):
+        print_latency(latency_ms(node.info_at, {s: t for s, t in at.items() if s in wanted}), TIMING_NAME, 'frames',
+                      out, output)
     problems = [f'{len(missing)} of {len(stamps)} input stamps got no {OUTPUT_NAME}'] if missing else []
     problems += [f'{len(duplicate)} stamps got more than one {OUTPUT_NAME}'] if duplicate else []
     problems += [f'{len(unexpected)} {OUTPUT_NAME} stamps are not in the bag'] if unexpected else []
@@ -143,8 +147,9 @@ def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Rec
         print(f'sync skew (newest - oldest member stamp): bag sets p50 {np.median(bag):.1f} ms, max {bag.max():.1f} ms'
               + (f'; sets the graph processed (people2d stamps) p50 {np.median(graph):.1f} ms, max '
                  f'{graph.max():.1f} ms' if graph.size else ''), file=out)
-    print_latency(latency_ms(node.info_at, {s: t for s, t in node.output_at.items() if s in wanted}),
-                  'first camera_info of a set', 'sets', out)
+    for output, at in ((OUTPUT_NAME, node.output_at), (LIVE_NAME, node.live_at)):
+        print_latency(latency_ms(node.info_at, {s: t for s, t in at.items() if s in wanted}),
+                      'first camera_info of a set', 'sets', out, output)
     problems = []
     if lockstep and len(processed) < len(set_stamps):
         problems.append(f'{len(set_stamps) - len(processed)} of {len(set_stamps)} sets got no {OUTPUT_NAME}')

@@ -1,16 +1,19 @@
 """The bp_solver node: per-person 3D hypotheses from the bundles' heatmaps and sliding-window
-belief propagation; publishes every frame's 3D skeletons `lag` frames after it arrives.
+belief propagation; publishes every frame's 3D skeletons `lag` frames after it arrives, and its
+causal estimate at once.
 
 In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
-record per person joint, empty when nobody is seen) and skeletons/markers (MarkerArray for
-RViz), both with the input bundle's stamp. Frames are numbered by arrival (the association's set
-order), not by stamp x rate; the temporal term uses the real time between the bundles' stamps,
-so sets dropped upstream (uneven gaps) are bridged, and a gap longer than `max_gap` seconds
-breaks the temporal chains. Every bundle message yields exactly one skeleton message, but for a
-late one (a stamp not after the last one taken: a duplicate, or out of order), which is logged
-and dropped. With no input for `idle_flush` seconds (the end of a replay, or a stalled graph)
-every pending frame is decoded and published. A rig without intrinsics in its file waits for
-every camera's CameraInfo; bundles before that are published with no people (logged).
+record per person joint, empty when nobody is seen) and skeletons/markers (MarkerArray for RViz),
+both with the input bundle's stamp; skeletons/live (encoding D, the same ids) as soon as a bundle
+is in: its frame decoded from the frames up to it (no lag: for a robot that reacts, where
+skeletons, smoothed by the `lag` frames after it, is for analysis). Frames are numbered by arrival
+(the association's set order), not by stamp x rate; the temporal term uses the real time between
+the bundles' stamps, so sets dropped upstream (uneven gaps) are bridged, and a gap longer than
+`max_gap` seconds breaks the temporal chains. Every bundle message yields exactly one skeleton
+message, but for a late one (a stamp not after the last one taken: a duplicate, or out of order),
+which is logged and dropped. With no input for `idle_flush` seconds (the end of a replay, or a
+stalled graph) every pending frame is decoded and published. A rig without intrinsics in its file
+waits for every camera's CameraInfo; bundles before that are published with no people (logged).
 """
 from __future__ import annotations
 
@@ -45,7 +48,7 @@ class _NotReady(ValueError):
 
 
 class BpSolverNode(Node):
-    """people/bundles in, skeletons and skeletons/markers out (names relative: see topics)."""
+    """people/bundles in; skeletons, skeletons/live and skeletons/markers out (names relative: see topics)."""
 
     def __init__(self) -> None:
         super().__init__('bp_solver')
@@ -79,6 +82,8 @@ class BpSolverNode(Node):
         self._last_wait_log = -float('inf')
         self._frames_out = 0
         self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
+        self._live = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
+        self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
         self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS)
         self.create_timer(IDLE_CHECK_S, self._on_timer)
@@ -120,8 +125,12 @@ class BpSolverNode(Node):
             if not isinstance(exc, _NotReady) or now - self._last_wait_log >= THROTTLE_S:
                 self._last_wait_log = now
                 self.get_logger().error(f'bundles stamp {stamp} ns: {exc}; published with no people')
-            self._publish(FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3))), msg.header.stamp)
+            nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)))
+            self._publish_live(nobody, msg.header.stamp)
+            self._publish(nobody, msg.header.stamp)
             return
+        # with no lag the output is the causal estimate itself
+        self._publish_live(results[0] if self._lag == 0 else self._inference.live(), msg.header.stamp)
         self._stamps[frame] = msg.header.stamp
         for result in results:
             self._publish(result, self._stamps.pop(result.frame))
@@ -132,6 +141,10 @@ class BpSolverNode(Node):
             self.get_logger().info(f'no input for {self._idle} s: output the {len(results)} pending frames')
             for result in results:
                 self._publish(result, self._stamps.pop(result.frame))
+
+    def _publish_live(self, result: FrameResult, stamp: Time) -> None:
+        header = Header(stamp=stamp, frame_id=self._world_frame)
+        self._live.publish(skeletons_to_msg(np.asarray(result.person_ids, dtype=np.int64), result.joints, header))
 
     def _publish(self, result: FrameResult, stamp: Time) -> None:
         header = Header(stamp=stamp, frame_id=self._world_frame)

@@ -75,6 +75,12 @@ class Inference3D:
         frames = person_frames(self.cameras, people, frame, self.config, self.timer)
         return [self._finish(r) for r in self.window.push(frame, frames, time_s)]
 
+    def live(self) -> FrameResult | None:
+        """The newest frame pushed, decoded from it and the frames before it only (no lag; see
+        window.SlidingWindow.live)."""
+        result = self.window.live()
+        return None if result is None else self._finish(result)
+
     def flush(self) -> list[FrameResult]:
         """Every frame not yet output (end of stream)."""
         return [self._finish(r) for r in self.window.flush()]

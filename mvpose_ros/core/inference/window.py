@@ -150,6 +150,14 @@ class SlidingWindow:
         self._unsent -= 1
         return [self._decode_at(len(self._slots) - 1 - self.config.lag)]
 
+    def live(self) -> FrameResult | None:
+        """The newest frame decoded now, from the frames up to it only (the causal estimate, with no
+        lag; None before the first frame). In window mode the lagged output of the same frame comes
+        later and has seen the frames after it."""
+        if not self._slots:
+            return None
+        return self._decode_at(len(self._slots) - 1, forget=False)
+
     def flush(self) -> list[FrameResult]:
         """Output every frame not yet output (end of stream)."""
         start = len(self._slots) - self._unsent
@@ -234,13 +242,16 @@ class SlidingWindow:
             hi += 1
         return range(lo, hi + 1)
 
-    def _decode_at(self, i: int) -> FrameResult:
+    def _decode_at(self, i: int, forget: bool = True) -> FrameResult:
+        """The frame at buffer position i decoded; forget: it is output, so the chains that ended
+        before it are no longer needed."""
         slot = self._slots[i]
         ids = sorted(slot.people)
         if self._warm:
             t0 = time.perf_counter()
             joints = [self._decode_warm(pid, slot.frame) for pid in ids]
-            self._ended = [(q, c) for q, c in self._ended if c.last > slot.frame]
+            if forget:
+                self._ended = [(q, c) for q, c in self._ended if c.last > slot.frame]
             self.timer.add('decoding', t0)
         else:
             joints = []
