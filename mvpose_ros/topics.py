@@ -17,6 +17,7 @@ PEOPLE2D = 'people2d'  # 2D people with heatmaps (encoding B)
 BUNDLES = 'people/bundles'  # associated people, every view (encoding C)
 SKELETONS = 'skeletons'  # 3D skeletons (encoding D)
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
+CAMERA_MARKERS = 'cameras/markers'  # the rig's camera frusta (MarkerArray), published once, transient local
 
 
 def camera_namespace(camera: int | str) -> str:
