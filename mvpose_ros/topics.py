@@ -18,6 +18,7 @@ BUNDLES = 'people/bundles'  # associated people, every view (encoding C)
 SKELETONS = 'skeletons'  # 3D skeletons (encoding D), `lag` frames late
 SKELETONS_LIVE = 'skeletons/live'  # the same with no lag: each frame's causal estimate
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
+CAMERA_MARKERS = 'cameras/markers'  # the rig's camera frusta (MarkerArray), published once, transient local
 
 
 def camera_namespace(camera: int | str) -> str:

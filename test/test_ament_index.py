@@ -15,7 +15,7 @@ from ament_index_python.packages import (PackageNotFoundError, get_package_prefi
 
 DOMAIN_ID = 172
 PACKAGE = 'mvpose_ros'
-NODES = ('bag_player', 'heatmap_detector', 'association', 'bp_solver')
+NODES = ('bag_player', 'heatmap_detector', 'association', 'bp_solver', 'skeleton_echo')
 
 
 @pytest.fixture
@@ -43,7 +43,8 @@ def test_node_launchers_are_executable(prefix):
 
 def test_share_folder(prefix):
     share = Path(get_package_share_directory(PACKAGE))
-    for item in ('package.xml', 'config/shelf.yaml', 'config/fastdds.xml', 'launch/shelf.launch.py'):
+    for item in ('package.xml', 'config/shelf.yaml', 'config/fastdds.xml', 'config/mvpose.rviz',
+                 'launch/shelf.launch.py'):
         assert (share / item).is_file(), item
     assert f'<name>{PACKAGE}</name>' in (share / 'package.xml').read_text()
 

@@ -242,7 +242,8 @@ def test_campus_recipe_gives_images_camera_info_and_ground_truth(campus_dir, tmp
           for _, _, stamp, cdr in read_bag(path, ['/ground_truth/skeletons'])]
     assert [stamp for stamp, _ in gt] == [f * FRAME_NS for f in frames]
     for (_, msg), f in zip(gt, frames):
-        ids, joints = msg_to_skeletons(msg)
+        ids, joints, confidence = msg_to_skeletons(msg)
+        assert (confidence == 1).all()  # the truth
         assert msg.header.frame_id == 'world'
         assert ids.tolist() == list(CAMPUS_ACTORS[f])
         for a, pose in zip(ids, joints):

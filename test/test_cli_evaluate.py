@@ -56,3 +56,22 @@ def test_bad_input_is_a_clear_error(tmp_path, capsys):
     assert 'nowhere' in capsys.readouterr().err
     with pytest.raises(SystemExit):
         build_parser().parse_args(['shelf', '--terms', 'temp,bogus'])
+
+
+def test_confidence_report_on_shelf_error_falls_as_confidence_rises(shelf_run, tmp_path, capsys):
+    """The predictions carry each joint's confidence, and on the real Shelf run it ranks errors:
+    a negative rank correlation, the least sure tenth of joints worse than the surest tenth, and
+    the least sure tenth of limbs the least often correct."""
+    _, path = shelf_run
+    assert all('confidence' in p for line in path.read_text().splitlines() for p in json.loads(line)['people'])
+    assert main(['shelf', '--score', str(path), '--confidence-report', str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    rho = float(out.split('Spearman rank correlation (confidence, joint error) ')[1].split()[0])
+    assert rho < -0.15
+    joint_rows = out.split('median mm\n')[1].split('\n\n')[0].splitlines()
+    means = [float(row.split()[4]) for row in joint_rows]
+    assert len(means) == 10 and means[0] > 1.5 * means[-1]
+    limb_rows = out.split('lenient %\n')[1].split('\n\n')[0].splitlines()
+    strict = [float(row.split()[4]) for row in limb_rows]
+    assert strict[0] == min(strict) and strict[-1] > strict[0] + 10
+    assert (tmp_path / 'confidence_joints.png').is_file() and (tmp_path / 'confidence_limbs.png').is_file()

@@ -119,8 +119,9 @@ def test_bundles_decoder_on_random_bytes(msg):
 def test_skeleton_decoder_on_random_bytes(msg):
     result = _decodes_or_value_error(msg_to_skeletons, msg)
     if result is not None:
-        ids, joints = result
+        ids, joints, confidence = result
         assert joints.shape == (len(ids), 14, 3) and np.isfinite(joints).all()
+        assert confidence.shape == (len(ids), 14) and ((confidence >= 0) & (confidence <= 1)).all()
 
 
 # --- plausible records: small fields, so the semantic checks are reached -----------------
@@ -156,12 +157,13 @@ def test_skeleton_decoder_on_plausible_records(data):
     records['joint'] = np.arange(n) % 14
     if data.draw(st.booleans()):
         records['joint'] = data.draw(hnp.arrays(np.uint8, n, elements=st.integers(0, 14)))
-    for field in 'xyz':
+    for field in ('x', 'y', 'z', 'confidence'):
         records[field] = data.draw(hnp.arrays(np.float32, n, elements=floats32))
     result = _decodes_or_value_error(msg_to_skeletons, to_cloud(records, HEADER))
     if result is not None:
-        ids, joints = result
+        ids, joints, confidence = result
         assert np.isfinite(joints).all() and (np.diff(ids) > 0).all()
+        assert ((confidence >= 0) & (confidence <= 1)).all()
 
 
 @FUZZ
@@ -248,10 +250,12 @@ def test_bundles_round_trip(layout, one):
 def test_skeleton_round_trip(ids, data):
     joints = data.draw(hnp.arrays(np.float64, (len(ids), 14, 3),
                                   elements=st.floats(-1e4, 1e4, width=32)))
-    back_ids, back = msg_to_skeletons(skeletons_to_msg(np.array(ids, dtype=np.int64), joints, HEADER))
+    confidence = data.draw(hnp.arrays(np.float64, (len(ids), 14), elements=st.floats(0, 1, width=32)))
+    back_ids, back, back_conf = msg_to_skeletons(skeletons_to_msg(np.array(ids, dtype=np.int64), joints, HEADER,
+                                                                  confidence=confidence))
     order = np.argsort(ids)
     assert back_ids.tolist() == sorted(ids)
-    assert np.array_equal(back, joints[order])
+    assert np.array_equal(back, joints[order]) and np.array_equal(back_conf, confidence[order])
 
 
 # --- images and camera infos ---------------------------------------------------------------

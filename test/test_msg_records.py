@@ -109,7 +109,7 @@ def _encoded() -> list[tuple[object, object]]:
         (openpose_to_msg(frame, Header()), msg_to_openpose),
         (people_to_msg([person, person], Header()), msg_to_people),
         (bundles_to_msg([(1, {0: person, 3: person})], Header()), msg_to_bundles),
-        (skeletons_to_msg([1, 2], np.zeros((2, 14, 3)), Header()), msg_to_skeletons),
+        (skeletons_to_msg([1, 2], np.zeros((2, 14, 3)), Header(), confidence=np.ones((2, 14))), msg_to_skeletons),
     ]
 
 

@@ -11,7 +11,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from msg_adapters.markers import person_colour, skeleton_markers
+from msg_adapters.markers import MIN_ALPHA, camera_markers, frustum, person_colour, skeleton_markers
 from msg_adapters.records import from_cloud, to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
 from mvpose_ros.core.geometry.body import BONES
@@ -23,22 +23,40 @@ def _joints(p: int, seed: int = 0) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-3, 3, (p, 14, 3))
 
 
+def _conf(p: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed + 1).uniform(0, 1, (p, 14))
+
+
 @pytest.mark.parametrize('ids', [[], [4], [9, 0, 3]])
 def test_round_trip(ids):
-    joints = _joints(len(ids))
-    msg = skeletons_to_msg(np.array(ids, dtype=int), joints, WORLD)
-    assert msg.width == 14 * len(ids) and msg.point_step == 17 and msg.header.frame_id == 'world'
+    joints, confidence = _joints(len(ids)), _conf(len(ids))
+    msg = skeletons_to_msg(np.array(ids, dtype=int), joints, WORLD, confidence=confidence)
+    assert msg.width == 14 * len(ids) and msg.point_step == 21 and msg.header.frame_id == 'world'
+    # the older layout's fields where they were, confidence appended
     assert [(f.name, f.offset) for f in msg.fields] == [('x', 0), ('y', 4), ('z', 8),
-                                                        ('person', 12), ('joint', 16)]
+                                                        ('person', 12), ('joint', 16), ('confidence', 17)]
     order = np.argsort(ids)
     for m in (msg, deserialize_message(serialize_message(msg), PointCloud2)):
-        back_ids, back = msg_to_skeletons(m)
+        back_ids, back, back_conf = msg_to_skeletons(m)
         assert back_ids.tolist() == sorted(ids) and back.shape == (len(ids), 14, 3)
         np.testing.assert_array_equal(back, joints[order].astype(np.float32))
+        np.testing.assert_array_equal(back_conf, confidence[order].astype(np.float32))
+
+
+def test_a_reader_of_named_fields_reads_the_older_fields():
+    """A reader that looks x, y, z, person and joint up by name (as PointCloud2 iterators do) and
+    ignores the rest gets what it got before confidence was appended."""
+    msg = skeletons_to_msg(np.array([3]), _joints(1), WORLD, confidence=_conf(1))
+    data = bytes(msg.data)
+    offsets = {f.name: f.offset for f in msg.fields}
+    joint = np.frombuffer(data, np.uint8)[offsets['joint']::msg.point_step]
+    person = [int.from_bytes(data[k + offsets['person']:k + offsets['person'] + 4], 'little')
+              for k in range(0, len(data), msg.point_step)]
+    assert joint.tolist() == list(range(14)) and person == [3] * 14
 
 
 def _records(p: int = 2) -> np.ndarray:
-    return from_cloud(skeletons_to_msg(np.arange(p) * 5, _joints(p), WORLD), SKELETON_DTYPE)
+    return from_cloud(skeletons_to_msg(np.arange(p) * 5, _joints(p), WORLD, confidence=_conf(p)), SKELETON_DTYPE)
 
 
 def _decode(records):
@@ -72,23 +90,38 @@ def test_decoder_rejects_non_finite():
         _decode(records)
 
 
+def test_decoder_rejects_confidence_outside_unit_interval():
+    for bad in (np.nan, -0.01, 1.01):
+        records = _records()
+        records['confidence'][16] = bad
+        with pytest.raises(ValueError, match='person 5: joint 2 confidence .* not in'):
+            _decode(records)
+
+
 def test_encoder_rejects():
+    c = _conf(2)
     with pytest.raises(ValueError, match=r'expected \(2, 14, 3\)'):
-        skeletons_to_msg([1, 2], _joints(2)[:, :13], WORLD)
+        skeletons_to_msg([1, 2], _joints(2)[:, :13], WORLD, confidence=c)
     with pytest.raises(ValueError, match='person 1 given twice'):
-        skeletons_to_msg([1, 1], _joints(2), WORLD)
+        skeletons_to_msg([1, 1], _joints(2), WORLD, confidence=c)
     with pytest.raises(ValueError, match='integers'):
-        skeletons_to_msg([1.5, 2], _joints(2), WORLD)
+        skeletons_to_msg([1.5, 2], _joints(2), WORLD, confidence=c)
     joints = _joints(2)
     joints[1, 12, 0] = np.inf
     with pytest.raises(ValueError, match='person 2: joint 12 not finite'):
-        skeletons_to_msg([1, 2], joints, WORLD)
+        skeletons_to_msg([1, 2], joints, WORLD, confidence=c)
+    with pytest.raises(ValueError, match=r'confidence: expected \(2, 14\)'):
+        skeletons_to_msg([1, 2], _joints(2), WORLD, confidence=c[:, :13])
+    c[0, 4] = 1.5
+    with pytest.raises(ValueError, match='person 1: joint 4 confidence 1.5 not in'):
+        skeletons_to_msg([1, 2], _joints(2), WORLD, confidence=c)
 
 
 def test_markers():
     ids = np.array([7, 2, 3])
-    joints = _joints(3)
-    array = skeleton_markers(ids, joints, WORLD)
+    joints, confidence = _joints(3), _conf(3)
+    confidence[0, 0] = 0.0  # person 7's joint 0: the faintest
+    array = skeleton_markers(ids, joints, WORLD, confidence=confidence, lifetime_s=0.5)
     markers = array.markers
     assert len(markers) == 1 + 2 * 3
     assert markers[0].action == Marker.DELETEALL
@@ -98,8 +131,11 @@ def test_markers():
         (ns, i, t) for i in (2, 3, 7)
         for ns, t in (('joints', Marker.SPHERE_LIST), ('bones', Marker.LINE_LIST))]
     by_id = dict(zip(ids.tolist(), joints))
+    conf_of = dict(zip(ids.tolist(), confidence))
     for m in body:
-        assert m.action == Marker.ADD and m.lifetime.sec == 0 and m.lifetime.nanosec == 0
+        assert m.action == Marker.ADD and m.lifetime.sec == 0 and m.lifetime.nanosec == 500_000_000
+        alpha = np.array([c.a for c in m.colors])
+        assert all((c.r, c.g, c.b) == pytest.approx(person_colour(m.id)) for c in m.colors)
         assert m.pose.orientation.w == 1.0
         assert all(isinstance(p, Point) for p in m.points)
         xyz = np.array([[p.x, p.y, p.z] for p in m.points])
@@ -107,16 +143,23 @@ def test_markers():
         if m.ns == 'joints':
             assert (m.scale.x, m.scale.y, m.scale.z) == pytest.approx((0.06, 0.06, 0.06))
             np.testing.assert_array_equal(xyz, by_id[m.id])  # float64, no float32 rounding
+            # opacity follows confidence: the same order, 0 still visible, 1 opaque
+            np.testing.assert_allclose(alpha, MIN_ALPHA + (1 - MIN_ALPHA) * conf_of[m.id])
+            assert (np.argsort(alpha) == np.argsort(conf_of[m.id])).all()
         else:
             assert m.scale.x == pytest.approx(0.03)
             assert len(m.points) == 2 * len(BONES)
             np.testing.assert_array_equal(xyz, by_id[m.id][np.array(BONES).ravel()])
+            # a bone as opaque as its less sure end, both of its points alike
+            bone = conf_of[m.id][np.array(BONES)].min(axis=1)
+            np.testing.assert_allclose(alpha, np.repeat(MIN_ALPHA + (1 - MIN_ALPHA) * bone, 2))
     back = deserialize_message(serialize_message(array), MarkerArray)
     assert len(back.markers) == 7 and back.markers[2].ns == 'bones'
 
 
 def test_markers_for_nobody():
-    markers = skeleton_markers(np.zeros(0, int), np.zeros((0, 14, 3)), WORLD).markers
+    markers = skeleton_markers(np.zeros(0, int), np.zeros((0, 14, 3)), WORLD, confidence=np.zeros((0, 14)),
+                               lifetime_s=1.0).markers
     assert len(markers) == 1 and markers[0].action == Marker.DELETEALL
 
 
@@ -126,11 +169,31 @@ def test_colours_stable_and_distinct():
     assert all(0 <= c <= 1 for rgb in colours for c in rgb)
     for a, b in itertools.combinations(colours, 2):
         assert np.linalg.norm(np.subtract(a, b)) > 0.2
-    first = skeleton_markers([4], _joints(1), WORLD).markers[1].color
-    again = skeleton_markers([0, 4], _joints(2, seed=5), WORLD).markers[3].color
+    first = skeleton_markers([4], _joints(1), WORLD, confidence=_conf(1), lifetime_s=1.0).markers[1].color
+    again = skeleton_markers([0, 4], _joints(2, seed=5), WORLD, confidence=_conf(2), lifetime_s=1.0).markers[3].color
     assert (first.r, first.g, first.b) == (again.r, again.g, again.b)
 
 
 def test_marker_id_range():
     with pytest.raises(ValueError, match='INT32'):
-        skeleton_markers([1 << 31], _joints(1), WORLD)
+        skeleton_markers([1 << 31], _joints(1), WORLD, confidence=_conf(1), lifetime_s=1.0)
+
+
+def test_camera_frusta_reach_the_image_corners():
+    from mvpose_ros.core.evaluation.datasets import shelf_cameras
+    cameras = shelf_cameras(None)
+    array = camera_markers(cameras, [f'cam{c}' for c in range(len(cameras))], WORLD)
+    lines = [m for m in array.markers if m.ns == 'frusta']
+    names = [m for m in array.markers if m.ns == 'camera names']
+    assert [m.id for m in lines] == list(range(len(cameras))) and [m.text for m in names] == ['cam0', 'cam1', 'cam2',
+                                                                                              'cam3', 'cam4']
+    assert all(m.lifetime.sec == 0 and m.lifetime.nanosec == 0 and m.header.frame_id == 'world' for m in lines)
+    for camera, marker in zip(cameras, lines):
+        points = frustum(camera)
+        np.testing.assert_allclose(points[0], camera.centre)
+        corners = camera.project(points[1:])
+        np.testing.assert_allclose(corners, [[0, 0], [camera.width, 0], [camera.width, camera.height],
+                                             [0, camera.height]], atol=1e-6)
+        depth = (points[1:] @ camera.R.T + camera.t)[:, 2]
+        np.testing.assert_allclose(depth, 0.5)
+        assert len(marker.points) == 16  # 4 edges from the centre, 4 around the image

@@ -233,13 +233,14 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
             stop(proc)
     assert sorted(skeletons) == [*frames, 316] and all(len(v) == 1 for v in skeletons.values())
     for f in frames:
-        ids, joints = msg_to_skeletons(skeletons[f][0])
+        ids, joints, confidence = msg_to_skeletons(skeletons[f][0])
         assert ids.tolist() == expected[f].person_ids and len(ids) >= 2
         np.testing.assert_allclose(joints, expected[f].joints, atol=1e-5)
+        np.testing.assert_allclose(confidence, expected[f].confidence, atol=1e-6)
         assert skeletons[f][0].header.stamp == wire[f].header.stamp
         assert skeletons[f][0].header.frame_id == 'world'
         assert len(markers[f]) == 1
-        live_ids, live_joints = msg_to_skeletons(live[f][0])  # the causal estimate, at once
+        live_ids, live_joints, _ = msg_to_skeletons(live[f][0])  # the causal estimate, at once
         assert live_ids.tolist() == live_expected[f].person_ids and len(live[f]) == 1
         np.testing.assert_allclose(live_joints, live_expected[f].joints, atol=1e-5)
     assert any(not np.allclose(msg_to_skeletons(live[f][0])[1], msg_to_skeletons(skeletons[f][0])[1])

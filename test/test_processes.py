@@ -239,7 +239,7 @@ elif role == 'bp_solver':
     def answer(info):
         frame = frame_of_stamp(info.header.stamp)
         joints = np.full((1, 14, 3), frame / 1000.0)
-        pub.publish(skeletons_to_msg(np.array([7]), joints, info.header))
+        pub.publish(skeletons_to_msg(np.array([7]), joints, info.header, confidence=np.ones((1, 14))))
     info = node.create_subscription(CameraInfo, 'cam0/camera_info', answer, QOS)
     ready = node.create_publisher(Empty, SOLVER_READY, START_QOS)
     def check():

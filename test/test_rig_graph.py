@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+from msg_adapters.skeleton_msg import Skeletons
 from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_stamps
 from mvpose_ros.bags.replay import InFlight, group_sets, header_stamp_ns
 from mvpose_ros.cli.graph import main as graph_main
@@ -183,7 +184,9 @@ def test_lockstep_nodes_and_their_overrides_file(tmp_path):
 def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
     stamps = [S + k * PERIOD for k in range(4)]
     joints = np.arange(2 * 14 * 3, dtype=float).reshape(2, 14, 3) / 100
-    node = SimpleNamespace(outputs={stamps[0]: (np.array([3, 7]), joints), stamps[2]: (np.array([3]), joints[:1])},
+    confidence = np.full((2, 14), 0.5)
+    node = SimpleNamespace(outputs={stamps[0]: Skeletons(np.array([3, 7]), joints, confidence),
+                                    stamps[2]: Skeletons(np.array([3]), joints[:1], confidence[:1])},
                            output_at={stamps[0]: 1_000 * MS, stamps[2]: 1_500 * MS}, live_at={},
                            info_at={stamps[0]: 900 * MS, stamps[2]: 1_300 * MS}, received={stamps[0]: 1, stamps[2]: 1},
                            bad=[])
@@ -202,6 +205,7 @@ def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
     assert [p['id'] for p in records[0]['people']] == [3, 7]
     assert np.allclose(records[0]['people'][1]['joints'], joints[1], atol=1e-3)
     assert np.array(records[1]['people'][0]['joints']).shape == (14, 3)
+    assert records[1]['people'][0]['confidence'] == [0.5] * 14
 
 
 def test_sets_are_scored_one_line_each_against_the_frame_they_show(tmp_path):

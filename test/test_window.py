@@ -67,7 +67,7 @@ def _clip(seed: int = 0, n_frames: int = T, absent: dict[int, set[int]] | None =
         hyp, data, data_right[pid] = _frames(rng, truth[pid])
         for t in range(n_frames):
             if t not in (absent or {}).get(pid, set()):
-                frames[t].append(PersonFrame(pid, hyp[t], data[t]))
+                frames[t].append(PersonFrame(pid, hyp[t], data[t], np.ones(len(data[t]))))
     return frames, truth, data_right
 
 
@@ -231,7 +231,7 @@ def _fast_clip(seed: int, n_frames: int):
         truth[pid] = _truth(rng, 5 * n_frames)[::5]
         hyp, data, _ = _frames(rng, truth[pid])
         for t in range(n_frames):
-            frames[t].append(PersonFrame(pid, hyp[t], data[t]))
+            frames[t].append(PersonFrame(pid, hyp[t], data[t], np.ones(len(data[t]))))
     return frames, truth
 
 

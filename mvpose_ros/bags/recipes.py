@@ -40,6 +40,7 @@ from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_
                                                  load_actors_gt)
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
+from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 
@@ -298,6 +299,7 @@ def campus_recipe(campus_dir: str | Path) -> Recipe:
                                                          headers[c]), ns
             here = gt.present[i]
             yield GROUND_TRUTH_TOPIC, skeletons_to_msg(np.flatnonzero(here), gt.poses[i, here],
-                                                       Header(stamp=headers[0].stamp, frame_id='world')), ns
+                                                       Header(stamp=headers[0].stamp, frame_id='world'),
+                                                       confidence=np.ones((here.sum(), NUM_JOINTS))), ns  # the truth
 
     return Recipe('campus', inputs, items)

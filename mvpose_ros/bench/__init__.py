@@ -1,2 +1,2 @@
 """The benchmark (ROS-free): runs (bench.runs), their report (bench.report), scenes multiplied by
-shifted copies (bench.scene), the two-process run (bench.pipelined) and OpenCV line plots (bench.plot)."""
+shifted copies (bench.scene), the two-process run (bench.pipelined); plots by core.evaluation.plot."""

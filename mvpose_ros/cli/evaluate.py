@@ -5,6 +5,7 @@
     mvpose-eval shelf --drop-every 2    # uneven frames: every second set dropped, scored on the rest
     mvpose-eval shelf --drop-fraction 0.3 --drop-seed 1 [--evenly-spaced]
     mvpose-eval shelf --score FILE      # score a predictions file (e.g. from the ROS graph)
+    mvpose-eval shelf --confidence-report out/confidence [--score FILE]   # confidence against error
     mvpose-eval campus [--campus-dir CampusSeq1]
 """
 from __future__ import annotations
@@ -25,7 +26,8 @@ from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SH
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
-from mvpose_ros.core.evaluation.predictions import read_predictions, write_predictions
+from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
+from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.inference.window import TERMS
 from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig
@@ -81,6 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--predictions', type=Path, help='write the predictions here (JSON lines)')
     p.add_argument('--score', type=Path, help='only score this predictions file')
     p.add_argument('--no-ablation', action='store_true', help='skip the ablation table')
+    p.add_argument('--confidence-report', type=Path, metavar='DIR',
+                   help='shelf: bin every joint and limb by its confidence, print error, PCP and the threshold '
+                        'trade-off, and write the plots confidence_joints.png and confidence_limbs.png into DIR')
     p.add_argument('--campus-dir', type=Path, help='a full CampusSeq1 folder (campus only)')
     return p
 
@@ -101,8 +106,11 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.score:
         if args.dataset != 'shelf':
             raise ValueError('--score is for shelf')
-        ev = evaluate(read_predictions(args.score), gt, actors)
+        results = [r for r, _ in read_results(args.score)]
+        ev = evaluate(as_predictions(results), gt, actors)
         print(f'{args.score}\n{format_table(ev, reference)}\n{_summary(ev)}', file=out)
+        if args.confidence_report:
+            _confidence_report(results, gt, actors, args.confidence_report, out)
         return 0
     t0 = time.perf_counter()
     if args.dataset == 'shelf':
@@ -141,6 +149,10 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         with open(args.predictions, 'w', encoding='utf-8') as f:
             n = write_predictions(results, f)
         print(f'wrote {n} frames to {args.predictions}', file=out)
+    if args.confidence_report:
+        if args.dataset != 'shelf':
+            raise ValueError('--confidence-report is for shelf')
+        _confidence_report(results, gt, actors, args.confidence_report, out)
     if not args.no_ablation:
         _print_ablation(prepared, config, gt, actors, args.dataset == 'shelf', out, real_time)
     print(f'total {time.perf_counter() - t0:.1f} s', file=out)
@@ -155,6 +167,13 @@ def _print_speed(seq: Sequence2D, prepared: Prepared, bp_timer: StageTimer, out)
     for name, sec in stages.items():
         print(f'  {name:24s} {1000 * sec / n:7.2f} ms', file=out)
     print(f'  {"total":24s} {1000 * total / n:7.2f} ms  -> {n / total:.1f} frames/s', file=out)
+
+
+def _confidence_report(results, gt: GroundTruth, actors: Sequence[int], folder: Path, out) -> None:
+    samples = confidence_samples(results, gt, actors)
+    print('\n' + format_confidence_report(samples), file=out)
+    for path in plot_confidence_report(samples, folder):
+        print(f'wrote {path}', file=out)
 
 
 def _restricted(gt: GroundTruth, frames: Sequence[int]) -> GroundTruth:

@@ -22,7 +22,6 @@ from typing import Sequence, TextIO
 import cv2
 import numpy as np
 
-from msg_adapters.markers import person_colour
 from mvpose_ros.core.geometry.body import HEAD_MODELS, NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 from mvpose_ros.core.geometry.rig import load_rig_file
@@ -30,7 +29,7 @@ from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_act
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
 from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
-from mvpose_ros.core.evaluation.overlay import overlay
+from mvpose_ros.core.evaluation.overlay import overlay, person_colour
 from mvpose_ros.core.stage import StageConfig, Stage3D
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.types import FrameResult
@@ -124,7 +123,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     detected = time.perf_counter()
     stage = Stage3D(cameras, StageConfig.from_params({'window': 0, 'head_model': args.head_model}))
     results = stage.push(args.frame, people) + stage.flush()
-    result = results[0] if results else FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)))
+    nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
+    result = results[0] if results else nobody
     end = time.perf_counter()
     print(f'frame: 2D detection {1e3 * (detected - start):.0f} ms ({len(cameras)} cameras), association and 3D '
           f'{1e3 * (end - detected):.0f} ms, total {1e3 * (end - start):.0f} ms; '

@@ -68,17 +68,22 @@ class Sequence2D:
 
 @dataclass
 class PersonFrame:
-    """One person's hypotheses (J, M, 3) metres and normalised data term (J, M) at one frame."""
+    """One person's hypotheses (J, M, 3) metres, normalised data term (J, M) and 2D support (J,)
+    in [0, 1] (inference.confidence.joint_support) at one frame."""
 
     person_id: int
     hypotheses: np.ndarray
     data: np.ndarray
+    support: np.ndarray
 
 
 @dataclass
 class FrameResult:
-    """Decoded people of one frame: ids (P,) and joints (P, J, 3) metres."""
+    """Decoded people of one frame: ids (P,), joints (P, J, 3) metres and their confidence (P, J)
+    in [0, 1] (inference.confidence; None where the source has none, e.g. an older predictions
+    file)."""
 
     frame: int
     person_ids: list[int]
     joints: np.ndarray
+    confidence: np.ndarray | None = None

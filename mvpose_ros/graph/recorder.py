@@ -34,7 +34,6 @@ from collections import Counter
 from pathlib import Path
 from typing import Any, Mapping, Sequence, TextIO
 
-import numpy as np
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -46,7 +45,7 @@ from sensor_msgs.msg import CameraInfo, PointCloud2
 from std_msgs.msg import Empty
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters.skeleton_msg import msg_to_skeletons
+from msg_adapters.skeleton_msg import Skeletons, msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import header_stamp_ns
@@ -91,7 +90,7 @@ class SkeletonRecorder(Node):
         self.frame_rate = frame_rate
         self.stream = stream
         self.info_at: dict[int, int] = {}
-        self.outputs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.outputs: dict[int, Skeletons] = {}
         self.output_at: dict[int, int] = {}
         self.live_at: dict[int, int] = {}  # stamp -> receipt (ns) of its skeletons/live
         self.received: Counter[int] = Counter()
@@ -151,9 +150,9 @@ class SkeletonRecorder(Node):
             self.outputs[stamp] = decoded
             self.output_at[stamp] = info['received_timestamp']
         if self.stream is not None:
-            ids, joints = decoded
-            result = FrameResult(frame_of_stamp(msg.header.stamp, self.frame_rate), [int(i) for i in ids], joints)
-            self.stream.write(frame_line(result) + '\n')
+            result = FrameResult(frame_of_stamp(msg.header.stamp, self.frame_rate), [int(i) for i in decoded.ids],
+                                 decoded.joints, decoded.confidence)
+            self.stream.write(frame_line(result, stamp=stamp) + '\n')
             self.stream.flush()
 
     def missing_links(self, expected: Mapping[str, Sequence[str]]) -> list[str]:

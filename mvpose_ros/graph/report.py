@@ -10,6 +10,7 @@ from typing import Mapping, Protocol, Sequence, TextIO
 
 import numpy as np
 
+from msg_adapters.skeleton_msg import Skeletons
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions
@@ -161,16 +162,12 @@ def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Rec
     return problems
 
 
-def rig_prediction_lines(set_stamps: Sequence[int], outputs: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> list[str]:
+def rig_prediction_lines(set_stamps: Sequence[int], outputs: Mapping[int, Skeletons]) -> list[str]:
     """One predictions line per set with skeletons, in bag order: {"frame": <set index from 0>,
-    "stamp": <ns>, "people": [{"id": ..., "joints": [[x, y, z] x 14]}]}."""
-    lines = []
-    for index, stamp in enumerate(set_stamps):
-        if stamp in outputs:
-            ids, joints = outputs[stamp]
-            people = json.loads(frame_line(FrameResult(index, [int(i) for i in ids], joints)))['people']
-            lines.append(json.dumps({'frame': index, 'stamp': int(stamp), 'people': people}, separators=(',', ':')))
-    return lines
+    "stamp": <ns>, "people": [{"id": ..., "joints": [[x, y, z] x 14], "confidence": [c x 14]}]}."""
+    return [frame_line(FrameResult(index, [int(i) for i in outputs[stamp].ids], outputs[stamp].joints,
+                                   outputs[stamp].confidence), stamp=int(stamp))
+            for index, stamp in enumerate(set_stamps) if stamp in outputs]
 
 
 def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextIO) -> None:

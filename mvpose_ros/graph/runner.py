@@ -19,7 +19,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import loop_offset_ns
-from mvpose_ros.core.evaluation.predictions import write_predictions
+from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings, NodeSpec, expected_connections, node_command
 from mvpose_ros.graph.memory import MemoryLog
@@ -176,11 +176,13 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
 def save_predictions(stamps: Sequence[int], node: SkeletonRecorder, frame_rate: float, path: Path) -> int:
     """Write the received frames of `stamps` in bag order; returns how many. Written beside and
     renamed into place, so that an interruption never leaves a half-written file."""
-    results = [FrameResult(frame_of(s, frame_rate), [int(i) for i in node.outputs[s][0]], node.outputs[s][1])
-               for s in stamps if s in node.outputs]
+    lines = [frame_line(FrameResult(frame_of(s, frame_rate), [int(i) for i in node.outputs[s].ids],
+                                    node.outputs[s].joints, node.outputs[s].confidence), stamp=int(s))
+             for s in stamps if s in node.outputs]
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + '.partial')
     with open(partial, 'w', encoding='utf-8') as f:
-        n = write_predictions(results, f)
+        f.write(''.join(line + '\n' for line in lines))
+    n = len(lines)
     os.replace(partial, path)
     return n

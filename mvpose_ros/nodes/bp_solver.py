@@ -3,17 +3,20 @@ belief propagation; publishes every frame's 3D skeletons `lag` frames after it a
 causal estimate at once.
 
 In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
-record per person joint, empty when nobody is seen) and skeletons/markers (MarkerArray for RViz),
-both with the input bundle's stamp; skeletons/live (encoding D, the same ids) as soon as a bundle
-is in: its frame decoded from the frames up to it (no lag: for a robot that reacts, where
-skeletons, smoothed by the `lag` frames after it, is for analysis). Frames are numbered by arrival
-(the association's set order), not by stamp x rate; the temporal term uses the real time between
-the bundles' stamps, so sets dropped upstream (uneven gaps) are bridged, and a gap longer than
-`max_gap` seconds breaks the temporal chains. Every bundle message yields exactly one skeleton
-message, but for a late one (a stamp not after the last one taken: a duplicate, or out of order),
-which is logged and dropped. With no input for `idle_flush` seconds (the end of a replay, or a
-stalled graph) every pending frame is decoded and published. A rig without intrinsics in its file
-waits for every camera's CameraInfo; bundles before that are published with no people (logged).
+record per person joint with its confidence, empty when nobody is seen) and skeletons/markers
+(MarkerArray for RViz, living `marker_lifetime` s), both with the input bundle's stamp;
+skeletons/live (encoding D, the same ids) as soon as a bundle is in: its frame decoded from the
+frames up to it (no lag: for a robot that reacts, where skeletons, smoothed by the `lag` frames
+after it, is for analysis); and once, as soon as every camera's intrinsics are known,
+cameras/markers (the rig's frusta, transient local: RViz started later still gets them). Frames
+are numbered by arrival (the association's set order), not by stamp x rate; the temporal term
+uses the real time between the bundles' stamps, so sets dropped upstream (uneven gaps) are
+bridged, and a gap longer than `max_gap` seconds breaks the temporal chains. Every bundle message
+yields exactly one skeleton message, but for a late one (a stamp not after the last one taken: a
+duplicate, or out of order), which is logged and dropped. With no input for `idle_flush` seconds
+(the end of a replay, or a stalled graph) every pending frame is decoded and published. A rig
+without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
+published with no people (logged).
 """
 from __future__ import annotations
 
@@ -22,11 +25,12 @@ import time
 import numpy as np
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters.markers import skeleton_markers
+from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns
@@ -41,6 +45,8 @@ from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, dec
 IDLE_CHECK_S = 0.1
 REPORT_EVERY = 100  # frames between timing lines
 THROTTLE_S = 2.0  # s between two logs of bundles arriving before the intrinsics
+# published once and kept for late subscribers (RViz opened after the solver)
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class _NotReady(ValueError):
@@ -56,10 +62,14 @@ class BpSolverNode(Node):
             *rig_parameters(),
             *parameter_specs(SOLVER_PARAMETERS),
             ('idle_flush', 1.0, 's without input after which every pending frame is output'),
+            ('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
+                                     'keep it above the time between two frames'),
         ])
         rig = load_rig_parameter(p)
         if not p['idle_flush'] > 0:
             raise StartupError('parameter idle_flush: must be > 0')
+        if not p['marker_lifetime'] >= 0:
+            raise StartupError('parameter marker_lifetime: must be >= 0')
         try:
             config = StageConfig.from_params(p)
         except ValueError as exc:
@@ -74,6 +84,8 @@ class BpSolverNode(Node):
         self._inference = Inference3D(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
                                       config.solver)
         self._idle = p['idle_flush']
+        self._marker_lifetime = p['marker_lifetime']
+        self._cameras_sent = False
         self._stamps: dict[int, Time] = {}  # frames pushed, not yet output
         self._next_frame = 0  # the number of the next frame pushed: arrival order
         self._first_ns: int | None = None  # stamp of the first frame pushed: times are relative to it
@@ -85,6 +97,7 @@ class BpSolverNode(Node):
         self._live = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
         self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
+        self._camera_markers = self.create_publisher(MarkerArray, topics.CAMERA_MARKERS, LATCHED_QOS)
         self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS)
         self.create_timer(IDLE_CHECK_S, self._on_timer)
         self.get_logger().info(f'window {p["window"]}, lag {p["lag"]}, terms {",".join(p["terms"])}, '
@@ -125,7 +138,7 @@ class BpSolverNode(Node):
             if not isinstance(exc, _NotReady) or now - self._last_wait_log >= THROTTLE_S:
                 self._last_wait_log = now
                 self.get_logger().error(f'bundles stamp {stamp} ns: {exc}; published with no people')
-            nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)))
+            nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
             self._publish_live(nobody, msg.header.stamp)
             self._publish(nobody, msg.header.stamp)
             return
@@ -136,6 +149,8 @@ class BpSolverNode(Node):
             self._publish(result, self._stamps.pop(result.frame))
 
     def _on_timer(self) -> None:
+        if not self._cameras_sent:
+            self._publish_cameras()
         if self._stamps and time.monotonic() - self._last_input >= self._idle:
             results = self._inference.flush()
             self.get_logger().info(f'no input for {self._idle} s: output the {len(results)} pending frames')
@@ -144,13 +159,24 @@ class BpSolverNode(Node):
 
     def _publish_live(self, result: FrameResult, stamp: Time) -> None:
         header = Header(stamp=stamp, frame_id=self._world_frame)
-        self._live.publish(skeletons_to_msg(np.asarray(result.person_ids, dtype=np.int64), result.joints, header))
+        self._live.publish(skeletons_to_msg(np.asarray(result.person_ids, dtype=np.int64), result.joints, header,
+                                            confidence=result.confidence))
+
+    def _publish_cameras(self) -> None:
+        """The rig's frusta, once every camera's intrinsics are known."""
+        cameras = self._inference.cameras if self._intrinsics is None else self._intrinsics.known
+        if any(c is None for c in cameras):
+            return
+        header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self._world_frame)
+        self._camera_markers.publish(camera_markers(cameras, self._names, header))
+        self._cameras_sent = True
 
     def _publish(self, result: FrameResult, stamp: Time) -> None:
         header = Header(stamp=stamp, frame_id=self._world_frame)
         ids = np.asarray(result.person_ids, dtype=np.int64)
-        self._skeletons.publish(skeletons_to_msg(ids, result.joints, header))
-        self._markers.publish(skeleton_markers(ids, result.joints, header))
+        self._skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
+        self._markers.publish(skeleton_markers(ids, result.joints, header, confidence=result.confidence,
+                                               lifetime_s=self._marker_lifetime))
         self._frames_out += 1
         if self._frames_out % REPORT_EVERY == 0 and self._inference is not None:
             seconds = self._inference.timer.seconds

@@ -18,7 +18,7 @@ from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
-from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.solver import person_frames
 from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
@@ -93,7 +93,8 @@ def infer(prepared: Prepared, inference: InferenceConfig, head_model: str,
         results += window.push(frame, people, (frame if real_time else k) / FRAME_RATE)
     results += window.flush()
     t0 = time.perf_counter()
-    out = [replace(r, joints=finalize_head(r.joints, head_model)) for r in results]
+    out = [replace(r, joints=finalize_head(r.joints, head_model),
+                   confidence=finalize_confidence(r.confidence, head_model)) for r in results]
     timer.add('decoding', t0)
     return out
 

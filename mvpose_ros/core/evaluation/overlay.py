@@ -2,6 +2,7 @@
 over that camera's 2D detections drawn thinly."""
 from __future__ import annotations
 
+import colorsys
 from typing import Sequence
 
 import cv2
@@ -12,8 +13,16 @@ from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import Person2D
 
 DETECTION_BGR = (255, 255, 255)
+GOLDEN_RATIO_CONJUGATE = (5.0 ** 0.5 - 1.0) / 2.0
 _SHIFT = 4  # cv2 sub-pixel drawing: coordinates in 1/16 px
 _BONES = np.array(BONES)  # (B, 2) joints of each bone, the 14 dataset joints
+
+
+def person_colour(person_id: int) -> tuple[float, float, float]:
+    """(r, g, b) in [0, 1] for a person id, the same in RViz markers, overlays and videos: hues
+    step by the golden ratio, so consecutive ids get far-apart hues and any few ids stay distinct."""
+    r, g, b = colorsys.hsv_to_rgb((int(person_id) * GOLDEN_RATIO_CONJUGATE) % 1.0, 0.85, 0.95)
+    return r, g, b
 
 
 def _segments(uv: np.ndarray) -> np.ndarray:

@@ -104,14 +104,27 @@ def _padded(predictions: Mapping[int, np.ndarray], frames: np.ndarray) -> np.nda
     return out
 
 
-def evaluate(predictions: Mapping[int, np.ndarray], gt: GroundTruth, actors: Sequence[int],
-             alpha: float = ALPHA) -> Evaluation:
-    """Score predictions {actorsGT frame: (P, 14, 3) metres} against gt for the given actors.
+@dataclass
+class Matches:
+    """Each ground-truth actor of each frame with the predicted person closest to it.
 
-    Frames of gt missing from `predictions` (or with P = 0) count every limb of every present
-    actor as wrong. Predicted joints that are NaN make their limbs wrong and are left out of MPJPE.
+    truth: (F, A, 14, 3) metres (NaN where absent); present: (F, A); best: (F, A) index of the
+    closest predicted person in its frame; matched: (F, A) present and with a prediction;
+    chosen: (F, A, 14, 3) that person's joints (NaN where not matched); joint_err: (F, A, 14)
+    metres (NaN where not matched or a predicted joint is NaN).
     """
-    actors = tuple(int(a) for a in actors)
+
+    truth: np.ndarray
+    present: np.ndarray
+    best: np.ndarray
+    matched: np.ndarray
+    chosen: np.ndarray
+    joint_err: np.ndarray
+
+
+def match_actors(predictions: Mapping[int, np.ndarray], gt: GroundTruth, actors: Sequence[int]) -> Matches:
+    """Match every present actor (actorsGT indices) of every gt frame to the prediction {actorsGT
+    frame: (P, 14, 3) metres} of least mean joint distance."""
     truth = gt.poses[:, list(actors)]                                  # (F, A, 14, 3)
     present = np.isfinite(truth).all(axis=(-2, -1))                    # (F, A)
     pred = _padded(predictions, gt.frames)                             # (F, P, 14, 3)
@@ -125,29 +138,45 @@ def evaluate(predictions: Mapping[int, np.ndarray], gt: GroundTruth, actors: Seq
     matched = present & np.isfinite(np.take_along_axis(mean_err, best[..., None], -1)[..., 0])
     chosen = pred[np.arange(len(pred))[:, None], best]                 # (F, A, 14, 3)
     chosen = np.where(matched[..., None, None], chosen, np.nan)
-
-    ends_true = _with_hip_centre(truth)[..., LIMBS, :]                 # (F, A, 10, 2, 3)
-    ends_pred = _with_hip_centre(chosen)[..., LIMBS, :]
-    end_err = np.linalg.norm(ends_pred - ends_true, axis=-1)           # (F, A, 10, 2), NaN = wrong
-    tolerance = alpha * np.linalg.norm(ends_true[..., 0, :] - ends_true[..., 1, :], axis=-1)
-    ok = np.stack([(end_err <= tolerance[..., None]).all(axis=-1),
-                   end_err.mean(axis=-1) <= tolerance]) & present[..., None]  # (2, F, A, 10)
-
     err = np.take_along_axis(joint_err, best[..., None, None], axis=2)[:, :, 0]  # (F, A, 14)
-    err = np.where(matched[..., None], err, np.nan)
+    return Matches(truth, present, best, matched, chosen, np.where(matched[..., None], err, np.nan))
+
+
+def limb_correct(truth: np.ndarray, chosen: np.ndarray, alpha: float = ALPHA) -> np.ndarray:
+    """(2, ..., 10) whether each limb (LIMBS) of the poses chosen (..., 14, 3) is correct against
+    truth (..., 14, 3), strict then lenient (FORMS); NaN joints make their limbs wrong."""
+    ends_true = _with_hip_centre(truth)[..., LIMBS, :]                 # (..., 10, 2, 3)
+    ends_pred = _with_hip_centre(chosen)[..., LIMBS, :]
+    end_err = np.linalg.norm(ends_pred - ends_true, axis=-1)           # (..., 10, 2), NaN = wrong
+    tolerance = alpha * np.linalg.norm(ends_true[..., 0, :] - ends_true[..., 1, :], axis=-1)
+    return np.stack([(end_err <= tolerance[..., None]).all(axis=-1), end_err.mean(axis=-1) <= tolerance])
+
+
+def evaluate(predictions: Mapping[int, np.ndarray], gt: GroundTruth, actors: Sequence[int],
+             alpha: float = ALPHA) -> Evaluation:
+    """Score predictions {actorsGT frame: (P, 14, 3) metres} against gt for the given actors.
+
+    Frames of gt missing from `predictions` (or with P = 0) count every limb of every present
+    actor as wrong. Predicted joints that are NaN make their limbs wrong and are left out of MPJPE.
+    """
+    actors = tuple(int(a) for a in actors)
+    m = match_actors(predictions, gt, actors)
+    ok = limb_correct(m.truth, m.chosen, alpha) & m.present[..., None]  # (2, F, A, 10)
+
+    err = m.joint_err
     scored = np.isfinite(err)
     err_sum, err_n = np.where(scored, err, 0).sum(axis=(0, 2)), scored.sum(axis=(0, 2))
     with np.errstate(divide='ignore', invalid='ignore'):
         mpjpe = 1000.0 * err_sum / err_n
     mpjpe_all = 1000.0 * err_sum.sum() / err_n.sum() if err_n.sum() else float('nan')
 
-    frames = present.sum(axis=0)
+    frames = m.present.sum(axis=0)
     return Evaluation(
         actors=actors,
         correct=ok.sum(axis=1) @ _MEMBERSHIP,
         total=frames[:, None] * _MEMBERSHIP.sum(axis=0),
         frames=frames,
-        missed=(present & ~matched).sum(axis=0),
+        missed=(m.present & ~m.matched).sum(axis=0),
         mpjpe=mpjpe,
         mpjpe_all=float(mpjpe_all),
         alpha=alpha,

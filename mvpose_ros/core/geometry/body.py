@@ -132,3 +132,15 @@ def finalize_head(joints: np.ndarray, head_model: str) -> np.ndarray:
         out[..., BOTTOM_HEAD, :] = 0.5 * (joints[..., NECK, :] + centre)
         out[..., TOP_HEAD, :] = 2.0 * centre - out[..., BOTTOM_HEAD, :]
     return out
+
+
+def finalize_confidence(confidence: np.ndarray, head_model: str) -> np.ndarray:
+    """Confidence (..., 14) of the dataset's joints from that of the 16 inferred ones (..., 16): a
+    derived head joint is as sure as the least sure joint it is made from."""
+    if head_model not in HEAD_MODELS:
+        raise ValueError(f'unknown head model {head_model!r}; expected one of {HEAD_MODELS}')
+    confidence = np.asarray(confidence, dtype=np.float64)
+    out = confidence[..., :NUM_JOINTS].copy()
+    if head_model == 'anatomical':
+        out[..., [BOTTOM_HEAD, TOP_HEAD]] = confidence[..., [NECK, R_EAR, L_EAR]].min(axis=-1, keepdims=True)
+    return out

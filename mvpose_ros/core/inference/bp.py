@@ -146,6 +146,10 @@ class ChainBP:
         """(T, J, M) normalised beliefs."""
         return _softmax(self.total)
 
+    def marginals_at(self, row: int) -> np.ndarray:
+        """(J, M) normalised beliefs of one frame of the chain."""
+        return _softmax(self.total[row])
+
 
 def run_chains(chains: Sequence[ChainBP], iterations: int) -> None:
     """ChainBP.run of every chain, with the chains of one shape stacked along the joint axis so

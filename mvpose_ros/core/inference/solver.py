@@ -11,8 +11,9 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import BONES, HEAD_MODELS, SYMMETRIC_PAIRS, finalize_head
+from mvpose_ros.core.geometry.body import BONES, HEAD_MODELS, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.inference.confidence import joint_support
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import HeatmapStack
 from mvpose_ros.core.inference.hypotheses import SamplingConfig, sample_people
@@ -56,7 +57,8 @@ def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: in
                       HeatmapStack.of([hm for p in kept for _, hm in views[p]]) if len(kept) < len(people) else stack)
     if timer:
         timer.add('data term', t0)
-    return [PersonFrame(people[p][0], hyps[p], d) for p, d in zip(kept, data)]
+    support = [joint_support([v.keypoints[:, 2] for v in people[p][1].values()], len(cameras)) for p in kept]
+    return [PersonFrame(people[p][0], hyps[p], d, s) for p, d, s in zip(kept, data, support)]
 
 
 class Inference3D:
@@ -87,6 +89,8 @@ class Inference3D:
 
     def _finish(self, result: FrameResult) -> FrameResult:
         t0 = time.perf_counter()
-        out = FrameResult(result.frame, result.person_ids, finalize_head(result.joints, self.config.head_model))
+        head = self.config.head_model
+        out = FrameResult(result.frame, result.person_ids, finalize_head(result.joints, head),
+                          finalize_confidence(result.confidence, head))
         self.timer.add('decoding', t0)
         return out

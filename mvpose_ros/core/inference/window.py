@@ -25,6 +25,7 @@ import numpy as np
 
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
+from mvpose_ros.core.inference.confidence import joint_confidence
 from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.types import FrameResult, PersonFrame
@@ -88,12 +89,13 @@ class _Slot:
 @dataclass
 class _Chain:
     """Warm-started BP of one person over the linked frames `frames` (one per BP row); best:
-    each frame's best-data joints (J, 3), for the limb lengths."""
+    each frame's best-data joints (J, 3), for the limb lengths; support: each frame's (J,)."""
 
     frames: deque[int] = field(default_factory=deque)
     bp: ChainBP | None = None
     hypotheses: deque[np.ndarray] = field(default_factory=deque)
     best: deque[np.ndarray] = field(default_factory=deque)
+    support: deque[np.ndarray] = field(default_factory=deque)
 
     @property
     def last(self) -> int:
@@ -182,6 +184,7 @@ class SlidingWindow:
                 chain = self._chains[pid] = _Chain()
             chain.frames.append(slot.frame)
             chain.hypotheses.append(p.hypotheses)
+            chain.support.append(p.support)
             chain.best.append(np.take_along_axis(p.hypotheses, p.data.argmax(-1)[:, None, None], axis=1)[:, 0])
             t0 = time.perf_counter()
             groups = self._groups(pid, i, chain.best)
@@ -196,6 +199,7 @@ class SlidingWindow:
                 for _ in range(excess):
                     chain.frames.popleft()
                     chain.hypotheses.popleft()
+                    chain.support.popleft()
                     chain.best.popleft()
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
@@ -249,38 +253,43 @@ class SlidingWindow:
         ids = sorted(slot.people)
         if self._warm:
             t0 = time.perf_counter()
-            joints = [self._decode_warm(pid, slot.frame) for pid in ids]
+            decoded = [self._decode_warm(pid, slot.frame) for pid in ids]
             if forget:
                 self._ended = [(q, c) for q, c in self._ended if c.last > slot.frame]
             self.timer.add('decoding', t0)
         else:
-            joints = []
+            decoded = []
             for pid in ids:
                 run = self._run(pid, i)
-                joints.append(self._solve(pid, run)[i - run.start])
-        return FrameResult(slot.frame, ids, _stack(joints))
+                joints, confidence = self._solve(pid, run)
+                decoded.append((joints[i - run.start], confidence[i - run.start]))
+        return _result(slot.frame, ids, decoded)
 
-    def _decode_warm(self, pid: int, frame: int) -> np.ndarray:
-        """Joints (J, 3) of person pid at `frame` from the current beliefs of its chain."""
+    def _decode_warm(self, pid: int, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """Joints (J, 3) and their confidence (J,) of person pid at `frame` from the current beliefs
+        of its chain."""
         chains = [c for q, c in self._ended if q == pid] + ([self._chains[pid]] if pid in self._chains else [])
         chain = next(c for c in chains if c.frames[0] <= frame <= c.last)
         row = chain.frames.index(frame)
         best = chain.bp.total[row].argmax(axis=-1)  # (J,)
-        return np.take_along_axis(chain.hypotheses[row], best[:, None, None], axis=1)[:, 0]
+        hyp = chain.hypotheses[row]
+        return (np.take_along_axis(hyp, best[:, None, None], axis=1)[:, 0],
+                joint_confidence(chain.bp.marginals_at(row), hyp, best, chain.support[row]))
 
     def _decode_all(self) -> list[FrameResult]:
-        decoded: dict[tuple[int, int], np.ndarray] = {}
+        decoded: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         for i, slot in enumerate(self._slots):
             for pid in slot.people:
                 if (pid, i) not in decoded:
                     run = self._run(pid, i)
-                    for pos, joints in zip(run, self._solve(pid, run)):
-                        decoded[(pid, pos)] = joints
-        return [FrameResult(s.frame, sorted(s.people), _stack([decoded[(pid, i)] for pid in sorted(s.people)]))
+                    for pos, joints, confidence in zip(run, *self._solve(pid, run)):
+                        decoded[(pid, pos)] = joints, confidence
+        return [_result(s.frame, sorted(s.people), [decoded[(pid, i)] for pid in sorted(s.people)])
                 for i, s in enumerate(self._slots)]
 
-    def _solve(self, pid: int, run: range) -> np.ndarray:
-        """Decoded joints (T, J, 3) of person pid over the buffer positions `run`."""
+    def _solve(self, pid: int, run: range) -> tuple[np.ndarray, np.ndarray]:
+        """Decoded joints (T, J, 3) of person pid over the buffer positions `run`, and their
+        confidence (T, J)."""
         t0 = time.perf_counter()
         frames = [self._slots[i].people[pid] for i in run]
         hyp = np.stack([f.hypotheses for f in frames])  # (T, J, M, 3)
@@ -307,8 +316,9 @@ class SlidingWindow:
         t0 = self.timer.add('bp', t0)
         best = marginals.argmax(axis=-1)  # (T, J)
         out = np.take_along_axis(hyp, best[..., None, None], axis=2)[:, :, 0]
+        confidence = joint_confidence(marginals, hyp, best, np.stack([f.support for f in frames]))
         self.timer.add('decoding', t0)
-        return out
+        return out, confidence
 
     def _collision(self, pid: int, i: int) -> np.ndarray:
         slot = self._slots[i]
@@ -352,8 +362,11 @@ def _pruned(p: PersonFrame, k: int) -> PersonFrame:
     keep = np.argsort(-p.data, axis=1, kind='stable')[:, :k]
     data = np.take_along_axis(p.data, keep, axis=1)
     return PersonFrame(p.person_id, np.take_along_axis(p.hypotheses, keep[..., None], axis=1),
-                       data / np.maximum(data.sum(axis=1, keepdims=True), np.finfo(float).tiny))
+                       data / np.maximum(data.sum(axis=1, keepdims=True), np.finfo(float).tiny), p.support)
 
 
-def _stack(joints: list[np.ndarray]) -> np.ndarray:
-    return np.stack(joints) if joints else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
+def _result(frame: int, ids: list[int], decoded: list[tuple[np.ndarray, np.ndarray]]) -> FrameResult:
+    """A frame's result from each person's (joints (J, 3), confidence (J,))."""
+    if not decoded:
+        return FrameResult(frame, ids, np.zeros((0, NUM_INFERENCE_JOINTS, 3)), np.zeros((0, NUM_INFERENCE_JOINTS)))
+    return FrameResult(frame, ids, np.stack([j for j, _ in decoded]), np.stack([c for _, c in decoded]))
