@@ -18,6 +18,10 @@ BUNDLES = 'people/bundles'  # associated people, every view (encoding C)
 SKELETONS = 'skeletons'  # 3D skeletons (encoding D)
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
 
+# The one absolute name: every ROS tool (diagnostic_aggregator, rqt_robot_monitor) listens on
+# /diagnostics; each status names its node by its fully qualified name, namespace included.
+DIAGNOSTICS = '/diagnostics'  # diagnostic_msgs/DiagnosticArray
+
 
 def camera_namespace(camera: int | str) -> str:
     """The namespace of a rig camera, relative: its name in the rig file, or for an index c of a
