@@ -20,6 +20,10 @@ SKELETONS_LIVE = 'skeletons/live'  # the same with no lag: each frame's causal e
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
 CAMERA_MARKERS = 'cameras/markers'  # the rig's camera frusta (MarkerArray), published once, transient local
 
+# The one absolute name: every ROS tool (diagnostic_aggregator, rqt_robot_monitor) listens on
+# /diagnostics; each status names its node by its fully qualified name, namespace included.
+DIAGNOSTICS = '/diagnostics'  # diagnostic_msgs/DiagnosticArray
+
 
 def camera_namespace(camera: int | str) -> str:
     """The namespace of a rig camera, relative: its name in the rig file, or for an index c of a

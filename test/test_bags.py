@@ -428,3 +428,31 @@ def test_shelf_rig_raw_recipe_gives_rgb8_images_on_the_raw_topics():
     assert isinstance(image, Image) and image.encoding == 'rgb8' and (image.width, image.height) == (1548, 1164)
     assert msg_to_image(image).shape == (1164, 1548, 3)
     assert '/image_raw/compressed' not in recipe.rig_text() and "image: /rig/left/image_raw\n" in recipe.rig_text()
+
+
+def test_shelf_bag_with_a_bumped_or_an_unplugged_camera():
+    """--rotate-camera: camera 2's candidates move (about fx tan 2 degrees) from frame 450 on, the
+    others and earlier frames are the real ones; --unplug-camera: camera 3 sends nothing from then."""
+    shelf = dataset_dir('shelf', None)
+    first = 450 * 40_000_000
+
+    def openpose(fault):
+        out = {}
+        for topic, msg, stamp in shelf_recipe(shelf, fault=fault).items():
+            if topic.endswith('/openpose'):
+                out[topic, stamp] = np.concatenate([c[:, :2] for c in msg_to_openpose(msg).candidates if len(c)])
+        return out
+
+    real = openpose(None)
+    turned = openpose(recipes.CameraFault(2, 450, 2.0))
+    fx = shelf_cameras(None)[2].K[0, 0]
+    for (topic, stamp), uv in real.items():
+        shift = np.abs(turned[topic, stamp] - uv).max(axis=0)
+        if topic == '/cam2/openpose' and stamp >= first:
+            assert 0.8 * fx * np.tan(np.radians(2)) < shift[0] < 1.3 * fx * np.tan(np.radians(2))
+        else:
+            assert shift.max() == 0
+    unplugged = openpose(recipes.CameraFault(3, 450))
+    assert set(unplugged) == {k for k in real if not (k[0] == '/cam3/openpose' and k[1] >= first)}
+    with pytest.raises(ValueError, match='camera 7'):
+        shelf_recipe(shelf, fault=recipes.CameraFault(7, 450))

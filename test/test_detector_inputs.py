@@ -18,8 +18,7 @@ from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compr
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.heatmap_detector import (MAX_CAUSE_CHARS, MAX_CAUSES, OTHER_CAUSES, DropLog,
-                                               _camera_indices, decode_image, image_type, image_type_by_name,
+from mvpose_ros.nodes.heatmap_detector import (_camera_indices, decode_image, image_type, image_type_by_name,
                                                in_namespace, rig_namespace)
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
@@ -128,52 +127,6 @@ def test_camera_inputs_are_best_effort_keep_last():
     qos = camera_qos(3)
     assert (qos.reliability, qos.history, qos.depth) == (ReliabilityPolicy.BEST_EFFORT, HistoryPolicy.KEEP_LAST, 3)
     assert camera_qos() is not camera_qos()  # fresh: the overriding options write into it
-
-
-class _Logger:
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, str]] = []
-
-    def error(self, text: str, **_) -> None:
-        self.lines.append(('error', text))
-
-    def warning(self, text: str, **_) -> None:
-        self.lines.append(('warning', text))
-
-
-def test_an_unusable_input_is_logged_once_per_camera_and_cause_then_counted():
-    logger = _Logger()
-    drops = DropLog(logger)
-    assert drops.report('left', 'image', 1, 'CompressedImage data: truncated')
-    assert not drops.report('left', 'image', 2, 'CompressedImage data:  truncated')  # the same cause
-    assert drops.report('right', 'image', 3, 'CompressedImage data: truncated')  # another camera
-    assert drops.report('left', 'image', 4, 'Image encoding: bayer')  # another cause
-    assert not drops.report('left', 'image', 5, 'CompressedImage data: truncated')
-    errors = [text for level, text in logger.lines if level == 'error']
-    assert errors == ['left: image stamp 1 ns dropped: CompressedImage data: truncated (said once per camera and '
-                      'cause; later ones are counted)',
-                      'right: image stamp 3 ns dropped: CompressedImage data: truncated (said once per camera and '
-                      'cause; later ones are counted)',
-                      'left: image stamp 4 ns dropped: Image encoding: bayer (said once per camera and cause; later '
-                      'ones are counted)']
-    assert drops.summary() == ('left: 3 x CompressedImage data: truncated; left: 1 x Image encoding: bayer; '
-                               'right: 1 x CompressedImage data: truncated')
-
-
-def test_junk_with_ever_new_causes_keeps_the_drop_log_bounded():
-    """Every junk message can carry a cause of its own (its size, its frame_id): past MAX_CAUSES
-    per camera they are counted together, and a long cause is cut, so neither the error lines nor
-    the counts grow with a flood."""
-    logger = _Logger()
-    drops = DropLog(logger)
-    for k in range(1000):
-        drops.report('left', 'image', k, f"frame_id '{k}{'x' * 5000}' is not this camera")
-    assert drops.report('right', 'image', 0, 'Image data: 9 bytes')  # other cameras keep their own causes
-    assert len(drops.counts) == MAX_CAUSES + 2
-    assert drops.counts['left', OTHER_CAUSES] == 1000 - MAX_CAUSES
-    assert max(len(cause) for _, cause in drops.counts) <= MAX_CAUSE_CHARS
-    assert sum(level == 'error' for level, _ in logger.lines) == MAX_CAUSES + 2  # the others counted, not told
-    assert max(len(text) for _, text in logger.lines if _ == 'error') < MAX_CAUSE_CHARS + 200
 
 
 def test_admission_checks_every_input_before_it_is_queued_and_decodes_nothing(shelf_image):

@@ -31,7 +31,11 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     assert StageConfig.from_params({}) == default
     assert StageConfig.from_params(default.to_params()) == default
     assert set(default.to_params()) == set(ALL_PARAMETERS)
-    assert [name for name, _, _ in parameter_specs(ALL_PARAMETERS)] == list(ALL_PARAMETERS)
+    specs = parameter_specs(ALL_PARAMETERS)
+    assert [s.name for s in specs] == list(ALL_PARAMETERS)
+    assert all(s.low is not None or s.high is not None for s in specs if isinstance(s.default, (int, float)))
+    assert {s.name for s in specs if s.live} == {'collision_centre', 'collision_width', 'max_gap', 'track_iou',
+                                                 'match_distance'}
     changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
                                        'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored',
                                        'max_gap': 0.5, 'frame_rate': 30.0})

@@ -2,7 +2,9 @@
 
 - `shelf`: Shelf test frames 300..600, per camera c `/cam{c}/camera_info` and `/cam{c}/openpose`
   (the real OpenPose BODY25 output, encoding A), plus `/cam{c}/image_raw` for frame 572, the one
-  frame whose real images are available.
+  frame whose real images are available. With a CameraFault, one camera is bumped (turned about
+  its optical centre from a frame on, its calibration unchanged: its OpenPose candidates move as
+  the turned camera would see them) or unplugged (no message from it from a frame on).
 - `shelf_images`: frame 572 only, images and camera infos (input of image-based 2D backends).
 - `shelf_rig` / `shelf_rig_raw`: the five frame-572 images as a foreign rig's driver would record
   them (see shelf_rig_recipe): 40 sets at 25 Hz, camera names, topics and frame ids of a driver,
@@ -41,6 +43,8 @@ from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.detection.openpose import OpenPoseFrame
+from mvpose_ros.core.geometry.bump import axis_rotation, bumped_camera, bumped_pixels
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 
@@ -77,17 +81,21 @@ class Recipe:
 
 
 def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path | None = None,
-                drop: FrameDrop = FrameDrop()) -> Recipe:
+                drop: FrameDrop = FrameDrop(), fault: CameraFault | None = None) -> Recipe:
     """The recipe `name` (one of RECIPES); campus needs campus_dir, the others the data root.
-    `drop` leaves frames of the shelf bag out, as sets dropped upstream (the others refuse it)."""
+    `drop` leaves frames of the shelf bag out, as sets dropped upstream, and `fault` puts a camera
+    fault on it (the other recipes refuse both)."""
     if drop and name != 'shelf':
         raise ValueError(f'dropping frames is for the shelf bag, not {name}')
+    if fault is not None and name != 'shelf':
+        raise ValueError(f'a camera fault (--rotate-camera, --unplug-camera) is for the shelf bag, not {name}')
     if name == 'campus':
         if campus_dir is None:
             raise ValueError('the campus bag needs a CampusSeq1 folder (--campus-dir)')
         return campus_recipe(campus_dir)
     if name in ('shelf', 'shelf_images'):
-        return shelf_recipe(dataset_dir('shelf', data_root), images_only=name == 'shelf_images', drop=drop)
+        return shelf_recipe(dataset_dir('shelf', data_root), images_only=name == 'shelf_images', drop=drop,
+                            fault=fault)
     if name in ('shelf_rig', 'shelf_rig_raw'):
         return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name == 'shelf_rig')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
@@ -99,15 +107,44 @@ def _require(*paths: Path) -> None:
             raise FileNotFoundError(f'{path}: missing')
 
 
+@dataclass(frozen=True)
+class CameraFault:
+    """Camera `camera` from Shelf frame `from_frame` on: turned by `degrees` about its optical
+    `axis` (core.geometry.bump), or with degrees None unplugged (it sends nothing)."""
+
+    camera: int
+    from_frame: int
+    degrees: float | None = None
+    axis: str = 'y'
+
+    def describe(self) -> str:
+        """E.g. 'cam2 turned 2 deg about y from frame 450' (part of the bag's recipe name)."""
+        what = 'unplugged' if self.degrees is None else f'turned {self.degrees:g} deg about {self.axis}'
+        return f'cam{self.camera} {what} from frame {self.from_frame}'
+
+    def default_folder(self) -> str:
+        """The bag folder name under bags/ for the shelf bag with this fault."""
+        what = 'unplugged' if self.degrees is None else f'rot{self.degrees:g}{self.axis}'
+        return f'shelf_cam{self.camera}_{what}_from{self.from_frame}'
+
+
+def _bumped(frame: OpenPoseFrame, camera: Camera, bumped: Camera) -> OpenPoseFrame:
+    """The OpenPose output of `camera` as the bumped camera would have seen it: every candidate
+    moved (same score; the part affinities between candidates are kept)."""
+    return OpenPoseFrame([np.column_stack([bumped_pixels(camera, bumped, c[:, :2]), c[:, 2]]) if len(c) else c
+                          for c in frame.candidates], frame.pafs)
+
+
 def _headers(frame: int, n_cameras: int) -> tuple[int, list[Header]]:
     """Log stamp (ns) and one header per camera of `frame`."""
     stamp = stamp_of_frame(frame)
     return stamp_ns(stamp), [Header(stamp=stamp, frame_id=f'cam{c}') for c in range(n_cameras)]
 
 
-def shelf_recipe(shelf: Path, images_only: bool = False, drop: FrameDrop = FrameDrop()) -> Recipe:
+def shelf_recipe(shelf: Path, images_only: bool = False, drop: FrameDrop = FrameDrop(),
+                 fault: CameraFault | None = None) -> Recipe:
     """The `shelf` bag (or `shelf_images` with images_only) from the Shelf folder `shelf`, without
-    the frames `drop` leaves out."""
+    the frames `drop` leaves out and with `fault` on one camera if given."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
     _require(calibration)
     rig = dataset_cameras('shelf', calibration=calibration)
@@ -116,7 +153,15 @@ def shelf_recipe(shelf: Path, images_only: bool = False, drop: FrameDrop = Frame
     detections = [] if images_only else [shelf / 'openpose_body25' / f'{c}.txt' for c in range(len(rig))]
     _require(*images.values(), *detections)
     frames: Sequence[int] = SHELF_IMAGE_FRAMES if images_only else SHELF_TEST_FRAMES
+    if fault is not None and not (0 <= fault.camera < len(rig) and fault.from_frame in frames):
+        raise ValueError(f'camera fault: camera {fault.camera} must be in 0..{len(rig) - 1} and frame '
+                         f'{fault.from_frame} in {frames[0]}..{frames[-1]}')
+    bumped = (bumped_camera(rig[fault.camera], axis_rotation(fault.axis, fault.degrees))
+              if fault is not None and fault.degrees is not None else None)
     frames = [frames[k] for k in drop.kept(len(frames))]
+
+    def sends(f: int, c: int) -> bool:
+        return fault is None or fault.degrees is not None or c != fault.camera or f < fault.from_frame
 
     def items() -> Iterator[Item]:
         openpose = [read_body25(path, cam.width, cam.height) for path, cam in zip(detections, rig)]
@@ -127,15 +172,21 @@ def shelf_recipe(shelf: Path, images_only: bool = False, drop: FrameDrop = Frame
         for f in frames:
             ns, headers = _headers(f, len(rig))
             for c, cam in enumerate(rig):
-                yield f'/cam{c}/camera_info', camera_to_info(cam, headers[c]), ns
+                if sends(f, c):
+                    yield f'/cam{c}/camera_info', camera_to_info(cam, headers[c]), ns
             if f in SHELF_IMAGE_FRAMES:
                 for c, cam in enumerate(rig):
-                    yield f'/cam{c}/image_raw', image_to_msg(read_image(images[f, c], cam), headers[c]), ns
+                    if sends(f, c):
+                        yield f'/cam{c}/image_raw', image_to_msg(read_image(images[f, c], cam), headers[c]), ns
             for c, frames_of_camera in enumerate(openpose):
-                yield f'/cam{c}/openpose', openpose_to_msg(frames_of_camera[f - SHELF_TEST_FRAMES.start],
-                                                           headers[c]), ns
+                raw = frames_of_camera[f - SHELF_TEST_FRAMES.start]
+                if bumped is not None and c == fault.camera and f >= fault.from_frame:
+                    raw = _bumped(raw, rig[c], bumped)
+                if sends(f, c):
+                    yield f'/cam{c}/openpose', openpose_to_msg(raw, headers[c]), ns
 
     name = 'shelf_images' if images_only else 'shelf'
+    name += f' ({fault.describe()})' if fault is not None else ''
     return Recipe(name, (calibration, *images.values(), *detections), items, variant=drop.label)
 
 

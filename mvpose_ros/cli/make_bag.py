@@ -3,6 +3,8 @@
     mvpose-make-bag shelf|shelf_images|shelf_rig|shelf_rig_raw [--data-root DIR] [--output DIR] [--force]
     mvpose-make-bag shelf --drop-every N | --drop-fraction F [--drop-seed S]   (bags/shelf_every2, ...)
     mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]
+    mvpose-make-bag shelf --rotate-camera C --degrees D [--axis y] --from-frame F   (a bumped camera)
+    mvpose-make-bag shelf --unplug-camera C --from-frame F                         (a camera that stops)
 
 A bag that is complete and made from the current inputs by the current recipe is left alone
 (exit 0), so scripts can call this every time; any other existing output needs --force. The
@@ -19,8 +21,9 @@ from pathlib import Path
 from typing import Sequence, TextIO
 
 from mvpose_ros.bags.io import bag_summary, write_bag
-from mvpose_ros.bags.recipes import RECIPES, RIG_FILE, Recipe, make_recipe
+from mvpose_ros.bags.recipes import RECIPES, RIG_FILE, CameraFault, Recipe, make_recipe
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
+from mvpose_ros.core.geometry.bump import AXES
 
 RECIPE_KEY = 'mvpose_recipe'
 FINGERPRINT_KEY = 'mvpose_fingerprint'
@@ -40,7 +43,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--drop-fraction', type=float, default=0.0, metavar='F',
                    help='shelf: then leave out this fraction of the rest at random (as mvpose-eval)')
     p.add_argument('--drop-seed', type=int, default=0, metavar='S', help='seed of --drop-fraction')
+    fault = p.add_mutually_exclusive_group()
+    fault.add_argument('--rotate-camera', type=int, metavar='C',
+                       help='shelf: camera C is bumped from --from-frame on (turned by --degrees about --axis, its '
+                            'calibration unchanged; default output bags/shelf_camC_rot<D><axis>_from<F>)')
+    fault.add_argument('--unplug-camera', type=int, metavar='C',
+                       help='shelf: camera C sends nothing from --from-frame on (default output '
+                            'bags/shelf_camC_unplugged_from<F>)')
+    p.add_argument('--degrees', type=float, default=2.0, help='with --rotate-camera (default 2)')
+    p.add_argument('--axis', choices=AXES, default='y',
+                   help="with --rotate-camera: the camera's axis (default y: a pan)")
+    p.add_argument('--from-frame', type=int, help='with --rotate-camera / --unplug-camera: the first Shelf frame '
+                                                  'affected (300..600)')
     return p
+
+
+def camera_fault(args: argparse.Namespace) -> CameraFault | None:
+    """The camera fault the options ask for, if any."""
+    camera = args.rotate_camera if args.rotate_camera is not None else args.unplug_camera
+    if camera is None:
+        return None
+    if args.from_frame is None:
+        raise ValueError('--rotate-camera and --unplug-camera need --from-frame')
+    return CameraFault(camera, args.from_frame, args.degrees if args.rotate_camera is not None else None, args.axis)
 
 
 def _size_mb(path: Path) -> float:
@@ -86,8 +111,10 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """Make the bag `args` name; returns the exit code."""
     out = out or sys.stdout
     drop = FrameDrop(args.drop_every, args.drop_fraction, args.drop_seed)
-    recipe = make_recipe(args.recipe, args.data_root, args.campus_dir, drop)
-    output = Path(args.output or Path('bags') / '_'.join(filter(None, (args.recipe, drop.label))))
+    fault = camera_fault(args)
+    recipe = make_recipe(args.recipe, args.data_root, args.campus_dir, drop, fault)
+    default = fault.default_folder() if fault else '_'.join(filter(None, (args.recipe, drop.label)))
+    output = Path(args.output or Path('bags') / default)
     fingerprint = recipe.fingerprint()
     if output.exists():
         reason = _stale_reason(output, recipe, fingerprint)

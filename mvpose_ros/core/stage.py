@@ -7,7 +7,9 @@ bp_solver nodes.
 
 `StageConfig.from_params` is the one translation from flat parameters (the nodes' ROS parameters,
 the command lines' options, a parameter file's section) to the configuration dataclasses; the
-defaults are the dataclasses' own and validation happens in their constructors.
+defaults are the dataclasses' own and validation happens in their constructors. `parameter_specs`
+gives the nodes each parameter with its default, description, range and whether it may change
+while the node runs (LIVE_PARAMETERS).
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from mvpose_ros.core.inference.factors import FactorConfig
 from mvpose_ros.core.inference.hypotheses import SamplingConfig
 from mvpose_ros.core.inference.solver import Inference3D, SolverConfig
 from mvpose_ros.core.inference.window import TERMS, InferenceConfig
+from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.types import Bundle, FrameResult, Person2D
 
@@ -48,6 +51,16 @@ ASSOCIATION_PARAMETERS = {
     'track_iou': 'per-camera tracking: minimum box IoU (paper: 0.7)',
     'match_distance': 'cross-view matching: maximum mean ray-to-ray distance between two views of a person, metres',
 }
+# (low, high) inclusive of every numeric parameter (None: unbounded on that side)
+PARAMETER_RANGES: dict[str, tuple[float | None, float | None]] = {
+    'window': (0, None), 'lag': (0, None), 'iterations': (1, None), 'slide_iterations': (0, None),
+    'hypotheses': (1, None), 'bp_hypotheses': (0, None), 'seed': (0, None),
+    'collision_centre': (0.0, 10.0), 'collision_width': (0.001, 10.0), 'frame_rate': (0.1, 1000.0),
+    'max_gap': (0.0, 3600.0), 'track_iou': (0.0, 1.0), 'match_distance': (0.0, 10.0),
+}
+# Thresholds and distances a running node applies to the frames after the change; every other
+# parameter sizes or seeds state made at start-up (read-only: a change needs a restart).
+LIVE_PARAMETERS = frozenset({'collision_centre', 'collision_width', 'max_gap', 'track_iou', 'match_distance'})
 
 
 @dataclass(frozen=True)
@@ -94,10 +107,12 @@ class StageConfig:
 ALL_PARAMETERS = {**SOLVER_PARAMETERS, **ASSOCIATION_PARAMETERS}
 
 
-def parameter_specs(names: Mapping[str, str]) -> list[tuple[str, Any, str]]:
-    """(name, default, description) of each named parameter, the defaults from StageConfig()."""
+def parameter_specs(names: Mapping[str, str]) -> list[Param]:
+    """Each named parameter (name -> description) with its default from StageConfig(), its range
+    (PARAMETER_RANGES) and whether it is live (LIVE_PARAMETERS)."""
     defaults = StageConfig().to_params()
-    return [(name, defaults[name], description) for name, description in names.items()]
+    return [Param(name, defaults[name], description, *PARAMETER_RANGES.get(name, (None, None)),
+                  live=name in LIVE_PARAMETERS) for name, description in names.items()]
 
 
 class Stage3D:

@@ -18,14 +18,20 @@ reason (late, duplicate, unmatched, overflow, frame_id, oversize, malformed, no 
 at most every few seconds per camera and reason; every REPORT_EVERY sets the achieved skew
 (median, max) and the drops so far are logged. A rig without intrinsics in its file takes them
 from each camera's CameraInfo: until every camera's is known, inputs are dropped (no intrinsics).
+
+Diagnostics (nodes.health, on /diagnostics): per camera its people2d rate, drops by reason, sync
+offset and silence; the node's ms per set, pending messages, set skew and latency. Live
+parameters: sync_timeout, max_skew, track_iou, match_distance and the diagnostics thresholds.
 """
 from __future__ import annotations
 
 import time
 from collections import Counter
 from functools import partial
+from typing import Any
 
 import numpy as np
+import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
@@ -38,13 +44,18 @@ from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, Approx
                                                           default_max_skew)
 from mvpose_ros.core.association.associator import Associator
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
+from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.thresholds import HealthThresholds
+from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, StageConfig, parameter_specs
-from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, load_rig_parameter,
-                                      rig_parameters, run)
+from mvpose_ros.core.throttled_log import ThrottledLog
+from mvpose_ros.nodes.health import NodeHealth
+from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, live_parameters,
+                                      load_rig_parameter, rig_parameters, run)
 
 EXPIRE_PERIOD_S = 0.05
 REPORT_EVERY = 100  # sets between two skew reports
-THROTTLE_S = 2.0  # s between two logs of the same camera and drop reason (or the same missing cameras)
 NS_PER_S = 1_000_000_000
 
 
@@ -55,17 +66,17 @@ class AssociationNode(Node):
         super().__init__('association')
         p = declare(self, [
             *rig_parameters(),
-            ('sync_timeout', SYNC_TIMEOUT_S, 's to wait for a camera missing from a set before going on without it'),
-            ('max_skew', 0.0, 's between the oldest and newest stamp of a set (0: half a frame period)'),
-            ('min_cameras', 2, 'cameras a set needs to be bundled (smaller sets are dropped: nobody in them is '
-                               'seen twice)'),
+            Param('sync_timeout', SYNC_TIMEOUT_S, 's to wait for a camera missing from a set before going on without '
+                  'it', 0.001, 3600.0, live=True),
+            Param('max_skew', 0.0, 's between the oldest and newest stamp of a set (0: half a frame period)',
+                  0.0, 3600.0, live=True),
+            Param('min_cameras', 2, 'cameras a set needs to be bundled (smaller sets are dropped: nobody in them is '
+                                    'seen twice)', 1, 65535),
             *parameter_specs(ASSOCIATION_PARAMETERS),
-            ('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (for max_skew 0)'),
+            Param('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (for max_skew 0)', 0.1, 1000.0),
         ])
         rig = load_rig_parameter(p)
         n = len(rig.cameras)
-        if not (p['sync_timeout'] > 0 and p['frame_rate'] > 0 and p['max_skew'] >= 0):
-            raise StartupError('parameters sync_timeout, frame_rate: must be > 0; max_skew: must be >= 0')
         if not 1 <= p['min_cameras'] <= n:
             raise StartupError(f'parameter min_cameras: must be in 1..{n} (the rig has {n} cameras)')
         try:
@@ -74,6 +85,8 @@ class AssociationNode(Node):
             raise StartupError(f'parameters: {exc}') from None
         self._rig = rig
         self._names = rig.names
+        self._frame_rate = p['frame_rate']
+        self._params = p
         max_skew = p['max_skew'] or default_max_skew(p['frame_rate'])
         # a camera whose intrinsics are still unknown (no CameraInfo yet) is left out of the sets
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
@@ -81,9 +94,14 @@ class AssociationNode(Node):
                                       self._config)
         self._sync = ApproximateSync(n, p['sync_timeout'], max_skew, p['min_cameras'])
         self.dropped: Counter[str] = Counter()  # every dropped input message, by reason
-        self._logged: dict[tuple, float] = {}  # (what, ...) -> when last logged
-        self._suppressed: Counter[tuple] = Counter()  # (what, ...) -> not logged since
+        self._log = ThrottledLog(self.get_logger())
         self._skews: list[int] = []  # ns, of the sets since the last report
+        now = time.monotonic()
+        self._inputs = [InputMonitor(name, now) for name in self._names]
+        self._arrivals: dict[tuple[int, int], float] = {}  # (camera, stamp) of pending messages -> arrival
+        self._monitor = NodeMonitor()
+        self._health = NodeHealth(self, self._statuses)
+        live_parameters(self, ['sync_timeout', 'max_skew', 'track_iou', 'match_distance'], self._check, self._retune)
         self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
         for c, camera in enumerate(rig.cameras):
             self.create_subscription(PointCloud2, topics.camera_topic(camera.name, topics.PEOPLE2D),
@@ -93,20 +111,28 @@ class AssociationNode(Node):
                                f'sync timeout {p["sync_timeout"]} s, sets of >= {p["min_cameras"]} cameras'
                                + ('' if rig.calibrated else ', intrinsics from CameraInfo'))
 
-    def _throttled(self, key: tuple, text: str) -> None:
-        """Log text as a warning unless the same key was logged less than THROTTLE_S ago."""
-        now = time.monotonic()
-        if now - self._logged.get(key, -float('inf')) < THROTTLE_S:
-            self._suppressed[key] += 1
-            return
-        more = self._suppressed.pop(key, 0)
-        self._logged[key] = now
-        self.get_logger().warning(text + (f' ({more} more like it since the last such line)' if more else ''))
+    def _retuned(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """The parameter values with the live changes."""
+        return {**self._params, **changes}
+
+    def _check(self, changes: dict[str, Any]) -> str | None:
+        try:
+            StageConfig.from_params(self._retuned(changes))
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    def _retune(self, changes: dict[str, Any]) -> None:
+        self._params = p = self._retuned(changes)
+        self._sync.retune(p['sync_timeout'], p['max_skew'] or default_max_skew(self._frame_rate))
+        self._associator.retune(StageConfig.from_params(p).association)
 
     def _drop(self, camera: int, stamp: int, reason: str, detail: str) -> None:
         self.dropped[reason] += 1
-        self._throttled(('drop', camera, reason),
-                        f'{self._names[camera]} people2d stamp {stamp} ns dropped ({reason}): {detail}')
+        self._inputs[camera].dropped(time.monotonic(), reason)
+        self._arrivals.pop((camera, stamp), None)
+        self._log.log((self._names[camera], f'dropped ({reason})'),
+                      f'{self._names[camera]} people2d stamp {stamp} ns dropped ({reason}): {detail}')
 
     def _ready(self, camera: int) -> bool:
         """Whether camera's intrinsics are known (taking them into the associator once they are)."""
@@ -116,6 +142,8 @@ class AssociationNode(Node):
 
     def _on_people(self, camera: int, msg: PointCloud2) -> None:
         stamp = stamp_ns(msg.header.stamp)
+        arrival = time.monotonic()
+        self._inputs[camera].received(arrival, stamp)
         if not self._ready(camera):
             self._drop(camera, stamp, 'no intrinsics', 'no CameraInfo from this camera yet')
             return
@@ -136,11 +164,12 @@ class AssociationNode(Node):
             return
         before = Counter(self._sync.dropped)
         try:
-            released = self._sync.add(stamp, camera, people, time.monotonic())
+            released = self._sync.add(stamp, camera, people, arrival)
         except ValueError as exc:
             reason = next((r for r, k in self._sync.dropped.items() if k != before[r]), 'late')
             self._drop(camera, stamp, reason, str(exc))
             return
+        self._arrivals[camera, stamp] = arrival
         self._release(released)
 
     def _on_timer(self) -> None:
@@ -160,12 +189,14 @@ class AssociationNode(Node):
     def _publish(self, synced: SyncedSet) -> None:
         stamp = Time(sec=synced.stamp_ns // NS_PER_S, nanosec=synced.stamp_ns % NS_PER_S)
         if synced.missing:
-            names = tuple(self._names[c] for c in synced.missing)
-            self._throttled(('missing', names), f'set {synced.index} stamp {synced.stamp_ns} ns: no data from '
-                                                f'{", ".join(names)}; going on without')
+            names = ', '.join(self._names[c] for c in synced.missing)
+            self._log.log((names, 'missing from sets'), f'set {synced.index} stamp {synced.stamp_ns} ns: no data from '
+                                                        f'{names}; going on without')
+        t0 = time.perf_counter()
         observations = self._associator.update(synced.index, synced.items)
         bundles = [(obs.person_id, obs.views) for obs in observations]
         self._publisher.publish(bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
+        self._observe(synced, time.perf_counter() - t0)
         self._skews.append(synced.skew_ns)
         if len(self._skews) == REPORT_EVERY:
             skews = np.array(self._skews) / 1e6
@@ -173,6 +204,31 @@ class AssociationNode(Node):
             self.get_logger().info(f'{synced.index + 1} sets; skew of the last {len(skews)}: median '
                                    f'{np.median(skews):.1f} ms, max {skews.max():.1f} ms; messages dropped: {drops}')
             self._skews = []
+
+    def _observe(self, synced: SyncedSet, seconds: float) -> None:
+        """Diagnostics of one published set: its members' offsets, its skew, cost and latency."""
+        now = time.monotonic()
+        arrivals = [self._arrivals.pop((c, s), None) for c, s in enumerate(synced.stamps) if s is not None]
+        for c, s in enumerate(synced.stamps):
+            if s is not None:
+                self._inputs[c].synchronised(now, (s - synced.stamp_ns) / 1e9)
+        self._monitor.processed(now, {'association': seconds})
+        self._monitor.set_skew(now, synced.skew_ns / 1e9)
+        known = [a for a in arrivals if a is not None]
+        self._monitor.delivered(now, now - min(known) if known else None,
+                                (self.get_clock().now().nanoseconds - synced.stamp_ns) / 1e9)
+
+    def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
+        node = self._health.prefix()
+        return [*input_statuses(node, [i.stats(now, t.window) for i in self._inputs], t),
+                node_status(node, self._monitor.stats(now, t.window), self._sync.pending, t,
+                            {'sets out': str(self._sync.sets)})]
+
+    def destroy_node(self) -> None:
+        """Log the totals of the problems logged throttled, then destroy the node."""
+        if hasattr(self, '_log') and self._log.counts:
+            rclpy.logging.get_logger(f'{self.get_logger().name}.totals').info(f'problems: {self._log.summary()}')
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:

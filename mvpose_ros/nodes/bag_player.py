@@ -24,16 +24,18 @@ reader has matched it too, and a volatile reader drops what a writer sends befor
 that must not miss the first frames (a recorder) makes the player wait for it with `start_topic`:
 the player then also waits for one message there (reliable, transient local: START_QOS), which the
 recorder publishes once its own readers have matched the player's writers.
+
+Diagnostics (nodes.health, on /diagnostics): frames out, ms per frame published, how far behind
+its schedule it publishes (paced), frames in flight and given up (rate 0). Live parameters:
+wait_subscribers, ack_timeout and the diagnostics thresholds; the others are read-only.
 """
 from __future__ import annotations
 
 import importlib
-import math
 import time
 from typing import Any
 
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import NameValidationException, ParameterException
@@ -50,7 +52,12 @@ from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.bags.replay import (NS, Frame, InFlight, due_s, group_frames, group_sets, header_stamp_ns, looped,
                                     with_header_stamp)
-from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, run
+from mvpose_ros.core.health.monitor import NodeMonitor, node_status
+from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.thresholds import HealthThresholds
+from mvpose_ros.core.parameters import Param
+from mvpose_ros.nodes.health import NodeHealth
+from mvpose_ros.nodes.runtime import DATA_QOS, StartupError, declare, live_parameters, run
 from mvpose_ros.topics import IMAGE, OPENPOSE, SKELETONS
 
 LOG_EVERY = 100  # frames between progress lines
@@ -99,59 +106,39 @@ class BagPlayerNode(Node):
 
     def _declare(self) -> dict[str, Any]:
         """Declare the parameters; returns their values."""
-        string = ParameterType.PARAMETER_STRING
-        specs = (
-            ('bag', 'bags/shelf', string, 'rosbag2 folder to play'),
-            ('rate', 1.0, None, 'x recorded speed; 0.0 = as fast as downstream keeps up (see max_in_flight)'),
-            ('clock', False, None, 'publish /clock with the current bag stamp'),
-            ('loops', 1, None, 'passes over the bag; later passes move stamps on'),
+        return declare(self, [
+            Param('bag', 'bags/shelf', 'rosbag2 folder to play'),
+            Param('rate', 1.0, 'x recorded speed; 0.0 = as fast as downstream keeps up (see max_in_flight)',
+                  0.0, 1e6),
+            Param('clock', False, 'publish /clock with the current bag stamp'),
+            Param('loops', 1, 'passes over the bag; later passes move stamps on', 1, 1_000_000),
             # An empty list cannot type itself: declared by type, unset means all topics.
-            ('topics', Parameter.Type.STRING_ARRAY, ParameterType.PARAMETER_STRING_ARRAY,
-             'topics to play; empty = all'),
-            ('wait_subscribers', 10.0, None,
-             's to wait for a matched reader on every cam*/openpose (else cam*/image_raw) topic and for '
-             'every visible reader to match'),
-            ('start_topic', '', string,
-             'if set, also wait for a message there (std_msgs/Empty, reliable, transient local) before playing'),
-            ('ack_topic', SKELETONS, string, 'downstream output whose stamps release frames when rate is 0'),
-            ('max_in_flight', 16, None,
-             'rate 0: at most this many frames (sets) published but not yet seen on ack_topic'),
-            ('qos', 'reliable', string,
-             "'reliable' (keep-all) or 'sensor' (best-effort keep-last, as a camera driver)"),
-            ('sets', False, None, 'play synchronised sets of the image topics instead of frames of one log stamp'),
-            ('max_skew', default_max_skew(FRAME_RATE), None,
-             'sets: s between the oldest and newest stamp of a set (as the graph)'),
-            ('sync_timeout', SYNC_TIMEOUT_S, None, 'sets: s of bag time a set waits for a camera that sent nothing'),
-            ('ack_timeout', 0.0, None,
-             'rate 0: s without an ack after which the oldest frame in flight is given up (0 = wait forever)'),
-        )
-        values = {}
-        for name, default, type_, description in specs:
-            descriptor = ParameterDescriptor(description=description)
-            if type_ is not None:
-                descriptor.type = type_
-            values[name] = self.declare_parameter(name, default, descriptor).value
-        return values
+            Param('topics', Parameter.Type.STRING_ARRAY, 'topics to play; empty = all'),
+            Param('wait_subscribers', 10.0, 's to wait for a matched reader on every cam*/openpose (else '
+                  'cam*/image_raw) topic and for every visible reader to match', 0.0, 3600.0, live=True),
+            Param('start_topic', '', 'if set, also wait for a message there (std_msgs/Empty, reliable, transient '
+                  'local) before playing'),
+            Param('ack_topic', SKELETONS, 'downstream output whose stamps release frames when rate is 0'),
+            Param('max_in_flight', 16, 'rate 0: at most this many frames (sets) published but not yet seen on '
+                  'ack_topic', 1, 1_000_000),
+            Param('qos', 'reliable', "'reliable' (keep-all) or 'sensor' (best-effort keep-last, as a camera driver)"),
+            Param('sets', False, 'play synchronised sets of the image topics instead of frames of one log stamp'),
+            Param('max_skew', default_max_skew(FRAME_RATE), 'sets: s between the oldest and newest stamp of a set '
+                  '(as the graph)', 0.0, 3600.0),
+            Param('sync_timeout', SYNC_TIMEOUT_S, 'sets: s of bag time a set waits for a camera that sent nothing',
+                  0.001, 3600.0),
+            Param('ack_timeout', 0.0, 'rate 0: s without an ack after which the oldest frame in flight is given up '
+                  '(0 = wait forever)', 0.0, 3600.0, live=True),
+        ])
 
     def _configure(self) -> None:
         p = self._declare()
-        if not (math.isfinite(p['rate']) and p['rate'] >= 0):
-            raise StartupError(f'parameter rate: expected a finite value >= 0, got {p["rate"]}')
-        if p['loops'] < 1:
-            raise StartupError(f'parameter loops: expected >= 1, got {p["loops"]}')
-        if not (math.isfinite(p['wait_subscribers']) and p['wait_subscribers'] >= 0):
-            raise StartupError(f'parameter wait_subscribers: expected >= 0 s, got {p["wait_subscribers"]}')
         self._bag, self._rate, self._loops = p['bag'], p['rate'], p['loops']
         self._in_flight = InFlight(p['max_in_flight']) if p['rate'] == 0 else None
         if self._in_flight is not None and not p['ack_topic']:
             raise StartupError('parameter ack_topic: required with rate 0')
         if p['qos'] not in PLAYER_QOS:
             raise StartupError(f'parameter qos: expected one of {", ".join(PLAYER_QOS)}, got {p["qos"]!r}')
-        if not (p['max_skew'] >= 0 and p['sync_timeout'] > 0):
-            raise StartupError(f'parameters max_skew, sync_timeout: must be >= 0 and > 0, got {p["max_skew"]}, '
-                               f'{p["sync_timeout"]}')
-        if not p['ack_timeout'] >= 0:
-            raise StartupError(f'parameter ack_timeout: must be >= 0 s, got {p["ack_timeout"]}')
         self._ack_timeout = p['ack_timeout']
         self._progress = 0.0  # monotonic s of the last publication or ack (rate 0)
         self._given_up = 0
@@ -202,6 +189,22 @@ class BagPlayerNode(Node):
                                f'playing {len(self._topics)} by {self._unit} at rate {self._rate:g}, loops '
                                f'{self._loops}, qos {p["qos"]}')
         self._timer = self.create_timer(_POLL_S, self._on_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._monitor = NodeMonitor()
+        self._health = NodeHealth(self, self._statuses)
+        live_parameters(self, ['wait_subscribers', 'ack_timeout'], lambda changes: None, self._retune)
+
+    def _retune(self, changes: dict[str, Any]) -> None:
+        self._ack_timeout = changes.get('ack_timeout', self._ack_timeout)
+        if 'wait_subscribers' in changes:
+            self._wait_until += changes['wait_subscribers'] - self._wait_s
+            self._wait_s = changes['wait_subscribers']
+
+    def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
+        extra = {'frames out' if self._unit == 'frames' else 'sets out': str(self._frames_out),
+                 'messages out': str(self._messages_out), 'playing': str(self._playing).lower(),
+                 'given up (never acknowledged)': str(self._given_up)}
+        return [node_status(self._health.prefix(), self._monitor.stats(now, t.window),
+                            0 if self._in_flight is None else len(self._in_flight), t, extra)]
 
     def _unmatched(self) -> list[str]:
         """Topics still waiting for readers: an awaited input without a matched reader, or a topic
@@ -271,8 +274,10 @@ class BagPlayerNode(Node):
         while True:
             loop, offset, frame = self._next
             stamp = frame.stamp_ns + offset
+            behind = None
             if self._in_flight is None:
                 wait = self._start + due_s(stamp, self._first_ns, self._rate) - time.monotonic()
+                behind = max(0.0, -wait)
                 if wait > 0:
                     self._timer.timer_period_ns = max(1, int(wait * NS))
                     self._timer.reset()
@@ -291,7 +296,10 @@ class BagPlayerNode(Node):
                 self._progress = time.monotonic()
                 self.get_logger().warning(f'no ack of stamp {given_up} ns within {self._ack_timeout:g} s: '
                                           f'dropped downstream, going on ({self._given_up} so far)')
+            t0 = time.perf_counter()
             self._publish(loop, stamp, offset, frame)
+            self._monitor.processed(time.monotonic(), {'publish': time.perf_counter() - t0})
+            self._monitor.delivered(time.monotonic(), behind, None)
             if not self._advance():
                 return
 

@@ -17,12 +17,23 @@ duplicate, or out of order), which is logged and dropped. With no input for `idl
 (the end of a replay, or a stalled graph) every pending frame is decoded and published. A rig
 without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
 published with no people (logged).
+
+Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
+node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
+skeletons it outputs: each camera's 2D keypoints of a person against the person's 3D joints
+projected into it (core.health.residual), WARN for a camera whose residual rises well above the
+others' (moved out of its calibration). Live parameters: idle_flush, marker_lifetime,
+collision_centre, collision_width, max_gap and the diagnostics thresholds; the others are
+read-only.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
+import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -36,15 +47,21 @@ from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros import topics
 from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
+from mvpose_ros.core.health.residual import ResidualMonitor, frame_residuals, residual_levels
+from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.solver import Inference3D
+from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, parameter_specs
-from mvpose_ros.core.types import FrameResult
-from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, load_rig_parameter,
-                                      rig_parameters, run)
+from mvpose_ros.core.throttled_log import ThrottledLog
+from mvpose_ros.core.types import Bundle, FrameResult
+from mvpose_ros.nodes.health import NodeHealth
+from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, live_parameters,
+                                      load_rig_parameter, rig_parameters, run)
 
 IDLE_CHECK_S = 0.1
 REPORT_EVERY = 100  # frames between timing lines
-THROTTLE_S = 2.0  # s between two logs of bundles arriving before the intrinsics
 # published once and kept for late subscribers (RViz opened after the solver)
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -61,15 +78,12 @@ class BpSolverNode(Node):
         p = declare(self, [
             *rig_parameters(),
             *parameter_specs(SOLVER_PARAMETERS),
-            ('idle_flush', 1.0, 's without input after which every pending frame is output'),
-            ('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
-                                     'keep it above the time between two frames'),
+            Param('idle_flush', 1.0, 's without input after which every pending frame is output', 0.01, 3600.0,
+                  live=True),
+            Param('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
+                                          'keep it above the time between two frames', 0.0, 3600.0, live=True),
         ])
         rig = load_rig_parameter(p)
-        if not p['idle_flush'] > 0:
-            raise StartupError('parameter idle_flush: must be > 0')
-        if not p['marker_lifetime'] >= 0:
-            raise StartupError('parameter marker_lifetime: must be >= 0')
         try:
             config = StageConfig.from_params(p)
         except ValueError as exc:
@@ -91,10 +105,18 @@ class BpSolverNode(Node):
         self._first_ns: int | None = None  # stamp of the first frame pushed: times are relative to it
         self._last_ns: int | None = None  # stamp of the last frame pushed
         self._last_input = time.monotonic()
-        self._last_wait_log = -float('inf')
+        self._log = ThrottledLog(self.get_logger())
         self._frames_out = 0
+        self._inputs: dict[int, tuple[list[Bundle], float]] = {}  # frames pushed: bundles, arrival (monotonic)
+        self._bundles_in = InputMonitor('bundles', time.monotonic())
+        self._monitor = NodeMonitor()
+        self._health = NodeHealth(self, self._statuses, residual=True)
+        self._residuals = ResidualMonitor(self._n_cameras, self._health.thresholds.residual_frames)
+        live_names = [s.name for s in parameter_specs(SOLVER_PARAMETERS) if s.live] + ['idle_flush', 'marker_lifetime']
+        live_parameters(self, live_names,
+                        self._check, self._retune)
         self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
-        self._live = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
+        self._live_skeletons = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
         self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
         self._camera_markers = self.create_publisher(MarkerArray, topics.CAMERA_MARKERS, LATCHED_QOS)
@@ -111,13 +133,34 @@ class BpSolverNode(Node):
                 self._inference.cameras[c] = self._intrinsics.known[c]
         return [self._names[c] for c in sorted(cameras) if self._inference.cameras[c] is None]
 
+    def _check(self, changes: dict[str, Any]) -> str | None:
+        try:
+            self._retuned(changes)
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    def _retune(self, changes: dict[str, Any]) -> None:
+        self._idle = changes.get('idle_flush', self._idle)
+        self._marker_lifetime = changes.get('marker_lifetime', self._marker_lifetime)
+        self._inference.window.config = self._retuned(changes)
+
+    def _retuned(self, changes: dict[str, Any]) -> Any:
+        """The window's InferenceConfig with the live changes (ValueError when invalid)."""
+        config = self._inference.window.config
+        factors = replace(config.factors, **{k: v for k, v in changes.items() if k.startswith('collision_')})
+        return replace(config, factors=factors, max_gap=changes.get('max_gap', config.max_gap))
+
     def _on_bundles(self, msg: PointCloud2) -> None:
-        self._last_input = time.monotonic()
+        self._last_input = arrival = time.monotonic()
         stamp = stamp_ns(msg.header.stamp)
+        self._bundles_in.received(arrival, stamp)
         if self._last_ns is not None and stamp <= self._last_ns:
             # its output exists or is pending (a duplicate), or the window has moved past it
-            self.get_logger().error(f'bundles stamp {stamp} ns came after stamp {self._last_ns} ns: late or '
-                                    f'duplicate, dropped')
+            cause = 'duplicate' if stamp == self._last_ns else 'late'
+            self._bundles_in.dropped(arrival, cause)
+            self._log.log(('bundles', cause), f'bundles stamp {stamp} ns came after stamp {self._last_ns} ns: late or '
+                                              f'duplicate, dropped', 'error')
             return
         try:
             bundles = msg_to_bundles(msg)
@@ -134,16 +177,17 @@ class BpSolverNode(Node):
             self._first_ns, self._last_ns = first, stamp
             self._next_frame += 1
         except ValueError as exc:
-            now = time.monotonic()
-            if not isinstance(exc, _NotReady) or now - self._last_wait_log >= THROTTLE_S:
-                self._last_wait_log = now
-                self.get_logger().error(f'bundles stamp {stamp} ns: {exc}; published with no people')
+            cause = 'no intrinsics' if isinstance(exc, _NotReady) else 'malformed'
+            self._bundles_in.dropped(arrival, cause)
+            self._log.log(('bundles', cause), f'bundles stamp {stamp} ns: {exc}; published with no people', 'error')
             nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
             self._publish_live(nobody, msg.header.stamp)
             self._publish(nobody, msg.header.stamp)
             return
         # with no lag the output is the causal estimate itself
         self._publish_live(results[0] if self._lag == 0 else self._inference.live(), msg.header.stamp)
+        self._monitor.processed_totals(time.monotonic(), self._inference.timer.seconds)
+        self._inputs[frame] = (bundles, arrival)
         self._stamps[frame] = msg.header.stamp
         for result in results:
             self._publish(result, self._stamps.pop(result.frame))
@@ -159,8 +203,8 @@ class BpSolverNode(Node):
 
     def _publish_live(self, result: FrameResult, stamp: Time) -> None:
         header = Header(stamp=stamp, frame_id=self._world_frame)
-        self._live.publish(skeletons_to_msg(np.asarray(result.person_ids, dtype=np.int64), result.joints, header,
-                                            confidence=result.confidence))
+        ids = np.asarray(result.person_ids, dtype=np.int64)
+        self._live_skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
 
     def _publish_cameras(self) -> None:
         """The rig's frusta, once every camera's intrinsics are known."""
@@ -177,11 +221,44 @@ class BpSolverNode(Node):
         self._skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
         self._markers.publish(skeleton_markers(ids, result.joints, header, confidence=result.confidence,
                                                lifetime_s=self._marker_lifetime))
+        self._observe(result, stamp)
         self._frames_out += 1
         if self._frames_out % REPORT_EVERY == 0 and self._inference is not None:
             seconds = self._inference.timer.seconds
             per_frame = ', '.join(f'{name} {1e3 * s / self._frames_out:.1f}' for name, s in seconds.items())
             self.get_logger().info(f'{self._frames_out} frames out; ms per frame: {per_frame}')
+
+    def _observe(self, result: FrameResult, stamp: Time) -> None:
+        """Diagnostics of one output frame: its latency and, for a solved frame, the residuals."""
+        now = time.monotonic()
+        bundles, arrival = self._inputs.pop(result.frame, (None, None))
+        capture = (self.get_clock().now().nanoseconds - stamp_ns(stamp)) / 1e9
+        self._monitor.delivered(now, None if arrival is None else now - arrival, capture)
+        if bundles is not None:
+            self._residuals.add(frame_residuals(self._inference.cameras, result.person_ids, result.joints, bundles,
+                                                self._health.thresholds.residual_min_score), stamp_ns(stamp))
+
+    def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
+        node = self._health.prefix()
+        medians, counts = self._residuals.medians()
+        residuals = [
+            Status(f'{node}: camera {name} reprojection', level, message,
+                   {'residual (px, median)': '' if np.isnan(value) else f'{value:.2f}',
+                    'frames with data': str(count), 'of recent frames': str(t.residual_frames),
+                    'newest stamp (ns)': '' if self._residuals.newest_stamp is None
+                    else str(self._residuals.newest_stamp)}, name)
+            for name, value, count, (level, message) in zip(
+                self._names, medians, counts, residual_levels(medians, t.residual_ratio, t.residual_floor))]
+        return [*input_statuses(node, [self._bundles_in.stats(now, t.window)], t),
+                node_status(node, self._monitor.stats(now, t.window), len(self._stamps), t,
+                            {'frames out': str(self._frames_out)}),
+                *residuals]
+
+    def destroy_node(self) -> None:
+        """Log the totals of the problems logged throttled, then destroy the node."""
+        if hasattr(self, '_log') and self._log.counts:
+            rclpy.logging.get_logger(f'{self.get_logger().name}.totals').info(f'problems: {self._log.summary()}')
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:

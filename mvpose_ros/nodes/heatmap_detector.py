@@ -49,6 +49,12 @@ no intrinsics yet, out of sync) is logged once per camera and cause, with its st
 after that (a throttled summary, and the totals when the node stops); the node goes on. That
 camera is left out of that stamp: nothing is published for it, so the synchronisation downstream
 leaves it out of its set. An empty people2d would instead claim the camera saw nobody.
+A cause that repeats is logged at most every few seconds with a count (core.throttled_log).
+
+Diagnostics (nodes.health, on /diagnostics): per camera the input rate, drops by cause, sync
+offset (whole rig) and silence; the node's ms per detection, waiting sets and latency. Live
+parameters: secondary_radius, box_margin, min_person_score, min_joint_score, heatmap_floor,
+sync_timeout, max_skew and the diagnostics thresholds; the others are read-only.
 """
 from __future__ import annotations
 
@@ -57,7 +63,7 @@ import threading
 import time
 import traceback
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -82,8 +88,14 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, 
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, RigCamera
+from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
+from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.thresholds import HealthThresholds
+from mvpose_ros.core.parameters import Param
+from mvpose_ros.core.throttled_log import ThrottledLog, short_cause
+from mvpose_ros.nodes.health import NodeHealth
 from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, StartupError, camera_subscription, declare,
-                                      load_rig_parameter, rig_parameters, run)
+                                      live_parameters, load_rig_parameter, rig_parameters, run)
 from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
@@ -92,12 +104,9 @@ BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
 IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
 TYPE_RECHECK = 2.0  # s between graph look-ups of an image topic typed by its name
-SUMMARY_PERIOD = 10.0  # s, at most one summary of counted drops per period
-# Distinct causes a DropLog keeps per camera, and the characters of one: junk can make every cause
-# new (random sizes, frame_ids), and neither the log nor the counts may grow with it.
-MAX_CAUSES = 32
-MAX_CAUSE_CHARS = 300
-OTHER_CAUSES = f'other causes (beyond {MAX_CAUSES} distinct ones)'
+# parameter -> the detector configuration field it sets, applied live
+LIVE_DETECTOR = {'openpose': ('secondary_radius',),
+                 'onnx': ('box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor')}
 
 
 def image_type_by_name(topic: str) -> type:
@@ -139,43 +148,6 @@ def decode_image(msg: Image | CompressedImage, camera: Camera) -> Any:
     return to_bgr(msg, (camera.width, camera.height))
 
 
-class DropLog:
-    """Inputs that could not be used: the first of each (camera, cause) is logged as an error
-    with its stamp; later ones are counted, with a summary at most every SUMMARY_PERIOD s. At most
-    MAX_CAUSES causes per camera (of at most MAX_CAUSE_CHARS) are told apart; the rest are
-    counted together as OTHER_CAUSES."""
-
-    def __init__(self, logger: Any) -> None:
-        self._logger = logger
-        self.counts: Counter[tuple[str, str]] = Counter()
-        self._causes: Counter[str] = Counter()  # camera -> distinct causes counted
-        self._lock = threading.Lock()  # the worker thread reports too
-
-    def report(self, camera: str, what: str, stamp: int, cause: str) -> bool:
-        """Count one dropped input; True when this was logged (the first of its camera and cause)."""
-        cause = ' '.join(cause[:4 * MAX_CAUSE_CHARS].split())[:MAX_CAUSE_CHARS]
-        with self._lock:
-            if (camera, cause) not in self.counts:
-                if self._causes[camera] >= MAX_CAUSES:
-                    cause = OTHER_CAUSES
-                else:
-                    self._causes[camera] += 1
-            self.counts[camera, cause] += 1
-            first = self.counts[camera, cause] == 1
-        if first:
-            self._logger.error(f'{camera}: {what} stamp {stamp} ns dropped: {cause} (said once per camera and '
-                               f'cause; later ones are counted)')
-        else:
-            self._logger.warning(f'inputs dropped so far: {self.summary()}', throttle_duration_sec=SUMMARY_PERIOD)
-        return first
-
-    def summary(self) -> str:
-        """'<camera>: <n> x <cause>; ...', or 'none'."""
-        with self._lock:
-            items = sorted(self.counts.items())
-        return '; '.join(f'{camera}: {n} x {cause}' for (camera, cause), n in items) or 'none'
-
-
 @dataclass
 class _Camera:
     """One camera this node detects: its rig entry, topics, intrinsics once known, output."""
@@ -209,48 +181,49 @@ class HeatmapDetectorNode(Node):
         except ParameterException as exc:
             raise StartupError(f'parameter camera: {exc}') from None
         p = declare(self, [
-            ('backend', 'openpose', f'2D detector: one of {", ".join(BACKENDS)} (input: openpose: '
-             "<camera>/openpose; onnx: the rig camera's image topic)"),
-            ('stride', defaults.stride, 'heatmap cell size, pixels'),
-            ('sigma', defaults.sigma, 'std of the Gaussian rendered at each candidate (onnx: at each COCO ear), '
-             'pixels'),
-            ('secondary_radius', defaults.secondary_radius,
-             "openpose: other candidates within this fraction of the person's box diagonal also enter its map"),
-            ('model', onnx.model, f'onnx: EfficientPose variant, {" or ".join(MODELS)} (<data_root>/models/'
-             'efficientpose_<model>.onnx)'),
-            ('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
-            ('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)'),
-            ('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32'),
-            ('box_margin', onnx.box_margin,
-             "onnx: each side of a person's box grows by this fraction of its size before the EfficientPose crop"),
-            ('min_person_score', onnx.min_person_score, 'onnx: MultiPose people scoring less are dropped'),
-            ('min_joint_score', onnx.min_joint_score,
-             'onnx: a joint whose heatmap peak is lower is not detected (empty map)'),
-            ('heatmap_floor', onnx.heatmap_floor, "onnx: heatmap cells below this fraction of their map's peak are 0"),
-            ('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
-             'needs them)'),
-            ('queue_depth', CAMERA_QUEUE_DEPTH, 'camera inputs (images, CameraInfo): keep-last depth of the '
-             'best-effort subscriptions (a parameter file may override each topic: qos_overrides.<topic>...)'),
-            ('frame_rate', FRAME_RATE, 'whole rig: the cameras\' frame rate, Hz (the default of max_skew)'),
-            ('sync_timeout', SYNC_TIMEOUT_S, 'whole rig: s a set waits for a missing camera (not waited for again '
-             'until it sends)'),
-            ('min_cameras', 1, 'whole rig: sets with fewer cameras are dropped (counted as unmatched)'),
-            ('waiting_sets', 1, 'whole rig: sets that wait while one is detected; older ones are dropped whole '
-             '(1: only the newest, for live cameras; more for a replay that must lose none)'),
+            Param('backend', 'openpose', f'2D detector: one of {", ".join(BACKENDS)} (input: openpose: '
+                  "<camera>/openpose; onnx: the rig camera's image topic)"),
+            Param('stride', defaults.stride, 'heatmap cell size, pixels', 0.5, 256.0),
+            Param('sigma', defaults.sigma, 'std of the Gaussian rendered at each candidate (onnx: at each COCO ear), '
+                  'pixels', 0.1, 1000.0),
+            Param('secondary_radius', defaults.secondary_radius,
+                  "openpose: other candidates within this fraction of the person's box diagonal also enter its map",
+                  0.0, 10.0, live=True),
+            Param('model', onnx.model, f'onnx: EfficientPose variant, {" or ".join(MODELS)} (<data_root>/models/'
+                  'efficientpose_<model>.onnx)'),
+            Param('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
+            Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
+            Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
+                  32, 4096),
+            Param('box_margin', onnx.box_margin,
+                  "onnx: each side of a person's box grows by this fraction of its size before the EfficientPose "
+                  'crop', 0.0, 10.0, live=True),
+            Param('min_person_score', onnx.min_person_score, 'onnx: MultiPose people scoring less are dropped',
+                  0.0, 1.0, live=True),
+            Param('min_joint_score', onnx.min_joint_score,
+                  'onnx: a joint whose heatmap peak is lower is not detected (empty map)', 0.0, 1.0, live=True),
+            Param('heatmap_floor', onnx.heatmap_floor, "onnx: heatmap cells below this fraction of their map's peak "
+                  'are 0', 0.0, 0.999, live=True),
+            Param('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
+                  'needs them)'),
+            Param('queue_depth', CAMERA_QUEUE_DEPTH, 'camera inputs (images, CameraInfo): keep-last depth of the '
+                  'best-effort subscriptions (a parameter file may override each topic: qos_overrides.<topic>...)',
+                  1, 10000),
+            Param('frame_rate', FRAME_RATE, 'whole rig: the cameras\' frame rate, Hz (the default of max_skew)',
+                  0.1, 1000.0),
+            Param('sync_timeout', SYNC_TIMEOUT_S, 'whole rig: s a set waits for a missing camera (not waited for '
+                  'again until it sends)', 0.001, 3600.0, live=True),
+            Param('min_cameras', 1, 'whole rig: sets with fewer cameras are dropped (counted as unmatched)', 1, 65535),
+            Param('waiting_sets', 1, 'whole rig: sets that wait while one is detected; older ones are dropped whole '
+                  '(1: only the newest, for live cameras; more for a replay that must lose none)', 1, 10000),
             *rig_parameters(),
         ])
         p['camera'] = self.get_parameter('camera').value
-        if not p['frame_rate'] > 0:
-            raise StartupError(f'parameter frame_rate: must be > 0, got {p["frame_rate"]}')
-        p |= declare(self, [('max_skew', default_max_skew(p['frame_rate']),
-                             'whole rig: s between the oldest and newest stamp of a set (default: half a frame '
-                             'period)')])
+        p |= declare(self, [Param('max_skew', default_max_skew(p['frame_rate']),
+                                  'whole rig: s between the oldest and newest stamp of a set (default: half a frame '
+                                  'period)', 0.0, 3600.0, live=True)])
         if p['backend'] not in BACKENDS:
             raise StartupError(f'parameter backend: {p["backend"]!r} is not one of {", ".join(BACKENDS)}')
-        if not (p['stride'] > 0 and p['sigma'] > 0):
-            raise StartupError(f'parameters stride, sigma: must be > 0, got {p["stride"]}, {p["sigma"]}')
-        if not p['queue_depth'] >= 1:
-            raise StartupError(f'parameter queue_depth: must be >= 1, got {p["queue_depth"]}')
         rig = load_rig_parameter(p)
         indices = _camera_indices(p['camera'], rig)
         self._whole_rig = len(indices) != 1 or p['camera'] in WHOLE_RIG
@@ -260,7 +233,9 @@ class HeatmapDetectorNode(Node):
                                               secondary_radius=p['secondary_radius'])
         if self._backend == 'onnx':
             self._detector = self._onnx_detector(p)  # before subscribing: the graph connects when it is ready
-        self._drops = DropLog(self.get_logger())
+        self._log = ThrottledLog(self.get_logger())
+        self._monitor = NodeMonitor()
+        self._released: dict[int, float] = {}  # whole rig: set index -> when released (monotonic)
         namespace = rig_namespace(self.get_namespace(), None if self._whole_rig else rig.cameras[indices[0]].name)
         graph = self.get_topic_names_and_types()
         self._cameras: list[_Camera] = []
@@ -286,6 +261,10 @@ class HeatmapDetectorNode(Node):
                                    f'{self.resolve_topic_name(cam.output.topic_name)}')
         if self._backend == 'onnx' and any(c.typed_by == 'name' for c in self._cameras):
             self._recheck_timer = self.create_timer(TYPE_RECHECK, self._recheck_types)
+        now = time.monotonic()
+        self._inputs = {cam.index: InputMonitor(cam.rig.name, now) for cam in self._cameras}
+        self._health = NodeHealth(self, self._statuses)
+        live_parameters(self, [*LIVE_DETECTOR[self._backend], 'sync_timeout', 'max_skew'], self._check, self._retune)
 
     # --- set-up -------------------------------------------------------------------------------
 
@@ -401,16 +380,66 @@ class HeatmapDetectorNode(Node):
     def _what(self) -> str:
         return 'openpose' if self._backend == 'openpose' else 'image'
 
+    def _drop(self, cam: _Camera, stamp: int, cause: str) -> None:
+        """An input that could not be used: counted for diagnostics, logged throttled per camera and cause."""
+        cause = short_cause(cause)
+        self._inputs[cam.index].dropped(time.monotonic(), cause.split(':')[0])
+        self._log.log((cam.rig.name, cause), f'{cam.rig.name}: {self._what()} stamp {stamp} ns dropped: {cause}',
+                      'error')
+
+    def _delivered(self, stamps: list[int], started: float, seconds: float) -> None:
+        """Diagnostics of one detection (a message, or a set): its time, latency since `started`
+        (monotonic) and from the capture stamps."""
+        now = time.monotonic()
+        self._monitor.processed(now, {'detection': seconds})
+        clock = self.get_clock().now().nanoseconds
+        self._monitor.delivered(now, now - started, (clock - min(stamps)) / 1e9 if stamps else None)
+
+    def _check(self, changes: dict[str, Any]) -> str | None:
+        try:
+            self._retuned(changes)
+            if {'sync_timeout', 'max_skew'} & changes.keys() and self._whole_rig:
+                ApproximateSync(1, changes.get('sync_timeout', self._sync.timeout),
+                                changes.get('max_skew', self._sync.max_skew_ns / 1e9))
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    def _retune(self, changes: dict[str, Any]) -> None:
+        if self._backend == 'onnx':
+            self._detector.config = self._retuned(changes)
+        else:
+            self._config = self._retuned(changes)
+        if self._whole_rig and {'sync_timeout', 'max_skew'} & changes.keys():
+            self._sync.retune(changes.get('sync_timeout', self._sync.timeout),
+                              changes.get('max_skew', self._sync.max_skew_ns / 1e9))
+
+    def _retuned(self, changes: dict[str, Any]) -> Any:
+        """The detector configuration with the live changes (ValueError when invalid)."""
+        config = self._detector.config if self._backend == 'onnx' else self._config
+        return replace(config, **{k: v for k, v in changes.items() if k in LIVE_DETECTOR[self._backend]})
+
+    def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
+        node = self._health.prefix()
+        waiting = (len(self._waiting) + self._sync.pending) if self._whole_rig else 0
+        extra = ({'sets released': str(self._waiting.put_count), 'sets detected': str(self._processed),
+                  'sets dropped whole while detecting': str(self._waiting.dropped)} if self._whole_rig else {})
+        return [*input_statuses(node, [i.stats(now, t.window) for i in self._inputs.values()], t),
+                node_status(node, self._monitor.stats(now, t.window), waiting, t, extra)]
+
     def _on_input(self, cam: _Camera, msg: Any) -> None:
         """One-camera mode: detect in the callback (a slower detector drops frames in the
         keep-last subscription, never queues them)."""
         t0 = time.perf_counter()
+        arrival = time.monotonic()
+        self._inputs[cam.index].received(arrival, stamp_ns(msg.header.stamp))
         try:
             out = self._people(cam, msg)
         except ValueError as exc:
-            self._drops.report(cam.rig.name, self._what(), stamp_ns(msg.header.stamp), str(exc))
+            self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
             return
         cam.output.publish(out)
+        self._delivered([stamp_ns(msg.header.stamp)], arrival, time.perf_counter() - t0)
         if self._backend == 'onnx':
             t = self._detector.timing
             self.get_logger().debug(f'{cam.rig.name}: image stamp {stamp_ns(msg.header.stamp)} ns: {t.people} '
@@ -422,18 +451,18 @@ class HeatmapDetectorNode(Node):
 
     def _on_set_input(self, cam: _Camera, msg: Any) -> None:
         stamp = stamp_ns(msg.header.stamp)
+        self._inputs[cam.index].received(time.monotonic(), stamp)
         try:
             self._admit(cam, msg)  # before the synchroniser holds it: refused junk takes no real image's place
         except ValueError as exc:
-            self._drops.report(cam.rig.name, self._what(), stamp, str(exc))
+            self._drop(cam, stamp, str(exc))
             return
         before = Counter(self._sync.dropped)
         try:
             released = self._sync.add(stamp, cam.index, msg, time.monotonic())  # every rig camera: sync index
         except ValueError as exc:
             reason = next(iter(self._sync.dropped - before), 'rejected')
-            self._drops.report(cam.rig.name, self._what(), stamp, f'not synchronised ({reason}): '
-                                                                  f'{_without_numbers(str(exc))}')
+            self._drop(cam, stamp, f'not synchronised ({reason}): {_without_numbers(str(exc))}')
             return
         self._offer(released)
 
@@ -445,13 +474,19 @@ class HeatmapDetectorNode(Node):
             cam = self._cameras[drop.camera]
             cause = {'unmatched': 'its set had fewer than min_cameras cameras',
                      'overflow': 'too many frames pending synchronisation (a camera stamping far ahead?)'}
-            self._drops.report(cam.rig.name, self._what(), drop.stamp_ns,
-                               f'not synchronised ({drop.reason}): {cause.get(drop.reason, drop.reason)}')
+            self._drop(cam, drop.stamp_ns, f'not synchronised ({drop.reason}): {cause.get(drop.reason, drop.reason)}')
+        now = time.monotonic()
         for synced in released:
-            if self._waiting.put(synced):
-                self.get_logger().warning(
-                    f'detection is slower than the cameras: {self._waiting.dropped} of {self._waiting.put_count} '
-                    f'sets dropped whole so far (the newest wait)', throttle_duration_sec=SUMMARY_PERIOD)
+            for c, s in enumerate(synced.stamps):
+                if s is not None:
+                    self._inputs[c].synchronised(now, (s - synced.stamp_ns) / 1e9)
+            self._monitor.set_skew(now, synced.skew_ns / 1e9)
+            self._released[synced.index] = now
+            for old in self._waiting.put(synced):
+                self._released.pop(old.index, None)
+                self._log.log(('sets', 'dropped whole while detecting'),
+                              f'detection is slower than the cameras: {self._waiting.dropped} of '
+                              f'{self._waiting.put_count} sets dropped whole so far (the newest wait)')
 
     def _work(self) -> None:
         while (synced := self._waiting.take()) is not None:
@@ -473,9 +508,11 @@ class HeatmapDetectorNode(Node):
             try:
                 outputs.append((cam, self._people(cam, msg)))
             except ValueError as exc:
-                self._drops.report(cam.rig.name, self._what(), stamp_ns(msg.header.stamp), str(exc))
+                self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
         for cam, out in outputs:
             cam.output.publish(out)
+        self._delivered([s for s in synced.stamps if s is not None], self._released.pop(synced.index, time.monotonic()),
+                        time.perf_counter() - t0)
         self._processed += 1
         dropped = self._waiting.dropped
         self.get_logger().debug(f'set {synced.index} stamp {synced.stamp_ns} ns: {len(outputs)} of '
@@ -493,8 +530,8 @@ class HeatmapDetectorNode(Node):
             logger.info(f'sets: {self._waiting.put_count} released, {self._processed} detected, '
                         f'{self._waiting.dropped} dropped whole while detecting; sync drops '
                         f'{dict(self._sync.dropped) or "none"}')
-        if hasattr(self, '_drops') and self._drops.counts:
-            logger.info(f'inputs dropped: {self._drops.summary()}')
+        if hasattr(self, '_log') and self._log.counts:
+            logger.info(f'problems: {self._log.summary()}')
         super().destroy_node()
 
 

@@ -1,5 +1,6 @@
-"""What every mvpose_ros node shares: typed parameter declaration, the data QoS and the camera
-QoS, the rig from the `rig` parameter, one-line start-up errors, and the rclpy main loop."""
+"""What every mvpose_ros node shares: typed parameter declaration (ranges, read-only unless a
+change applies live), the live-parameter callbacks, the data QoS and the camera QoS, the rig from
+the `rig` parameter, one-line start-up errors, and the rclpy main loop."""
 from __future__ import annotations
 
 import sys
@@ -8,10 +9,11 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 from rclpy.subscription import Subscription
@@ -21,6 +23,7 @@ from msg_adapters.camera_info_msg import info_to_intrinsics
 from mvpose_ros.core.evaluation.datasets import data_root
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
+from mvpose_ros.core.parameters import Param
 from mvpose_ros.package_files import package_path
 
 # Reliable and keep-all: a node that falls behind queues frames (and in the end slows its
@@ -63,35 +66,77 @@ def camera_subscription(node: Node, msg_type: type, topic: str, callback: Callab
 
 DEFAULT_RIG = 'config/rigs/shelf.yaml'
 
-# (name, default, description); string and array defaults carry their type explicitly
-ParameterSpec = tuple[str, Any, str]
-
 _TYPES = {str: ParameterType.PARAMETER_STRING, list: ParameterType.PARAMETER_STRING_ARRAY}
+_INT64 = 2 ** 63 - 1
+RESTART = 'read-only: a change needs a restart'
 
 
 class StartupError(Exception):
     """A bad parameter or file: the node cannot start (one line, exit code 2)."""
 
 
-def declare(node: Node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:
-    """Declare typed, described parameters; returns their values (from -p or --params-file)."""
-    for name, default, description in specs:
-        descriptor = ParameterDescriptor(description=description)
-        if type(default) in _TYPES:
-            descriptor.type = _TYPES[type(default)]
+def descriptor(spec: Param) -> ParameterDescriptor:
+    """The ParameterDescriptor of `spec`: typed, described, its range, read-only unless live."""
+    d = ParameterDescriptor(description=spec.description, read_only=not spec.live,
+                            additional_constraints='' if spec.live else RESTART)
+    if isinstance(spec.default, Parameter.Type):  # declared by type (an empty list cannot type itself)
+        d.type = spec.default.value
+    elif type(spec.default) in _TYPES:
+        d.type = _TYPES[type(spec.default)]
+    elif isinstance(spec.default, int) and not isinstance(spec.default, bool):
+        d.integer_range = [IntegerRange(from_value=-_INT64 if spec.low is None else int(spec.low),
+                                        to_value=_INT64 if spec.high is None else int(spec.high), step=1)]
+    elif isinstance(spec.default, float):
+        d.floating_point_range = [FloatingPointRange(from_value=-float('inf') if spec.low is None else float(spec.low),
+                                                     to_value=float('inf') if spec.high is None else float(spec.high),
+                                                     step=0.0)]
+    return d
+
+
+def declare(node: Node, specs: Sequence[Param]) -> dict[str, Any]:
+    """Declare typed, described, ranged parameters; returns their values (from -p or --params-file).
+    A value out of its range is a StartupError naming it."""
+    values = {}
+    for spec in specs:
         try:
-            node.declare_parameter(name, default, descriptor)
+            values[spec.name] = node.declare_parameter(spec.name, spec.default, descriptor(spec)).value
         except ParameterException as exc:
-            raise StartupError(f'parameter {name}: {exc}') from None
-    return {name: node.get_parameter(name).value for name, *_ in specs}
+            raise StartupError(f'parameter {spec.name}: {" ".join(str(exc).split())}') from None
+    return values
 
 
-def rig_parameters() -> list[ParameterSpec]:
+def live_parameters(node: Node, names: Sequence[str], check: Callable[[dict[str, Any]], str | None],
+                    apply: Callable[[dict[str, Any]], None]) -> None:
+    """Let the parameters `names` (declared live) change while the node runs: a set request naming
+    any of them is refused with check(changes)'s reason when it returns one, else applied with
+    apply(changes) once rclpy has stored the values. changes: name -> new value, of `names` only.
+    (Read-only parameters are refused by rclpy itself: 'Trying to set a read-only parameter'.)"""
+    wanted = set(names)
+
+    def changes_of(parameters: list[Parameter]) -> dict[str, Any]:
+        return {p.name: p.value for p in parameters if p.name in wanted}
+
+    def on_set(parameters: list[Parameter]) -> SetParametersResult:
+        changes = changes_of(parameters)
+        reason = check(changes) if changes else None
+        return SetParametersResult(successful=reason is None, reason=reason or '')
+
+    def on_applied(parameters: list[Parameter]) -> None:
+        changes = changes_of(parameters)
+        if changes:
+            apply(changes)
+            node.get_logger().info('parameters changed: ' + ', '.join(f'{k} = {v}' for k, v in changes.items()))
+
+    node.add_on_set_parameters_callback(on_set)
+    node.add_post_set_parameters_callback(on_applied)
+
+
+def rig_parameters() -> list[Param]:
     """The parameters naming the rig: a rig file (see core.geometry.rig) and the data root."""
     return [
-        ('data_root', '', "folder holding data/ and models/ ('' = $MVPOSE_DATA_ROOT or ../shared)"),
-        ('rig', DEFAULT_RIG, 'rig file (YAML; or a calibration json, see core.geometry.rig); a relative path '
-                             "is looked up from the working directory, then among the package's files"),
+        Param('data_root', '', "folder holding data/ and models/ ('' = $MVPOSE_DATA_ROOT or ../shared)"),
+        Param('rig', DEFAULT_RIG, 'rig file (YAML; or a calibration json, see core.geometry.rig); a relative path '
+                                  "is looked up from the working directory, then among the package's files"),
     ]
 
 

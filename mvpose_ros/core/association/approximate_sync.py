@@ -112,6 +112,19 @@ class ApproximateSync:
         self._absent: set[int] = set()  # cameras a set waited the timeout for, silent since
         self._drops: list[Drop] = []
 
+    def retune(self, timeout: float, max_skew: float) -> None:
+        """A new timeout and max_skew (seconds, as in the constructor) for what is released from now on."""
+        if not (timeout > 0 and max_skew >= 0):
+            raise ValueError(f'ApproximateSync needs timeout > 0 and max_skew >= 0, got {timeout}, {max_skew}')
+        self.timeout = float(timeout)
+        self.max_skew_ns = round(max_skew * 1e9)
+        self.grace = float(max_skew)
+
+    @property
+    def pending(self) -> int:
+        """Messages waiting for their set."""
+        return sum(len(q) for q in self._pending)
+
     def add(self, stamp_ns: int, camera: int, item: Any, now: float) -> list[SyncedSet]:
         """Take camera's message stamped stamp_ns (now: monotonic seconds); returns the sets this
         releases. ValueError for an unknown camera, and for a late or duplicate message (counted)."""

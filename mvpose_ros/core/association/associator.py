@@ -76,6 +76,12 @@ class Associator:
         self._trackers = [IouTracker(config.track_iou) for _ in self.cameras]
         self._ids = IdentityKeeper(config.max_jump, config.max_age)
 
+    def retune(self, config: AssociationConfig) -> None:
+        """New thresholds for the frames after this; the tracks and identities so far are kept."""
+        self.config = config
+        for tracker in self._trackers:
+            tracker.min_iou = config.track_iou
+
     def update(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[PersonObservation]:
         """people[c]: camera c's skeletons at this instant, or None when that camera is missing."""
         present = [list(p) if p is not None else [] for p in people]

@@ -35,6 +35,11 @@ class NewestQueue(Generic[T]):
             self._condition.notify()
         return dropped
 
+    def __len__(self) -> int:
+        """Items waiting."""
+        with self._condition:
+            return len(self._items)
+
     def take(self) -> T | None:
         """The oldest waiting item, blocking until there is one; None once closed."""
         with self._condition:

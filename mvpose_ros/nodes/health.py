@@ -1,0 +1,56 @@
+"""A node's /diagnostics: its `diagnostics.*` parameters (core.health.thresholds), live, and a
+timer that publishes, every `diagnostics.period` s, the statuses the node's collect function
+returns (core.health: inputs, node, residuals) as one DiagnosticArray."""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import Any, Callable
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from msg_adapters.diagnostics_msg import statuses_to_msg
+from mvpose_ros import topics
+from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.thresholds import PREFIX, HealthThresholds, health_parameters
+from mvpose_ros.nodes.runtime import declare, live_parameters
+
+DIAGNOSTICS_QOS = QoSProfile(depth=10)  # reliable, volatile: as diagnostic_updater publishes
+
+
+class NodeHealth:
+    """Declares the diagnostics parameters (with residual: the bp_solver's too) and publishes
+    collect(now, thresholds) on a timer; now: time.monotonic() s."""
+
+    def __init__(self, node: Node, collect: Callable[[float, HealthThresholds], list[Status]],
+                 residual: bool = False) -> None:
+        specs = health_parameters(residual)
+        self.thresholds = HealthThresholds.from_params(declare(node, specs))
+        self._node = node
+        self._collect = collect
+        self._publisher = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, DIAGNOSTICS_QOS)
+        node.create_timer(self.thresholds.period, self._publish)
+        live_parameters(node, [s.name for s in specs if s.live], self._check, self._apply)
+
+    def prefix(self) -> str:
+        """The node's name in its statuses: fully qualified, so namespaced rigs stay apart."""
+        return self._node.get_fully_qualified_name().lstrip('/')
+
+    def _check(self, changes: dict[str, Any]) -> str | None:
+        t = self._updated(changes)
+        if t.drop_warn > t.drop_error or t.latency_warn > t.latency_error:
+            return (f'diagnostics: drop_warn ({t.drop_warn}) and latency_warn ({t.latency_warn}) must not exceed '
+                    f'drop_error ({t.drop_error}) and latency_error ({t.latency_error})')
+        return None
+
+    def _apply(self, changes: dict[str, Any]) -> None:
+        self.thresholds = self._updated(changes)
+
+    def _updated(self, changes: dict[str, Any]) -> HealthThresholds:
+        return replace(self.thresholds, **{k[len(PREFIX):]: v for k, v in changes.items()})
+
+    def _publish(self) -> None:
+        statuses = self._collect(time.monotonic(), self.thresholds)
+        self._publisher.publish(statuses_to_msg(statuses, self._node.get_clock().now().to_msg()))

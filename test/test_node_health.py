@@ -1,0 +1,54 @@
+"""A node's /diagnostics and its parameters through rclpy's parameter service, as `ros2 param
+set` uses it: a live change applied (and seen in the next diagnostics), a read-only one refused
+with its reason, an out-of-range one refused."""
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+
+from msg_adapters.diagnostics_msg import msg_to_statuses
+from mvpose_ros.core.health.status import Level
+from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
+from ros_harness import probe, spin_until, start_node, stop
+
+
+def _set(node, executor, client, name: str, value: ParameterValue):
+    future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
+    assert spin_until(executor, future.done, 10.0)
+    return future.result().results[0]
+
+
+def test_bp_solver_publishes_diagnostics_and_takes_live_parameters(domain, tmp_path):
+    log = tmp_path / 'bp.log'
+    with probe(domain, 'health_probe') as (node, executor):
+        arrays: list[DiagnosticArray] = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, DIAGNOSTICS_QOS)
+        client = node.create_client(SetParameters, '/bp_solver/set_parameters')
+        proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=3',
+                          '-p', 'diagnostics.stale_error:=0.5', '-p', 'diagnostics.period:=0.2')
+        try:
+            def bundles_input(level: Level) -> bool:
+                return any(s.name == 'bp_solver: input bundles' and s.level == level
+                           for a in arrays for s in msg_to_statuses(a))
+
+            # no input for more than stale_error: WARN (every input of the node is silent)
+            assert spin_until(executor, lambda: bundles_input(Level.WARN), 20.0), log.read_text()
+            names = {s.name for s in msg_to_statuses(arrays[-1])}
+            assert {'bp_solver: node', *(f'bp_solver: camera cam{c} reprojection' for c in range(5))} <= names
+            assert client.wait_for_service(10.0)
+
+            refused = _set(node, executor, client, 'window',
+                           ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=8))
+            assert not refused.successful and 'read-only' in refused.reason
+            out_of_range = _set(node, executor, client, 'diagnostics.drop_warn',
+                                ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0))
+            assert not out_of_range.successful and 'out of range' in out_of_range.reason
+            applied = _set(node, executor, client, 'diagnostics.stale_error',
+                           ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=1000.0))
+            assert applied.successful, applied.reason
+            arrays.clear()
+            assert spin_until(executor, lambda: bundles_input(Level.OK), 10.0), log.read_text()  # applied live
+        finally:
+            stop(proc)
+    assert 'parameters changed: diagnostics.stale_error = 1000.0' in log.read_text()
