@@ -24,6 +24,7 @@ from mvpose_ros.core.evaluation.campus import campus_sequence
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
                                                  dataset_dir, load_actors_gt)
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
+from mvpose_ros.core.evaluation.identities import identity_report
 from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
@@ -109,6 +110,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         results = [r for r, _ in read_results(args.score)]
         ev = evaluate(as_predictions(results), gt, actors)
         print(f'{args.score}\n{format_table(ev, reference)}\n{_summary(ev)}', file=out)
+        print('\n'.join(identity_report(results, gt, actors).lines()), file=out)
         if args.confidence_report:
             _confidence_report(results, gt, actors, args.confidence_report, out)
         return 0
@@ -141,6 +143,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
               f'max gap {args.max_gap} s', file=out)
     print(format_table(ev, reference), file=out)
     print(_summary(ev), file=out)
+    print('\n'.join(identity_report(results, gt, actors).lines()), file=out)
     if args.dataset == 'campus':
         print(f'paper: Campus average {PAPER_CAMPUS_AVERAGE}', file=out)
     _print_speed(seq, prepared, bp_timer, out)
