@@ -225,6 +225,23 @@ def test_identity_recovered_by_position_when_all_tracks_changed(poses):
     assert recovered == [ids[k] for k in order]
 
 
+def test_a_person_split_for_a_few_frames_goes_back_to_its_long_standing_id():
+    """Shelf frames 431-435: a duplicate detection in one camera splits a person into two
+    clusters; when they merge again, with as many tracks from each, the id the tracks have long
+    made up wins over the newcomer's (its tracks vote with their history, not one each)."""
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    here = np.array([[0.0, 0.0, 0.9]])
+    for frame in range(20):
+        assert keeper.assign(frame, [{(0, 5), (1, 0), (2, 1), (3, 28)}], here) == [0]
+    split = [{(0, 5), (1, 0)}, {(1, 91), (2, 1), (3, 29)}]  # camera 2's track went to the newcomer
+    newcomer = here + [0.05, 0.05, 0.0]
+    for frame in range(20, 24):
+        assert keeper.assign(frame, split, np.vstack([here, newcomer])) == [0, 1]
+    # merged again, two tracks shared with each id and nearer the newcomer's centre
+    merged = {(0, 5), (1, 0), (2, 1), (3, 29)}
+    assert keeper.assign(24, [merged], newcomer) == [0]
+
+
 @pytest.mark.parametrize('jump, same', [(0.3, True), (0.45, True), (0.55, False), (1.5, False)])
 def test_identity_new_beyond_max_jump(poses, jump, same):
     keeper = IdentityKeeper(max_jump=0.5, max_age=25)

@@ -1,9 +1,11 @@
 """Stable 3D person ids across frames.
 
-A person keeps its id while the per-camera tracks that make it up continue (any shared
-(camera, track) pair votes for the old id); when the tracks all changed (a new box in every
-camera after an occlusion), the id is recovered from the 3D position if the person is within
-`max_jump` metres of where a recently seen person was.
+A person keeps its id while the per-camera tracks that make it up continue: each shared
+(camera, track) pair votes for the old id with the number of frames it has been part of that id
+(up to `max_age`), so a person split for a few frames into two clusters (a duplicate detection in
+one camera) goes back to the id its tracks have long made up rather than to the newcomer's. When
+the tracks all changed (a new box in every camera after an occlusion), the id is recovered from
+the 3D position if the person is within `max_jump` metres of where a recently seen person was.
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from scipy.optimize import linear_sum_assignment
 
 @dataclass
 class _Known:
-    members: set[tuple[int, int]]
+    members: dict[tuple[int, int], int]  # (camera, track) -> frames it has been part of this id
     centre: np.ndarray
     last_frame: int
 
@@ -40,11 +42,12 @@ class IdentityKeeper:
         known_ids = list(self._known)
         ids = [-1] * len(members)
         if members and known_ids:
-            shared = np.array([[len(m & self._known[k].members) for k in known_ids] for m in members])
+            shared = np.array([[sum(self._known[k].members.get(t, 0) for t in m) for k in known_ids]
+                               for m in members])
             jump = np.linalg.norm(centres[:, None] - np.array([self._known[k].centre for k in known_ids])[None],
                                   axis=-1)
             allowed = (shared > 0) | (jump <= self.max_jump)
-            # Shared tracks dominate; distance breaks ties and decides when no track survives.
+            # Shared track history dominates; distance breaks ties and decides when no track survives.
             cost = np.where(allowed, -100.0 * shared + jump, 1e6)
             rows, cols = linear_sum_assignment(cost)
             for r, c in zip(rows, cols):
@@ -54,5 +57,7 @@ class IdentityKeeper:
             if ids[i] < 0:
                 ids[i] = self._next_id
                 self._next_id += 1
-            self._known[ids[i]] = _Known(set(m), centres[i], frame)
+            before = self._known[ids[i]].members if ids[i] in self._known else {}
+            self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, max(self.max_age, 1)) for t in m}, centres[i],
+                                         frame)
         return ids
