@@ -270,3 +270,37 @@ def test_identity_never_reuses_ids_and_is_unique_per_frame(poses):
     assert sorted(ids) == [0, 2]
     # everyone expired: a person where 0 was gets a brand new id, not 0 or 1 again
     assert keeper.assign(10, _members([9]), centres[[0]]) == [3]
+
+
+def test_a_view_close_to_one_view_of_a_person_but_not_the_others_does_not_join_it(monkeypatch):
+    """Two people near each other: camera 3's skeleton of the second person passes close to
+    camera 2's of the first (0.10 m) but far from its cameras 0 and 1 (0.50 m). Closest pairs
+    first with single linkage chained it into the first person; on average it is 0.37 m away, so
+    it stays with camera 4's view of the second person."""
+    d = np.full((5, 5), np.inf)
+    for (u, v), value in {(0, 1): 0.05, (0, 2): 0.05, (1, 2): 0.05, (2, 3): 0.10, (0, 3): 0.50, (1, 3): 0.50,
+                          (3, 4): 0.12, (0, 4): 0.60, (1, 4): 0.60, (2, 4): 0.60}.items():
+        d[u, v] = d[v, u] = value
+    from mvpose_ros.core.association import matching
+    monkeypatch.setattr(matching, 'all_view_distances', lambda *_: d)
+    people = [[object()] for _ in range(5)]  # one skeleton per camera; only their count is used
+    clusters = cluster_views([None] * 5, people, MatchingConfig(max_distance=0.15))
+    assert sorted(sorted(c.items()) for c in clusters) == [[(0, 0), (1, 0), (2, 0)], [(3, 0), (4, 0)]]
+
+
+def test_a_person_nobody_matches_takes_a_new_id_rather_than_another_persons():
+    """Shelf frame 593: a stray two-view cluster that may take no free id (it shares a track with
+    a person whose id is taken, and is far from the rest). Every row of the assignment must go
+    somewhere: without new ids to go to, the stray one took person a's id and pushed a onto a
+    recent, weaker one."""
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    a, c = np.array([0.0, 0.0, 0.9]), np.array([3.0, 0.0, 0.9])
+    for frame in range(30):
+        assert keeper.assign(frame, [{(0, 1), (1, 1), (2, 1)}, {(3, 9), (5, 9), (6, 9)}], np.stack([a, c])) == [0, 1]
+    # a splits: camera 0's view of a goes with a stray view into a new person 0.3 m off
+    assert keeper.assign(30, [{(1, 1), (2, 1), (4, 4)}, {(0, 1), (7, 7)}, {(3, 9), (5, 9), (6, 9)}],
+                         np.stack([a, a + [0.3, 0, 0], c])) == [0, 2, 1]
+    # a whole again; a stray cluster with a's weak track (4, 4) and c's (3, 9), far from everyone
+    ids = keeper.assign(31, [{(0, 1), (1, 1), (2, 1)}, {(4, 4), (3, 9)}, {(5, 9), (6, 9)}],
+                        np.stack([a, [1.5, 2.0, 0.9], c]))
+    assert ids[0] == 0 and ids[2] == 1 and ids[1] not in (0, 1, 2)

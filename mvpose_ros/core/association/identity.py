@@ -48,10 +48,13 @@ class IdentityKeeper:
                                   axis=-1)
             allowed = (shared > 0) | (jump <= self.max_jump)
             # Shared track history dominates; distance breaks ties and decides when no track survives.
-            cost = np.where(allowed, -100.0 * shared + jump, 1e6)
+            # A new id costs more than any allowed match but far less than a forbidden one, so a
+            # person nobody matches takes one instead of pushing another person off its id.
+            cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6),
+                              np.full((len(members), len(members)), self.max_jump + 1.0)])
             rows, cols = linear_sum_assignment(cost)
             for r, c in zip(rows, cols):
-                if allowed[r, c]:
+                if c < len(known_ids) and allowed[r, c]:
                     ids[r] = known_ids[c]
         for i, m in enumerate(members):
             if ids[i] < 0:

@@ -3,7 +3,9 @@
 Two skeletons match when the rays through their shared joints pass close to each other on
 average (paper: 2 cm; on the real Shelf calibration and OpenPose noise the right value is
 larger, see MatchingConfig). Views are then clustered greedily, closest pairs first, with at
-most one skeleton per camera in a person.
+most one skeleton per camera in a person, and a view joins a person (or two persons merge) only
+when it matches that person's views on average: one close pair must not chain two people
+standing near each other into one (single linkage did, at Shelf frame 590).
 """
 from __future__ import annotations
 
@@ -63,23 +65,33 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
     view = [(c, i) for c, ps in enumerate(people) for i in range(len(ps))]
     a, b = np.nonzero(np.triu(dist <= config.max_distance, 1))
     order = np.argsort(dist[a, b], kind='stable')
-    edges = [(dist[a[e], b[e]], view[a[e]], view[b[e]]) for e in order]
-    owner: dict[tuple[int, int], int] = {}
-    clusters: list[dict[int, int]] = []
-    for _, u, v in edges:
+    owner: dict[int, int] = {}  # view (row of dist) -> its cluster
+    clusters: list[list[int]] = []
+
+    def linked(x: list[int], y: list[int]) -> bool:
+        """The two groups of views are one person: other cameras, and close on average."""
+        if {view[u][0] for u in x} & {view[v][0] for v in y}:
+            return False
+        cross = dist[np.ix_(x, y)]
+        return bool(np.mean(cross[np.isfinite(cross)]) <= config.max_distance)
+
+    for e in order:
+        u, v = int(a[e]), int(b[e])
         cu, cv = owner.get(u), owner.get(v)
-        if cu is None and cv is None:
-            owner[u] = owner[v] = len(clusters)
-            clusters.append({u[0]: u[1], v[0]: v[1]})
-        elif cu is not None and cv is not None:
-            if cu != cv and not clusters[cu].keys() & clusters[cv].keys():
-                for cam, idx in clusters[cv].items():
-                    owner[(cam, idx)] = cu
-                clusters[cu].update(clusters[cv])
-                clusters[cv] = {}
+        if cu is not None and cu == cv:
+            continue
+        x = clusters[cu] if cu is not None else [u]
+        y = clusters[cv] if cv is not None else [v]
+        if not linked(x, y):
+            continue
+        merged = x + y
+        target = cu if cu is not None else cv if cv is not None else len(clusters)
+        if target == len(clusters):
+            clusters.append(merged)
         else:
-            keep, new = (cu, v) if cu is not None else (cv, u)
-            if new[0] not in clusters[keep]:
-                clusters[keep][new[0]] = new[1]
-                owner[new] = keep
-    return [c for c in clusters if len(c) >= 2]
+            clusters[target] = merged
+        if cu is not None and cv is not None:
+            clusters[cv] = []
+        for w in merged:
+            owner[w] = target
+    return [{view[w][0]: view[w][1] for w in c} for c in clusters if len(c) >= 2]
