@@ -59,3 +59,12 @@ def test_junk_with_ever_new_causes_keeps_the_log_bounded():
     assert max(len(cause) for _, cause in log.counts) <= MAX_CAUSE_CHARS
     assert sum(level == 'error' for level, _ in logger.lines) == MAX_CAUSES + 2  # the others counted, not told
     assert max(len(text) for _, text in logger.lines) <= 2 * MAX_CAUSE_CHARS
+
+
+def test_an_rclpy_logger_takes_every_level_from_one_log():
+    """rclpy refuses a second severity from one call site ('Logger severity cannot be changed
+    between calls'): the detector logs dropped inputs as errors and dropped sets as warnings."""
+    import rclpy.logging
+    log = ThrottledLog(rclpy.logging.get_logger('throttled_log_test'), clock=lambda: 0.0)
+    for k, level in enumerate(('error', 'warning', 'info', 'error')):
+        assert log.log((f'cam{k}', level), f'a {level}', level)

@@ -57,7 +57,14 @@ class ThrottledLog:
                 return False
             more = self._unsaid.pop(key, 0)
             self._said[key] = now
-        getattr(self._logger, level)(text + (f' ({more} more like it in the last {self.period:g} s)' if more else ''))
+        line = text + (f' ({more} more like it in the last {self.period:g} s)' if more else '')
+        # one call site per severity: rclpy refuses another severity from a call site it has seen
+        if level == 'error':
+            self._logger.error(line)
+        elif level == 'warning':
+            self._logger.warning(line)
+        else:
+            self._logger.info(line)
         return True
 
     def summary(self) -> str:
