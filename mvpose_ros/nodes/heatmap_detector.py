@@ -193,6 +193,8 @@ class HeatmapDetectorNode(Node):
                   'efficientpose_<model>.onnx)'),
             Param('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
             Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
+            Param('max_batch', onnx.max_batch, 'onnx: EfficientPose crops per run (0 = all crops of a set in one run, '
+                  'for a GPU)', 0, 4096),
             Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
                   32, 4096),
             Param('box_margin', onnx.box_margin,
@@ -324,7 +326,7 @@ class HeatmapDetectorNode(Node):
                 providers=tuple(p['providers']), threads=p['threads'], input_size=p['input_size'],
                 box_margin=p['box_margin'], min_person_score=p['min_person_score'],
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
-                ears=p['ears'], sigma=p['sigma'])
+                ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
