@@ -78,7 +78,7 @@ def test_a_heatmap_peak_at_a_known_input_cell_maps_back_to_its_image_pixel(width
                       [cx + 0.5 * cw, cy + 0.9 * ch - 0.3]])
     maps = np.stack([_blob((side, side), c, 3.0) for c in cells]).astype(np.float32)
     origin, shape = lb.image_grid(stride)
-    resampled = lb.maps_to_image(maps, origin, stride, shape)
+    resampled = lb.maps_to_image(maps.transpose(1, 2, 0), origin, stride, shape)  # channel last, as networks give
     assert resampled.shape == (len(cells),) + shape
     expected = lb.to_image(cells)
     # the map's mass centre, in image pixels, is the mapped cell (sub-pixel)

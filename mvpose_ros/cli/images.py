@@ -2,13 +2,20 @@
 
     mvpose-images (--rig FILE | --calibration FILE) --images CAM0 CAM1 ... [--output DIR] [--frame N]
                   [--model rt|i] [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
+                  [--sets N] [--person-detector-every K] [--max-batch B] [--threads T]
 
 Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose + EfficientPose),
 associates them across the cameras, samples the 3D hypotheses and runs BP on this one frame, and
 writes the skeletons as one predictions line (`<output>/skeletons.jsonl`) and one overlay PNG per
 camera (`<output>/cam<c>.png`: the reprojected 3D skeletons in each person's colour over the 2D
-detections in thin white). Prints the latency of each camera's detection and of the whole frame;
-with --ground-truth shelf, the per-actor MPJPE and PCP of the frame against Shelf's actorsGT.
+detections in thin white). Prints the time of each stage of the set (MultiPose, EfficientPose,
+heatmaps, association and 3D); with --ground-truth shelf, the per-actor MPJPE and PCP of the
+frame against Shelf's actorsGT.
+
+--sets N detects the same images N times as a sequence of sets (a still scene) and prints each
+set's stage times and their medians; with --person-detector-every K, MultiPose runs on every K-th
+set only and the sets between take their crops from the previous set's 3D skeletons
+(core.tracked_crops). The files written and the score are those of the last set.
 """
 from __future__ import annotations
 
@@ -29,6 +36,7 @@ from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_act
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
 from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.evaluation.overlay import overlay, person_colour
 from mvpose_ros.core.stage import StageConfig, Stage3D
 from mvpose_ros.core.evaluation.predictions import frame_line
@@ -57,6 +65,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help='onnxruntime execution providers (default: CPUExecutionProvider)')
     p.add_argument('--input-size', type=int, default=DEFAULTS.input_size,
                    help='MultiPose input side, a multiple of 32 (default: 384)')
+    p.add_argument('--threads', type=int, default=DEFAULTS.threads,
+                   help='onnxruntime intra-op threads per model (default: 0, one per core)')
+    p.add_argument('--max-batch', type=int, default=DEFAULTS.max_batch,
+                   help=f'EfficientPose crops per run, 0 = all crops of the set in one (default: {DEFAULTS.max_batch})')
+    p.add_argument('--sets', type=int, default=1, help='detect the images this many times as a sequence (default: 1)')
+    p.add_argument('--person-detector-every', type=int, default=1,
+                   help='run MultiPose on every K-th set only; crops from the previous 3D skeletons between '
+                        '(default: 1, every set)')
     p.add_argument('--stride', type=float, default=DEFAULTS.stride, help='heatmap cell size, pixels (default: 4)')
     p.add_argument('--no-ears', dest='ears', action='store_false',
                    help="leave the ear joints empty instead of taking MultiPose's COCO ears")
@@ -104,31 +120,56 @@ def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
         print(f'Actor {actor + 1}: {found}, MPJPE {ev.mpjpe[a]:.1f} mm, {pcp}', file=out)
 
 
+def _mpjpe(result: FrameResult, root: str | None) -> str:
+    """Each annotated actor's MPJPE in this frame, one short line ('actor 1 65.6 mm, ...')."""
+    gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [result.frame])
+    actors = np.flatnonzero(gt.present[0]).tolist()
+    if not actors:
+        return 'no actor annotated'
+    ev = evaluate({result.frame: result.joints}, gt, actors)
+    return ', '.join(f'actor {a + 1} {m:.1f} mm' for a, m in zip(ev.actors, ev.mpjpe))
+
+
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
+    if args.sets < 1:
+        raise ValueError(f'--sets {args.sets} must be >= 1')
     cameras, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
-                                                   input_size=args.input_size, stride=args.stride, ears=args.ears))
+                                                   threads=args.threads, input_size=args.input_size,
+                                                   stride=args.stride, ears=args.ears, max_batch=args.max_batch))
+    planner = CropPlanner(cameras, args.person_detector_every)
     detector.detect(images[0])  # warm-up: onnxruntime's first run allocates; not a steady-state latency
-    start = time.perf_counter()
-    people = []
     print(f'{PROG}: {len(cameras)} cameras, EfficientPose {args.model.upper()}, MultiPose input '
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
-    for c, bgr in enumerate(images):
-        people.append(detector.detect(bgr))
-        t = detector.timing
-        print(f'  cam{c}: {t.people} people; MultiPose {1e3 * t.multipose:6.1f} ms, EfficientPose '
-              f'{t.people} crops {1e3 * t.efficientpose:6.1f} ms, total {1e3 * t.total:6.1f} ms', file=out)
-    detected = time.perf_counter()
     stage = Stage3D(cameras, StageConfig.from_params({'window': 0, 'head_model': args.head_model}))
-    results = stage.push(args.frame, people) + stage.flush()
     nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
-    result = results[0] if results else nobody
-    end = time.perf_counter()
-    print(f'frame: 2D detection {1e3 * (detected - start):.0f} ms ({len(cameras)} cameras), association and 3D '
-          f'{1e3 * (end - detected):.0f} ms, total {1e3 * (end - start):.0f} ms; '
-          f'{len(result.person_ids)} people in 3D (ids {result.person_ids})', file=out)
+    times = []
+    for n in range(args.sets):
+        start = time.perf_counter()
+        plan = planner.plan()
+        people = detector.detect_set(images, plan, planner.previous)
+        detected = time.perf_counter()
+        results = stage.push(args.frame + n, people) + stage.flush()
+        result = replace(results[0], frame=args.frame) if results else nobody
+        planner.update(plan, people)
+        planner.skeletons(result.joints)
+        end = time.perf_counter()
+        t = detector.timing
+        times.append((t.multipose, t.efficientpose, t.total - t.multipose - t.efficientpose, end - detected,
+                      end - start))
+        found = ' '.join(f'cam{c}:{len(p)}' for c, p in enumerate(people))
+        scored = f'; MPJPE {_mpjpe(result, args.data_root)}' if args.ground_truth == 'shelf' else ''
+        print(f'set {n}: MultiPose on {t.multipose_runs} images {1e3 * t.multipose:6.1f} ms, EfficientPose '
+              f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * times[-1][2]:5.1f} ms, '
+              f'association and 3D {1e3 * (end - detected):5.1f} ms, total {1e3 * (end - start):6.1f} ms; people '
+              f'{found}; {len(result.person_ids)} in 3D{scored}', file=out)
+    if args.sets > 1:
+        median = 1e3 * np.median(np.array(times), axis=0)
+        print(f'median of {args.sets} sets: MultiPose {median[0]:.1f} ms, EfficientPose {median[1]:.1f} ms, heatmaps '
+              f'{median[2]:.1f} ms, association and 3D {median[3]:.1f} ms, total {median[4]:.1f} ms '
+              f'({1e3 / median[4]:.2f} sets/s)', file=out)
 
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / 'skeletons.jsonl').write_text(frame_line(result) + '\n', encoding='utf-8')

@@ -193,6 +193,8 @@ class HeatmapDetectorNode(Node):
                   'efficientpose_<model>.onnx)'),
             Param('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
             Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
+            Param('max_batch', onnx.max_batch, 'onnx: EfficientPose crops per run (0 = all crops of a set in one run, '
+                  'for a GPU)', 0, 4096),
             Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
                   32, 4096),
             Param('box_margin', onnx.box_margin,
@@ -324,7 +326,7 @@ class HeatmapDetectorNode(Node):
                 providers=tuple(p['providers']), threads=p['threads'], input_size=p['input_size'],
                 box_margin=p['box_margin'], min_person_score=p['min_person_score'],
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
-                ears=p['ears'], sigma=p['sigma'])
+                ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
@@ -372,10 +374,15 @@ class HeatmapDetectorNode(Node):
 
     def _people(self, cam: _Camera, msg: Any) -> PointCloud2:
         """The people2d message of one input; ValueError (one line) when it cannot be used."""
-        self._admit(cam, msg)
         if self._backend == 'openpose':
+            self._admit(cam, msg)
             return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
-        return people_to_msg(self._detector.detect(decode_image(msg, cam.camera)), msg.header)
+        return people_to_msg(self._detector.detect(self._image(cam, msg)), msg.header)
+
+    def _image(self, cam: _Camera, msg: Any) -> Any:
+        """The admitted, decoded BGR image of one camera input; ValueError (one line) otherwise."""
+        self._admit(cam, msg)
+        return decode_image(msg, cam.camera)
 
     def _what(self) -> str:
         return 'openpose' if self._backend == 'openpose' else 'image'
@@ -502,13 +509,26 @@ class HeatmapDetectorNode(Node):
         association at once, not spread over the detection time)."""
         t0 = time.perf_counter()
         outputs = []
-        for cam, msg in zip(self._cameras, synced.items):
-            if msg is None:
-                continue
-            try:
-                outputs.append((cam, self._people(cam, msg)))
-            except ValueError as exc:
-                self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
+        if self._backend == 'onnx':
+            # every image decoded, then one detect_set: EfficientPose takes the crops of all cameras
+            images = []
+            for cam, msg in zip(self._cameras, synced.items):
+                try:
+                    images.append(None if msg is None else self._image(cam, msg))
+                except ValueError as exc:
+                    self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
+                    images.append(None)
+            for cam, msg, people in zip(self._cameras, synced.items, self._detector.detect_set(images)):
+                if people is not None:
+                    outputs.append((cam, people_to_msg(people, msg.header)))
+        else:
+            for cam, msg in zip(self._cameras, synced.items):
+                if msg is None:
+                    continue
+                try:
+                    outputs.append((cam, self._people(cam, msg)))
+                except ValueError as exc:
+                    self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
         for cam, out in outputs:
             cam.output.publish(out)
         self._delivered([s for s in synced.stamps if s is not None], self._released.pop(synced.index, time.monotonic()),

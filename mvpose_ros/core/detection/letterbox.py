@@ -64,19 +64,20 @@ class Letterbox:
 
     def maps_to_image(self, maps: np.ndarray, origin: np.ndarray, stride: float,
                       shape: tuple[int, int]) -> np.ndarray:
-        """Resample maps (J, size, size), value [j, y, x] at input pixel (x, y), onto the image
-        grid whose cell [r, c] is at image pixel origin + stride * (c, r), shape (h, w): returns
-        (J, h, w). Separable tent interpolation whose support widens to one output cell when
-        cells are coarser than the input's pixels (bilinear otherwise), so a peak keeps its mass;
-        0 where a cell falls outside the input."""
+        """Resample maps (size, size, J), channel last as the network gives them, value [y, x, j]
+        at input pixel (x, y), onto the image grid whose cell [r, c] is at image pixel origin +
+        stride * (c, r), shape (h, w): returns (J, h, w). Separable tent interpolation whose
+        support widens to one output cell when cells are coarser than the input's pixels (bilinear
+        otherwise), so a peak keeps its mass; 0 where a cell falls outside the input."""
         h, w = shape
         cols = self.to_input(np.stack([origin[0] + stride * np.arange(w), np.zeros(w)], -1))[:, 0]
         rows = self.to_input(np.stack([np.zeros(h), origin[1] + stride * np.arange(h)], -1))[:, 1]
         ix, wx = _tent_taps(cols, self.size, stride * self.scale[0])  # (w, K)
         iy, wy = _tent_taps(rows, self.size, stride * self.scale[1])  # (h, K)
         maps = np.asarray(maps, dtype=np.float32)
-        across = (maps[:, :, ix] * wx).sum(axis=-1)  # (J, size, w)
-        return (across[:, iy, :] * wy[..., None]).sum(axis=2)  # (J, h, w)
+        # rows first: each tap is a whole contiguous input row, and only the grid's rows are read
+        down = np.einsum('hk,hkxj->hxj', wy, maps[iy], optimize=True)  # (h, size, J)
+        return np.einsum('wk,hwkj->jhw', wx, down[:, ix], optimize=True)  # (J, h, w)
 
 
 def _tent_taps(positions: np.ndarray, n: int, step: float) -> tuple[np.ndarray, np.ndarray]:

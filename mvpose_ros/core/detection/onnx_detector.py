@@ -1,7 +1,11 @@
 """2D people with heatmaps from a camera image, with two ONNX models on onnxruntime: MoveNet
 MultiPose finds the people (boxes and COCO-17 keypoints) in the whole letterboxed frame, then
 EfficientPose (RT or I) gives each person's MPII-16 heatmaps on a letterboxed crop around its
-box, batched over the people of the frame.
+box. detect_set() takes a synchronised set of the rig's images: MultiPose runs once per image
+(its batch dimension is fixed at 1), EfficientPose on the crops of every camera in runs of at most
+`max_batch` crops. A camera can be given crops instead (core.tracked_crops: the previous set's
+3D skeletons projected into it): MultiPose does not run on its image, and its people's ears are
+carried from the camera's previous people.
 
 Joint mapping (body.SOURCE_INDEX['mpii16']): the 12 limb joints one-to-one; MPII upper_neck ->
 inference 'neck' and head_top -> inference 'head', the points the 'direct' head model takes as
@@ -21,21 +25,25 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import COCO17_NAMES, L_EAR, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX, to_inference
+from mvpose_ros.core.geometry.body import (COCO17_NAMES, L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX,
+                                           to_inference)
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap
 from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
 from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
                                                    load_session)
+from mvpose_ros.core.detection.tracked_crops import carried_ears
 from mvpose_ros.core.types import Person2D
 
 MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
 # EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])
 _MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
 _STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
-_COCO_EARS = {R_EAR: COCO17_NAMES.index('r_ear'), L_EAR: COCO17_NAMES.index('l_ear')}
+_EARS = (R_EAR, L_EAR)
+_COCO_EARS = [COCO17_NAMES.index('r_ear'), COCO17_NAMES.index('l_ear')]
 _MULTIPOSE_KEYPOINTS = 17
 
 
@@ -47,7 +55,10 @@ class OnnxDetectorConfig:
     square input side (a multiple of 32). box_margin: each side of a MultiPose box grows by this
     fraction of the box's width (height) before the crop. min_person_score: MultiPose people below
     it are dropped. min_joint_score, heatmap_floor, stride: see the module docstring. ears: fill the
-    ear joints from MultiPose's COCO ears, rendered as Gaussians of std sigma px."""
+    ear joints from MultiPose's COCO ears, rendered as Gaussians of std sigma px. max_batch:
+    EfficientPose crops per run (0 = all crops of a set in one run): on two CPU cores runs of 1 to 4
+    crops were as fast as one run of a set's 19 (the larger batch's tensors leave the cache); a GPU
+    gains from 0."""
 
     model_dir: Path
     model: str = 'rt'
@@ -61,6 +72,7 @@ class OnnxDetectorConfig:
     stride: float = 4.0
     ears: bool = True
     sigma: float = 6.0
+    max_batch: int = 4
 
     def __post_init__(self) -> None:
         problems = []
@@ -68,8 +80,8 @@ class OnnxDetectorConfig:
             problems.append(f'model {self.model!r} is not one of {", ".join(MODELS)}')
         if not (self.input_size >= 32 and self.input_size % 32 == 0):
             problems.append(f'input_size {self.input_size} is not a positive multiple of 32')
-        if self.threads < 0:
-            problems.append(f'threads {self.threads} is negative')
+        if self.threads < 0 or self.max_batch < 0:
+            problems.append(f'threads {self.threads} and max_batch {self.max_batch} must be >= 0')
         if not self.box_margin >= 0:
             problems.append(f'box_margin {self.box_margin} is negative')
         if not (0 <= self.min_person_score <= 1 and 0 <= self.min_joint_score <= 1 and 0 <= self.heatmap_floor < 1):
@@ -83,13 +95,15 @@ class OnnxDetectorConfig:
 
 @dataclass
 class DetectionTiming:
-    """Wall seconds of the last detect(): MultiPose (letterbox, run, decode), EfficientPose
-    (crops and one batched run), and everything including the heatmaps' resampling."""
+    """Wall seconds of the last detect() or detect_set(): MultiPose (letterbox, runs, decode),
+    EfficientPose (crops and runs), and everything including the heatmaps' resampling; people
+    found, and the images MultiPose ran on (the others' crops were given)."""
 
     multipose: float = 0.0
     efficientpose: float = 0.0
     total: float = 0.0
     people: int = 0
+    multipose_runs: int = 0
 
 
 @dataclass
@@ -101,8 +115,19 @@ class _Found:
     boxes: np.ndarray
 
 
+@dataclass
+class _Crop:
+    """One EfficientPose crop: its camera, letterbox, and the ears (2, 3) u, v, score from
+    MultiPose's COCO ears, or None to carry them from the camera's previous people."""
+
+    camera: int
+    box: Letterbox
+    ears: np.ndarray | None
+
+
 class OnnxPoseDetector:
-    """Both sessions are created (and checked) once, here; detect() runs them on one image."""
+    """Both sessions are created (and checked) once, here; detect() runs them on one image,
+    detect_set() on a synchronised set."""
 
     def __init__(self, config: OnnxDetectorConfig) -> None:
         self.config = config
@@ -117,29 +142,60 @@ class OnnxPoseDetector:
     def detect(self, bgr: np.ndarray) -> list[Person2D]:
         """The people in bgr (H, W, 3) uint8, each with its 16 inference keypoints and heatmaps;
         self.timing tells how long each step took."""
-        bgr = np.asarray(bgr)
-        if bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8:
-            raise ValueError(f'image: expected (H, W, 3) uint8 BGR, got {bgr.dtype} {bgr.shape}')
-        t0 = time.perf_counter()
-        rgb = np.ascontiguousarray(bgr[..., ::-1])
-        found = self._find_people(rgb)
-        t1 = time.perf_counter()
-        boxes = [letterbox(rgb.shape[1], rgb.shape[0], box, self._spec.input_side)
-                 for box in _grown(found.boxes, self.config.box_margin)]
-        maps = self._heatmaps(rgb, boxes)
-        t2 = time.perf_counter()
-        people = [p for p in (self._person(lb, m, kp) for lb, m, kp in zip(boxes, maps, found.keypoints))
-                  if p is not None]
-        self.timing = DetectionTiming(t1 - t0, t2 - t1, time.perf_counter() - t0, len(people))
-        return people
+        return self.detect_set([bgr])[0]
 
-    def _find_people(self, rgb: np.ndarray) -> _Found:
+    def detect_set(self, images: Sequence[np.ndarray | None], boxes: Sequence[np.ndarray | None] | None = None,
+                   previous: Sequence[np.ndarray] | None = None) -> list[list[Person2D] | None]:
+        """The people of each image (H, W, 3) uint8 BGR of a set (None for a camera without an
+        image: None out). boxes: per camera, None to find the people with MultiPose, else their
+        boxes (Q, 4) u0, v0, u1, v1 (pixel edges; tracked_crops.projected_boxes); previous: per
+        camera, the inference keypoints (R, 16, 3) of its people in the previous set, whose ears
+        given boxes carry. ValueError naming the camera for an image that is not uint8 BGR."""
+        cfg = self.config
+        boxes = boxes if boxes is not None else [None] * len(images)
+        if len(boxes) != len(images) or (previous is not None and len(previous) != len(images)):
+            raise ValueError(f'detect_set: {len(images)} images, {len(boxes)} box lists and '
+                             f'{len(previous) if previous is not None else "no"} previous people lists')
+        for c, bgr in enumerate(images):
+            if bgr is not None and (bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8):
+                raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
+                                 f'got {bgr.dtype} {bgr.shape}')
+        t0 = time.perf_counter()
+        crops: list[_Crop] = []
+        runs = 0
+        side = self._spec.input_side
+        for c, (bgr, given) in enumerate(zip(images, boxes)):
+            if bgr is None:
+                continue
+            if given is None:
+                found = self._find_people(bgr)
+                runs += 1
+                ears: list[np.ndarray | None] = list(found.keypoints[:, _COCO_EARS])
+                given = found.boxes
+            else:
+                ears = [None] * len(given)
+            for box, ear in zip(_grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin), ears):
+                crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side), ear))
+        t1 = time.perf_counter()
+        maps = self._heatmaps(images, crops)
+        t2 = time.perf_counter()
+        out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
+        for crop, raw in zip(crops, maps):
+            before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
+            person = self._person(crop, raw, before)
+            if person is not None:
+                out[crop.camera].append(person)
+        self.timing = DetectionTiming(t1 - t0, t2 - t1, time.perf_counter() - t0,
+                                      sum(len(p) for p in out if p is not None), runs)
+        return out
+
+    def _find_people(self, bgr: np.ndarray) -> _Found:
         """MultiPose on the whole letterboxed frame: people scoring at least min_person_score whose
         box holds image pixels."""
         side = self.config.input_size
-        lb = whole_image(rgb.shape[1], rgb.shape[0], side)
-        (out,) = self._multipose.run([MULTIPOSE.output_name],
-                                     {MULTIPOSE.input_name: lb.apply(rgb)[None].astype(np.int32)})
+        lb = whole_image(bgr.shape[1], bgr.shape[0], side)
+        rgb = lb.apply(bgr)[None, ..., ::-1].astype(np.int32)  # BGR -> RGB on the small input, not the image
+        (out,) = self._multipose.run([MULTIPOSE.output_name], {MULTIPOSE.input_name: rgb})
         rows = out[0]
         n = 3 * _MULTIPOSE_KEYPOINTS
         rows = rows[rows[:, n + 4] >= self.config.min_person_score]
@@ -148,25 +204,32 @@ class OnnxPoseDetector:
         keypoints = np.concatenate([lb.to_image(yx[..., 1::-1] * side - 0.5), yx[..., 2:]], axis=-1)
         corners = lb.to_image(rows[:, [n + 1, n, n + 3, n + 2]].reshape(-1, 2, 2) * side - 0.5)
         boxes = corners.reshape(-1, 4)
-        edge = np.array([rgb.shape[1], rgb.shape[0]]) - 0.5
+        edge = np.array([bgr.shape[1], bgr.shape[0]]) - 0.5
         keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > -0.5) & (boxes[:, :2] < edge)).all(axis=1)
         return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64))
 
-    def _heatmaps(self, rgb: np.ndarray, boxes: list[Letterbox]) -> np.ndarray:
-        """EfficientPose heatmaps (P, 16, side, side) of the letterboxed crops, one batched run."""
+    def _heatmaps(self, images: Sequence[np.ndarray | None], crops: list[_Crop]) -> np.ndarray:
+        """EfficientPose heatmaps (N, side, side, 16), channel last, clipped to [0, 1], of the
+        letterboxed crops, in runs of at most max_batch crops."""
         side = self._spec.input_side
-        if not boxes:
-            return np.zeros((0, 16, side, side), dtype=np.float32)
-        crops = np.stack([lb.apply(rgb) for lb in boxes]).astype(np.float32)
-        crops = (crops / 255.0 - _MEAN) / _STD
-        (out,) = self._efficientpose.run([self._spec.output_name], {self._spec.input_name: crops})
-        return np.ascontiguousarray(out.transpose(0, 3, 1, 2))  # BLAS wants C order for the resampling
+        if not crops:
+            return np.zeros((0, side, side, 16), dtype=np.float32)
+        batch = self.config.max_batch or len(crops)
+        outputs = []
+        for first in range(0, len(crops), batch):
+            chunk = np.stack([c.box.apply(images[c.camera]) for c in crops[first:first + batch]])[..., ::-1]
+            chunk = (chunk.astype(np.float32) * np.float32(1 / 255.0) - _MEAN) / _STD
+            (out,) = self._efficientpose.run([self._spec.output_name], {self._spec.input_name: chunk})
+            outputs.append(out)
+        maps = outputs[0] if len(outputs) == 1 else np.concatenate(outputs)
+        return np.clip(maps, 0.0, 1.0, out=maps)
 
-    def _person(self, lb: Letterbox, raw: np.ndarray, coco: np.ndarray) -> Person2D | None:
-        """One person from its crop's MPII-16 maps raw (16, side, side) and its MultiPose COCO
-        keypoints coco (17, 3); None when no joint is detected."""
+    def _person(self, crop: _Crop, raw: np.ndarray, previous: np.ndarray) -> Person2D | None:
+        """One person from its crop's MPII-16 maps raw (side, side, 16), clipped to [0, 1], with
+        the crop's ears, or those carried from the camera's previous people's keypoints previous
+        (R, 16, 3); None when no joint is detected."""
         cfg = self.config
-        raw = np.clip(raw, 0.0, 1.0)
+        lb = crop.box
         peaks = _peaks(raw)
         mpii = np.concatenate([lb.to_image(peaks[:, :2]), peaks[:, 2:]], axis=1)  # (16, 3) MPII order
         # a peak in the letterbox padding is no detection (and lies outside the maps' grid)
@@ -174,14 +237,18 @@ class OnnxPoseDetector:
         keypoints = to_inference(mpii, 'mpii16')
         origin, shape = lb.image_grid(cfg.stride)
         source = SOURCE_INDEX['mpii16']
-        maps = np.zeros((NUM_INFERENCE_JOINTS,) + shape, dtype=np.float32)
         has = source >= 0
-        maps[has] = lb.maps_to_image(raw[source[has]], origin, cfg.stride, shape)
+        maps = np.zeros((NUM_INFERENCE_JOINTS,) + shape, dtype=np.float32)
+        maps[has] = lb.maps_to_image(raw[..., source[has]], origin, cfg.stride, shape)
         if cfg.ears:
-            for joint, k in _COCO_EARS.items():
-                if coco[k, 2] >= cfg.min_joint_score and lb.contains(coco[k, :2]):
-                    keypoints[joint] = coco[k]
-                    maps[joint] = _gaussian(coco[k], origin, cfg.stride, shape, cfg.sigma)
+            x0, y0, x1, y1 = lb.roi
+            ears = crop.ears
+            if ears is None:
+                ears = carried_ears(keypoints[NECK], previous, max(x1 - x0, y1 - y0))
+            for joint, ear in zip(_EARS, ears):
+                if ear[2] >= cfg.min_joint_score and lb.contains(ear[:2]):
+                    keypoints[joint] = ear
+                    maps[joint] = _gaussian(ear, origin, cfg.stride, shape, cfg.sigma)
         peak = maps.max(axis=(1, 2), keepdims=True)
         maps[(maps < cfg.heatmap_floor * peak) | (keypoints[:, 2] <= 0)[:, None, None]] = 0.0
         if not (keypoints[:, 2] > 0).any():
@@ -197,13 +264,12 @@ def _grown(boxes: np.ndarray, margin: float) -> np.ndarray:
 
 def _peaks(maps: np.ndarray) -> np.ndarray:
     """(J, 3) x, y (input pixels, sub-pixel by a parabola through the maximum and its two
-    neighbours along each axis) and value of each map's maximum (maps (J, h, w))."""
-    n_j, h, w = maps.shape
-    flat = maps.reshape(n_j, -1)
-    best = flat.argmax(axis=1)
-    row, col = np.divmod(best, w)
-    value = flat[np.arange(n_j), best]
+    neighbours along each axis) and value of each map's maximum (maps (h, w, J), channel last)."""
+    h, w, n_j = maps.shape
     j = np.arange(n_j)
+    best = maps.reshape(-1, n_j).argmax(axis=0)
+    row, col = np.divmod(best, w)
+    value = maps[row, col, j]
 
     def offset(lo: np.ndarray, mid: np.ndarray, hi: np.ndarray) -> np.ndarray:
         curvature = lo - 2.0 * mid + hi
@@ -212,8 +278,8 @@ def _peaks(maps: np.ndarray) -> np.ndarray:
 
     cl, cr = np.maximum(col - 1, 0), np.minimum(col + 1, w - 1)
     rl, rr = np.maximum(row - 1, 0), np.minimum(row + 1, h - 1)
-    dx = offset(maps[j, row, cl], value, maps[j, row, cr]) * ((col > 0) & (col < w - 1))
-    dy = offset(maps[j, rl, col], value, maps[j, rr, col]) * ((row > 0) & (row < h - 1))
+    dx = offset(maps[row, cl, j], value, maps[row, cr, j]) * ((col > 0) & (col < w - 1))
+    dy = offset(maps[rl, col, j], value, maps[rr, col, j]) * ((row > 0) & (row < h - 1))
     return np.stack([col + dx, row + dy, value], axis=1).astype(np.float64)
 
 

@@ -66,18 +66,31 @@ def _describe(args: Sequence[ort.NodeArg]) -> str:
     return ', '.join(f'{a.name} {a.type} {list(a.shape)}' for a in args) or 'none'
 
 
-def load_session(path: str | Path, spec: ModelSpec, providers: Sequence[str] = DEFAULT_PROVIDERS,
-                 threads: int = 0) -> ort.InferenceSession:
-    """An onnxruntime session of the model file `path`, checked against `spec`; threads: intra-op
-    threads (0 = onnxruntime's default, one per core). ModelError when the file is missing, is not
-    an ONNX model, or has other inputs or outputs than spec."""
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f'{path}: {spec.kind} model file not found')
+def session_options(threads: int = 0) -> ort.SessionOptions:
+    """The options of every model session: `threads` intra-op threads (0 = onnxruntime's default,
+    one per core), all graph optimisations, operators one after the other, and idle threads that
+    sleep instead of spinning."""
     options = ort.SessionOptions()
     options.intra_op_num_threads = threads
     options.inter_op_num_threads = 1
+    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL  # the models are chains: nothing to run in parallel
+    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    # Spinning threads burn the cores the Python side (crops, heatmap resampling) and the other
+    # nodes need between runs: on 2 loaded cores a set took about twice as long with it.
+    options.add_session_config_entry('session.intra_op.allow_spinning', '0')
     options.log_severity_level = 3  # errors only: onnxruntime's warnings are not the user's business
+    return options
+
+
+def load_session(path: str | Path, spec: ModelSpec, providers: Sequence[str] = DEFAULT_PROVIDERS,
+                 threads: int = 0) -> ort.InferenceSession:
+    """An onnxruntime session of the model file `path` (session_options(threads)), checked against
+    `spec`. ModelError when the file is missing, is not an ONNX model, or has other inputs or
+    outputs than spec."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f'{path}: {spec.kind} model file not found')
+    options = session_options(threads)
     try:
         session = ort.InferenceSession(str(path), options, providers=list(providers))
     except Exception as exc:  # onnxruntime's own exception types (InvalidProtobuf, Fail, ...) share no base

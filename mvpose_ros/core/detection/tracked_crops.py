@@ -1,0 +1,101 @@
+"""Person crops without the person detector: the previous set's 3D skeletons projected into each
+camera give a box around each person's joints, and the ears (which only MoveNet MultiPose gives)
+are carried from the camera's previous people along with their neck.
+
+Between two runs of MultiPose (every `person_detector_every`-th set) EfficientPose then works on
+these crops alone; someone who enters the view is found at the next MultiPose run.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.types import Person2D
+
+# A box around joint centres is tighter than MultiPose's box around the body: each side moves
+# out by this fraction of the box's size (then the detector's box_margin applies, as to any box).
+# 0.1 gave crops of about MultiPose's size on Shelf frame 572 (median side ratio 1.0 to 1.1).
+JOINT_BOX_MARGIN = 0.1
+MIN_JOINTS_IN_VIEW = 4  # fewer projected joints in the image: the person is left to MultiPose
+# a previous person's ears follow the nearest previous neck within this fraction of the crop's size
+EAR_GATE = 0.25
+
+
+def projected_boxes(joints: np.ndarray, camera: Camera, margin: float = JOINT_BOX_MARGIN,
+                    min_joints: int = MIN_JOINTS_IN_VIEW) -> np.ndarray:
+    """(Q, 4) boxes u0, v0, u1, v1 (pixel-centre coordinates, as MultiPose's) around the joints
+    (P, J, 3) (world metres, NaN where missing) projected into camera, each side moved out by
+    margin times the box's size, then cut to the image (a person partly out of view gets the
+    crop up to the image's edge). A person with fewer than min_joints joints in front of the
+    camera and inside the image gives no box (Q <= P, in joints' order)."""
+    uv = camera.project(np.asarray(joints, dtype=np.float64))  # (P, J, 2), NaN behind the camera or missing
+    edge = np.array([camera.width, camera.height], dtype=np.float64) - 0.5
+    finite = np.isfinite(uv).all(axis=-1)
+    inside = finite & (uv >= -0.5).all(axis=-1) & (uv <= edge).all(axis=-1)
+    keep = inside.sum(axis=1) >= min_joints
+    if not keep.any():
+        return np.zeros((0, 4))
+    uv, finite = uv[keep], finite[keep]
+    lo = np.where(finite[..., None], uv, np.inf).min(axis=1)
+    hi = np.where(finite[..., None], uv, -np.inf).max(axis=1)
+    grow = margin * (hi - lo)
+    return np.concatenate([np.maximum(lo - grow, -0.5), np.minimum(hi + grow, edge)], axis=1)
+
+
+def carried_ears(neck: np.ndarray, previous: np.ndarray, size: float, gate: float = EAR_GATE) -> np.ndarray:
+    """(2, 3) r_ear, l_ear keypoints (u, v, score) of a person whose neck is now at neck (3,) (u, v,
+    score), from the camera's previous people's inference keypoints previous (Q, 16, 3): the ears
+    of the previous person whose neck is nearest, within gate * size pixels, moved by that neck's
+    shift, with their scores. Score 0 (and NaN u, v) when the neck is not detected, no previous
+    neck is near enough, or that person had no ears."""
+    out = np.full((2, 3), np.nan)
+    out[:, 2] = 0.0
+    previous = np.asarray(previous, dtype=np.float64)
+    if not (neck[2] > 0) or len(previous) == 0:
+        return out
+    has = previous[:, NECK, 2] > 0
+    distance = np.where(has, np.linalg.norm(previous[:, NECK, :2] - neck[:2], axis=1), np.inf)
+    best = int(np.argmin(distance))
+    if not distance[best] <= gate * size:
+        return out
+    ears = previous[best, [R_EAR, L_EAR]].copy()
+    seen = ears[:, 2] > 0
+    ears[seen, :2] += neck[:2] - previous[best, NECK, :2]
+    ears[~seen] = (np.nan, np.nan, 0.0)
+    return ears
+
+
+class CropPlanner:
+    """Which cameras of the next set run MultiPose and which get crops from skeletons: MultiPose
+    runs on every camera of every `every`-th set, and of any set while no skeletons are known
+    (or the last ones held nobody); in between, every camera gets its projected_boxes."""
+
+    def __init__(self, cameras: Sequence[Camera], every: int = 1) -> None:
+        if every < 1:
+            raise ValueError(f'person_detector_every {every} must be >= 1')
+        self.cameras = list(cameras)
+        self.every = every
+        self._joints = np.zeros((0, 0, 3))
+        self._since = 0  # sets detected since MultiPose last ran, that one included (0: never ran)
+        self.previous = [np.zeros((0, NUM_INFERENCE_JOINTS, 3)) for _ in self.cameras]
+
+    def plan(self) -> list[np.ndarray | None]:
+        """Per camera, None (run MultiPose) or the boxes (Q, 4) of the next set's crops."""
+        if self._since == 0 or self._since >= self.every or len(self._joints) == 0:
+            return [None] * len(self.cameras)
+        return [projected_boxes(self._joints, camera) for camera in self.cameras]
+
+    def update(self, plan: Sequence[np.ndarray | None], people: Sequence[Sequence[Person2D] | None]) -> None:
+        """After a set was detected with `plan`: its people per camera (None: no image), whose
+        keypoints carry the ears into the next set."""
+        self._since = 1 if all(p is None for p in plan) else self._since + 1
+        for c, found in enumerate(people):
+            if found is not None:
+                self.previous[c] = np.array([p.keypoints for p in found]).reshape(-1, NUM_INFERENCE_JOINTS, 3)
+
+    def skeletons(self, joints: np.ndarray) -> None:
+        """The latest 3D skeletons (P, J, 3), world metres (NaN where missing)."""
+        self._joints = np.asarray(joints, dtype=np.float64)

@@ -1,0 +1,126 @@
+"""Crops from projected skeletons instead of the person detector: the boxes, the carried ears, the
+schedule of MultiPose runs, and a real crop from a projected Shelf skeleton; batched EfficientPose
+runs give what one crop at a time gives."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.tracked_crops import CropPlanner, carried_ears, projected_boxes
+from mvpose_ros.core.evaluation.datasets import calibration_file, data_root, dataset_dir, load_actors_gt, \
+    load_actors_gt_2d
+from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
+from mvpose_ros.core.geometry.camera import Camera, load_rig
+
+FRAME, CAMERA = 572, 4
+
+
+def _camera() -> Camera:
+    """640 x 480, looking along world +y from the origin (x right, z up)."""
+    R = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+    K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    return Camera('c', K, R, np.zeros(3), np.zeros(5), 640, 480)
+
+
+def test_a_box_around_the_projected_joints_grown_by_the_margin_and_cut_to_the_image():
+    cam = _camera()
+    near = np.array([[0.0, 4.0, 0.5], [0.4, 4.0, -0.5], [-0.4, 4.0, 0.0], [0.0, 4.0, np.nan]])  # one joint missing
+    uv = cam.project(near[:3])
+    (box,) = projected_boxes(near[None], cam, margin=0.1, min_joints=3)
+    size = uv.max(axis=0) - uv.min(axis=0)
+    np.testing.assert_allclose(box, np.concatenate([uv.min(axis=0) - 0.1 * size, uv.max(axis=0) + 0.1 * size]))
+    # a person at the right edge: the box stops at the image's last pixel edge
+    edge = near + [2.2, 0.0, 0.0]  # u 545, 645 (out of view), 595
+    (cut,) = projected_boxes(edge[None], cam, margin=0.1, min_joints=2)
+    np.testing.assert_allclose(cut[[0, 2]], [545.0 - 10.0, 639.5])
+    # behind the camera, out of view, or too few joints in view: no box, the others keep their order
+    behind = near * [1, -1, 1]
+    out_of_view = near + [5.0, 0.0, 0.0]
+    boxes = projected_boxes(np.stack([behind, near, out_of_view, edge]), cam, margin=0.1, min_joints=2)
+    np.testing.assert_allclose(boxes, [box, cut])
+    assert len(projected_boxes(edge[None], cam, min_joints=3)) == 0  # two of its joints in view
+    assert projected_boxes(np.zeros((0, 14, 3)), cam).shape == (0, 4)
+
+
+def test_ears_follow_the_nearest_previous_neck():
+    previous = np.zeros((2, NUM_INFERENCE_JOINTS, 3))
+    previous[0, NECK] = (100.0, 100.0, 0.9)
+    previous[0, [R_EAR, L_EAR]] = [(90.0, 80.0, 0.7), (110.0, 80.0, 0.6)]
+    previous[1, NECK] = (300.0, 100.0, 0.9)
+    previous[1, R_EAR] = (290.0, 80.0, 0.8)  # its left ear unseen (score 0)
+    ears = carried_ears(np.array([105.0, 98.0, 0.8]), previous, size=200.0)
+    np.testing.assert_allclose(ears, [[95.0, 78.0, 0.7], [115.0, 78.0, 0.6]])
+    ears = carried_ears(np.array([310.0, 100.0, 0.8]), previous, size=200.0)
+    np.testing.assert_allclose(ears[0], [300.0, 80.0, 0.8])
+    assert ears[1, 2] == 0 and np.isnan(ears[1, :2]).all()
+    # beyond the gate (0.25 * 200 px), an undetected neck, or nobody before: no ears
+    for neck, before in (([200.0, 100.0, 0.8], previous), ([105.0, 98.0, 0.0], previous),
+                         ([105.0, 98.0, 0.8], previous[:0])):
+        assert (carried_ears(np.array(neck), before, size=200.0)[:, 2] == 0).all()
+
+
+def test_multipose_runs_every_kth_set_and_while_no_skeleton_is_known():
+    cam = _camera()
+    planner = CropPlanner([cam, cam], every=3)
+    skeleton = np.array([[[0.0, 4.0, 0.5], [0.4, 4.0, -0.5], [-0.4, 4.0, 0.0], [0.1, 4.0, -0.9]]])
+    ran = []
+    for n in range(7):
+        plan = planner.plan()
+        ran.append(all(p is None for p in plan))
+        if not ran[-1]:
+            assert all(p.shape == (1, 4) for p in plan)
+        planner.update(plan, [[], []])
+        planner.skeletons(skeleton if n != 4 else skeleton[:0])  # set 4 saw nobody
+    assert ran == [True, False, False, True, False, True, False]
+    with pytest.raises(ValueError, match='person_detector_every 0 must be >= 1'):
+        CropPlanner([cam], every=0)
+
+
+@pytest.fixture(scope='module')
+def shelf() -> tuple[OnnxPoseDetector, np.ndarray, Camera]:
+    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models'))
+    image = cv2.imread(str(dataset_dir('shelf') / 'frames' / f'cam{CAMERA}_{FRAME:06d}.png'))
+    camera = load_rig(calibration_file('shelf'), image.shape[1], image.shape[0])[CAMERA]
+    return detector, image, camera
+
+
+def test_crops_from_projected_skeletons_find_the_people_without_multipose(shelf):
+    """Shelf's annotated 3D skeletons of frame 572 projected into camera 4: EfficientPose on those
+    crops alone (MultiPose does not run) puts every actor's joints near its 2D annotation."""
+    detector, image, camera = shelf
+    joints = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', [FRAME]).poses[0]  # (A, 14, 3)
+    annotated = np.isfinite(joints).all(axis=(1, 2))
+    boxes = projected_boxes(joints[annotated], camera)
+    assert len(boxes) == annotated.sum() == 3
+    (people,) = detector.detect_set([image], [boxes])
+    assert detector.timing.multipose_runs == 0 and detector.timing.multipose < detector.timing.efficientpose
+    assert len(people) == 3
+    truth = load_actors_gt_2d(dataset_dir('shelf') / 'actorsGT.mat', [FRAME])[0, annotated, CAMERA]  # (3, 14, 2)
+    for person, gt in zip(people, truth):  # crops in the skeletons' order
+        # 12-24 px with MultiPose's boxes on this image (test_onnx_detector); 40 px is a real regression
+        assert np.nanmedian(np.linalg.norm(person.keypoints[:14, :2] - gt, axis=1)) < 40.0
+        assert person.keypoints[[R_EAR, L_EAR], 2].max() == 0  # no MultiPose and no previous people: no ears
+    # with the camera's people of the previous set (here: MultiPose's), each gets its ears back
+    before = detector.detect(image)
+    previous = np.array([p.keypoints for p in before])
+    (carried,) = detector.detect_set([image], [boxes], [previous])
+    assert all(p.keypoints[[R_EAR, L_EAR], 2].max() > 0 for p in carried)
+
+
+def test_batched_crops_equal_one_crop_at_a_time(shelf):
+    """All the crops of a set in one EfficientPose run (max_batch 0, for a GPU) give the people and
+    heatmaps that runs of one crop give, to float rounding."""
+    detector, image, _ = shelf
+    single = OnnxPoseDetector(replace(detector.config, max_batch=1))
+    batched = OnnxPoseDetector(replace(detector.config, max_batch=0))
+    images = [image, image[:, ::-1].copy()]  # two cameras' worth of crops in one run
+    one, many = single.detect_set(images), batched.detect_set(images)
+    assert [len(p) for p in one] == [len(p) for p in many] and len(one[0]) >= 3
+    for a, b in zip(sum(one, []), sum(many, [])):
+        np.testing.assert_allclose(a.keypoints, b.keypoints, atol=1e-2, equal_nan=True)
+        assert a.heatmap.maps.shape == b.heatmap.maps.shape
+        np.testing.assert_allclose(a.heatmap.maps, b.heatmap.maps, atol=1e-4)
