@@ -13,7 +13,8 @@ import numpy as np
 from msg_adapters.skeleton_msg import Skeletons
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
-from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions
+from mvpose_ros.core.evaluation.identities import identity_report
+from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions, read_results
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC
@@ -96,7 +97,8 @@ def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: 
 def score(predictions: Path | str, frames: Sequence[int], root: str | None, out: TextIO, loops: int = 1) -> None:
     """Print the PCP table and summary of the predictions over Shelf frames `frames` (one pass of
     the bag; actors 1-3), with the paper's rows when they are the whole test clip; with loops > 1
-    a summary line per loop (loop k's frames are moved on by k times the span of `frames`)."""
+    a summary line per loop (loop k's frames are moved on by k times the span of `frames`); then
+    the identities over the first pass."""
     gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', frames)
     predicted = read_predictions(predictions)
     span = max(frames) - min(frames) + 1
@@ -110,6 +112,8 @@ def score(predictions: Path | str, frames: Sequence[int], root: str | None, out:
               + f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
               f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
               f' | MPJPE {ev.mpjpe_all:5.1f} mm', file=out)
+    first_loop = [r for r, _ in read_results(predictions) if r.frame in frames]
+    print('\n'.join(identity_report(first_loop, gt, SHELF_ACTORS).lines()), file=out)
 
 
 def set_skews_ms(set_stamps: Sequence[int], people_stamps: Mapping[str, Sequence[int]], max_skew_ns: int) -> np.ndarray:
