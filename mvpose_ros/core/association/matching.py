@@ -16,6 +16,9 @@ from mvpose_ros.core.geometry.camera import Camera, ray_ray_distance
 from mvpose_ros.core.types import Person2D
 
 
+TIE_M = 1e-9  # metres: two mean ray distances closer than this are taken as equal
+
+
 @dataclass(frozen=True)
 class MatchingConfig:
     """max_distance: metres of mean ray distance; min_shared: joints both views must see."""
@@ -62,7 +65,9 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
     dist = all_view_distances(cameras, people, config)
     view = [(c, i) for c, ps in enumerate(people) for i in range(len(ps))]
     a, b = np.nonzero(np.triu(dist <= config.max_distance, 1))
-    order = np.argsort(dist[a, b], kind='stable')
+    # closest first; distances within TIE_M of each other are rounding noise (views of one point
+    # projected exactly, as in a synthetic scene), so they keep index order whatever the arithmetic
+    order = np.argsort(np.round(dist[a, b] / TIE_M), kind='stable')
     edges = [(dist[a[e], b[e]], view[a[e]], view[b[e]]) for e in order]
     owner: dict[tuple[int, int], int] = {}
     clusters: list[dict[int, int]] = []
