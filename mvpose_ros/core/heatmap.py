@@ -180,6 +180,11 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
         return []
     margin = MARGIN_SIGMAS * sigma
     valid = np.isfinite(centres).all(axis=-1) & (centres[..., 2] > 0)
+    # rows that count first, then only as many rows as the fullest map has: padding rows render
+    # as zeros, which never change the max, so the maps are the same
+    order = np.argsort(~valid, axis=-1, kind='stable')[..., :max(int(valid.sum(axis=-1).max(initial=0)), 1)]
+    centres = np.take_along_axis(centres, order[..., None], axis=-2)
+    valid = np.take_along_axis(valid, order, axis=-1)
     centres[~valid] = 0.0
     has = valid.any(axis=-1)  # (P, J)
     lo = np.where(valid[..., None], centres[..., :2], np.inf).min(axis=-2) - margin  # (P, J, 2)

@@ -23,7 +23,8 @@ def _limb_connections(score: np.ndarray, min_score: float) -> list[tuple[int, in
     pay off."""
     n_b = score.shape[1]
     flat = score.ravel().tolist()
-    order = sorted((k for k, s in enumerate(flat) if s > min_score), key=lambda k: -flat[k])  # stable
+    # best first, ties in index order (sorted is stable, also reversed)
+    order = sorted([k for k, s in enumerate(flat) if s > min_score], key=flat.__getitem__, reverse=True)
     used_a: set[int] = set()
     used_b: set[int] = set()
     out = []
