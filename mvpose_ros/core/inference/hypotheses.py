@@ -105,11 +105,12 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     dirs = np.empty((len(pixels), 3))
     centres = np.empty((n_views, 3))
     cameras = [cam for views in people for cam, _ in views]
-    for cam in {id(c): c for c in cameras}.values():
-        idx = [v for v, c in enumerate(cameras) if c is cam]
-        mine = np.isin(view, idx)
+    rig = list({id(c): c for c in cameras}.values())
+    camera_of = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])[view]  # (R,)
+    for i, cam in enumerate(rig):
+        mine = camera_of == i
         dirs[mine] = cam.directions(pixels[mine])
-        centres[idx] = cam.centre
+        centres[[v for v, c in enumerate(cameras) if c is cam]] = cam.centre
 
     out = np.full((len(people), n_joints, m, 3), np.nan)
     if plans:
