@@ -86,20 +86,32 @@ class HeatmapStack:
         """Pixels (N, J, K, 2) drawn from each map as a pmf over its cells, from uniform numbers
         u (N, J, K) in [0, 1) and jitter (N, J, K, 2) in [0, 1) (the position within the drawn
         cell); NaN for empty maps."""
+        n, n_j, k = u.shape
+        maps = np.repeat(np.arange(n * n_j), k)
+        return self.sample_at(maps, u.ravel(), jitter.reshape(-1, 2)).reshape(n, n_j, k, 2)
+
+    def sample_at(self, maps: np.ndarray, u: np.ndarray, jitter: np.ndarray) -> np.ndarray:
+        """Pixels (Q, 2), one draw from each of maps (Q,) (map j of heatmap i is i * J + j) as a
+        pmf over its cells, from uniform numbers u (Q,) and jitter (Q, 2) in [0, 1) (the position
+        within the drawn cell); NaN for empty maps. Only the draws asked for are made."""
         # Only non-zero cells can be drawn, and maps are mostly zero: one CDF over the non-zero
         # cells of every map, each map drawing inside its own stretch.
         nz = np.flatnonzero(self.values)
         cum = np.concatenate([[0.0], np.cumsum(self.values[nz], dtype=np.float64)])
-        first = np.searchsorted(nz, self.start)
-        end = np.searchsorted(nz, self.start + self._size())
+        start = self.start.ravel()
+        first = np.searchsorted(nz, start)[maps]
+        end = np.searchsorted(nz, start + self._size().ravel())[maps]
         before = cum[first]
-        q = before[..., None] + u * (cum[end] - before)[..., None]
+        q = before + u * (cum[end] - before)
         idx = np.searchsorted(cum, q, side='right') - 1
         # rounding can step past a map's stretch; empty maps point anywhere (NaN below)
-        idx = np.clip(idx, first[..., None], np.maximum(end - 1, first)[..., None])
+        idx = np.clip(idx, first, np.maximum(end - 1, first))
         idx = np.minimum(idx, max(len(nz) - 1, 0))
-        cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - self.start[..., None]
-        uv = self._pixels(cell, jitter - 0.5)
+        cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - start[maps]
+        heatmap = maps // self.start.shape[1]
+        row, col = np.divmod(cell, self.shape[heatmap, 1])
+        cr = np.stack([col, row], axis=-1) + (jitter - 0.5)
+        uv = self.origin.reshape(-1, 2)[maps] + self.stride[heatmap, None] * cr
         uv[end == first] = np.nan
         return uv
 
@@ -168,6 +180,11 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
         return []
     margin = MARGIN_SIGMAS * sigma
     valid = np.isfinite(centres).all(axis=-1) & (centres[..., 2] > 0)
+    # rows that count first, then only as many rows as the fullest map has: padding rows render
+    # as zeros, which never change the max, so the maps are the same
+    order = np.argsort(~valid, axis=-1, kind='stable')[..., :max(int(valid.sum(axis=-1).max(initial=0)), 1)]
+    centres = np.take_along_axis(centres, order[..., None], axis=-2)
+    valid = np.take_along_axis(valid, order, axis=-1)
     centres[~valid] = 0.0
     has = valid.any(axis=-1)  # (P, J)
     lo = np.where(valid[..., None], centres[..., :2], np.inf).min(axis=-2) - margin  # (P, J, 2)

@@ -12,7 +12,7 @@ import numpy as np
 
 from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
 from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.association.matching import MatchingConfig, cluster_views
+from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
 from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker
 
@@ -42,21 +42,21 @@ class PersonObservation:
     centre: np.ndarray
 
 
-def rough_centres(cameras: Sequence[Camera], people: Sequence[dict[int, Person2D]], min_score: float) -> np.ndarray:
-    """(P, 3) per person (camera index -> skeleton): the mean of the joints triangulated from the
-    keypoints of every view, metres; NaN where no joint is seen twice. All people in one call."""
+def rough_centres(rays: ViewRays, people: Sequence[Sequence[int]], min_score: float) -> np.ndarray:
+    """(P, 3) per person (the indices in `rays` of its views): the mean of the joints triangulated
+    from the keypoints of every view, metres; NaN where no joint is seen twice. All people in one
+    call."""
     width = max((len(v) for v in people), default=0)
     if width == 0:
         return np.full((len(people), 3), np.nan)
-    n_j = len(next(iter(people[0].values())).keypoints)
-    origins = np.zeros((len(people), n_j, width, 3))
-    dirs = np.zeros((len(people), n_j, width, 3))
-    seen = np.zeros((len(people), n_j, width), dtype=bool)
+    idx = np.full((len(people), width), -1)
     for p, views in enumerate(people):
-        for k, (c, person) in enumerate(views.items()):
-            origins[p, :, k] = cameras[c].centre
-            dirs[p, :, k] = cameras[c].directions(person.keypoints[:, :2])
-            seen[p, :, k] = person.keypoints[:, 2] > min_score
+        idx[p, :len(views)] = views
+    used = idx >= 0  # (P, K)
+    n_j = rays.keypoints.shape[1]
+    origins = np.broadcast_to(np.where(used[..., None], rays.origins[idx], 0.0)[:, None], (len(people), n_j, width, 3))
+    dirs = np.where(used[:, :, None, None], rays.dirs[idx], 0.0).transpose(0, 2, 1, 3)  # (P, J, K, 3)
+    seen = (used[:, :, None] & (rays.keypoints[idx, :, 2] > min_score)).transpose(0, 2, 1)  # (P, J, K)
     twice = seen.sum(axis=-1) >= 2  # (P, J)
     points = closest_point_to_rays(origins, dirs, seen)  # (P, J, 3)
     points[~twice] = np.nan
@@ -88,9 +88,12 @@ class Associator:
         for tracker, skeletons, raw in zip(self._trackers, present, people):
             if raw is not None:
                 tracker.update(skeletons)
-        clusters = cluster_views(self.cameras, present, self.config.matching)
+        rays = ViewRays.of(self.cameras, present)
+        clusters = cluster_views(self.cameras, present, self.config.matching, rays)
         views = [{c: present[c][i] for c, i in cl.items()} for cl in clusters]
-        centres = rough_centres(self.cameras, views, self.config.matching.min_score)
+        first = np.concatenate([[0], np.cumsum([len(p) for p in present])])
+        centres = rough_centres(rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
+                                self.config.matching.min_score)
         keep = [i for i in range(len(views)) if np.all(np.isfinite(centres[i]))]
         views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)
         members = [{(c, p.track_id) for c, p in v.items()} for v in views]

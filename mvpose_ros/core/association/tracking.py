@@ -20,6 +20,16 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
+def keypoint_boxes(keypoints: np.ndarray) -> np.ndarray:
+    """(P, 4) u_min, v_min, u_max, v_max over each person's detected keypoints (P, J, 3) (score
+    > 0), as Person2D.bbox; NaN for a person with none."""
+    detected = (keypoints[..., 2] > 0)[..., None]
+    with np.errstate(invalid='ignore'):
+        lo = np.where(detected, keypoints[..., :2], np.inf).min(axis=1)
+        hi = np.where(detected, keypoints[..., :2], -np.inf).max(axis=1)
+    return np.where(detected.any(axis=1), np.concatenate([lo, hi], axis=-1), np.nan)
+
+
 class IouTracker:
     """Gives each skeleton the track id of the previous frame's skeleton it overlaps enough."""
 
@@ -31,7 +41,7 @@ class IouTracker:
 
     def update(self, people: Sequence[Person2D]) -> None:
         """Set `track_id` on each person of the new frame (one-to-one, highest total IoU)."""
-        boxes = np.array([p.bbox() for p in people]).reshape(-1, 4)
+        boxes = keypoint_boxes(np.array([p.keypoints for p in people])) if len(people) else np.zeros((0, 4))
         ids = np.full(len(people), -1)
         if len(people) and len(self._ids):
             iou = box_iou(boxes, self._boxes)

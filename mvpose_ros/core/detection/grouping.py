@@ -18,16 +18,22 @@ _LIMB_ORDER = ([k for k in range(len(BODY25_PAF_PAIRS)) if k not in BODY25_REDUN
 
 
 def _limb_connections(score: np.ndarray, min_score: float) -> list[tuple[int, int, float]]:
-    """Greedy one-to-one matching of a limb's candidate pairs by score (n_a, n_b), best first."""
-    order = np.argsort(-score, axis=None, kind='stable')
-    order = order[score.ravel()[order] > min_score]
-    used_a = np.zeros(score.shape[0], bool)
-    used_b = np.zeros(score.shape[1], bool)
+    """Greedy one-to-one matching of a limb's candidate pairs by score (n_a, n_b), best first (ties
+    in index order). Plain Python: a limb has a handful of candidates, too few for numpy calls to
+    pay off."""
+    n_b = score.shape[1]
+    flat = score.ravel().tolist()
+    # best first, ties in index order (sorted is stable, also reversed)
+    order = sorted([k for k, s in enumerate(flat) if s > min_score], key=flat.__getitem__, reverse=True)
+    used_a: set[int] = set()
+    used_b: set[int] = set()
     out = []
-    for ia, ib in zip(*np.unravel_index(order, score.shape)):
-        if not (used_a[ia] or used_b[ib]):
-            used_a[ia] = used_b[ib] = True
-            out.append((int(ia), int(ib), float(score[ia, ib])))
+    for k in order:
+        ia, ib = divmod(k, n_b)
+        if ia not in used_a and ib not in used_b:
+            used_a.add(ia)
+            used_b.add(ib)
+            out.append((ia, ib, flat[k]))
     return out
 
 
@@ -50,8 +56,9 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
         of sharpened PAF scores of their connections) / joint count is lower, are dropped
         (OpenPose's subset filter).
     """
-    owner = [np.full(len(c), -1) for c in frame.candidates]  # person index per candidate
-    people: list[np.ndarray | None] = []
+    # plain Python lists throughout: per frame a few dozen candidates, and numpy scalars are slow
+    owner = [[-1] * len(c) for c in frame.candidates]  # person index per candidate
+    people: list[list[int] | None] = []
     scores: list[float] = []
 
     for k in _LIMB_ORDER:
@@ -60,13 +67,13 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
         if raw.size == 0:
             continue
         redundant = k in BODY25_REDUNDANT_LIMBS
-        sa, sb = frame.candidates[a][:, 2], frame.candidates[b][:, 2]
+        sa, sb = frame.candidates[a][:, 2].tolist(), frame.candidates[b][:, 2].tolist()
         for ca, cb, paf in _limb_connections(np.power(raw, paf_power), min_paf):
             pa, pb = owner[a][ca], owner[b][cb]
             if pa < 0 and pb < 0:
                 if redundant:
                     continue
-                person = np.full(BODY25_NUM_JOINTS, -1)
+                person = [-1] * BODY25_NUM_JOINTS
                 person[a], person[b] = ca, cb
                 owner[a][ca] = owner[b][cb] = len(people)
                 people.append(person)
@@ -80,12 +87,12 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
                     scores[p] += s + paf
             elif pa != pb:
                 first, second = people[pa], people[pb]
-                if np.any((first >= 0) & (second >= 0)):
+                if any(x >= 0 and y >= 0 for x, y in zip(first, second)):
                     continue  # the two fragments disagree on some joint
-                taken = second >= 0
-                first[taken] = second[taken]
-                for j in np.flatnonzero(taken):
-                    owner[j][second[j]] = pa
+                for j, c in enumerate(second):
+                    if c >= 0:
+                        first[j] = c
+                        owner[j][c] = pa
                 scores[pa] += scores[pb] + paf
                 people[pb] = None
 
@@ -93,7 +100,7 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
     for person, score in zip(people, scores):
         if person is None:
             continue
-        n = int(np.count_nonzero(person >= 0))
+        n = sum(c >= 0 for c in person)
         if n >= min_joints and score / n >= min_mean_score:
             kept.append((score, person))
     kept.sort(key=lambda x: -x[0])

@@ -39,12 +39,10 @@ class OpenPoseDetectorConfig:
 def grouped_keypoints(frame: OpenPoseFrame, groups: np.ndarray) -> np.ndarray:
     """(P, 25, 3) u, v, score of the grouped candidates (groups: (P, 25) index or -1); missing
     joints are (NaN, NaN, 0)."""
-    out = np.full((len(groups), len(frame.candidates), 3), np.nan)
-    out[..., 2] = 0.0
-    for k, cand in enumerate(frame.candidates):
-        has = groups[:, k] >= 0
-        out[has, k] = cand[groups[has, k]]
-    return out
+    sizes = [len(c) for c in frame.candidates]
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    rows = np.concatenate(frame.candidates + [np.array([[np.nan, np.nan, 0.0]])])  # last row: missing
+    return rows[np.where(groups >= 0, first + groups, len(rows) - 1)]
 
 
 def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,

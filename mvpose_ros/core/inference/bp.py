@@ -178,7 +178,7 @@ def run_chains(chains: Sequence[ChainBP], iterations: int) -> None:
 def _stacked(chains: Sequence[ChainBP]) -> ChainBP:
     """One chain whose joints are those of every chain in turn (same length and factor layout)."""
     n_j = chains[0].total.shape[1]
-    temporal = [None if t is None else np.concatenate([c.temporal[i] for c in chains])
+    temporal = [None if t is None else _joined([c.temporal[i] for c in chains])
                 for i, t in enumerate(chains[0].temporal)]
     groups = [PairwiseGroup(g.name, np.concatenate([c.groups[k].edges + p * n_j for p, c in enumerate(chains)]),
                             np.concatenate([c.groups[k].tables for c in chains], axis=1))
@@ -187,6 +187,21 @@ def _stacked(chains: Sequence[ChainBP]) -> ChainBP:
                         [np.concatenate([c.messages.pairwise[k] for c in chains], axis=1)
                          for k in range(len(groups))])
     return ChainBP(temporal, groups, messages, np.concatenate([c.total for c in chains], axis=1))
+
+
+def _joined(arrays: Sequence[np.ndarray]) -> np.ndarray:
+    """np.concatenate(arrays) along axis 0, as a view without copying when they are successive
+    slices of one C-contiguous array (the temporal tables of one frame are made for every person
+    at once, window.SlidingWindow._add_temporal, and chains are stacked in the same order)."""
+    base = arrays[0].base
+    if (isinstance(base, np.ndarray) and base.flags.c_contiguous and base.dtype == arrays[0].dtype
+            and all(a.base is base and a.flags.c_contiguous for a in arrays)):
+        start = [a.__array_interface__['data'][0] for a in arrays]
+        if all(p + a.nbytes == q for p, a, q in zip(start, arrays, start[1:])):
+            offset = (start[0] - base.__array_interface__['data'][0]) // base.itemsize
+            size = sum(a.size for a in arrays)
+            return base.reshape(-1)[offset:offset + size].reshape((-1,) + arrays[0].shape[1:])
+    return np.concatenate(arrays)
 
 
 def loopy_bp(

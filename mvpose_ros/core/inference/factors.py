@@ -95,16 +95,19 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     scale = config.temporal_scale if s0 == s1 == 1.0 else config.temporal_scale * 0.5 * (s0 + s1)
     j, ma, mc = mid.shape[:3]
     mid = mid.reshape(j, ma * mc, 3)
-    # |b - mid|^2 expanded so the M^3 part is a single batched matmul
-    sq = (np.einsum('jkd,jkd->jk', mid, mid)[:, :, None] + np.einsum('jbd,jbd->jb', cur, cur)[:, None, :]
-          - 2.0 * mid @ cur.transpose(0, 2, 1))
+    # |b - mid|^2 expanded so the M^3 part is a single batched matmul; summed in place over a
+    # full-size copy of |mid|^2 (a broadcast sum would loop over rows of only M elements)
+    mb = cur.shape[1]
+    sq = np.repeat(np.einsum('jkd,jkd->jk', mid, mid), mb, axis=1).reshape(j, ma * mc, mb)
+    sq += np.einsum('jbd,jbd->jb', cur, cur)[:, None, :]
+    sq -= 2.0 * mid @ cur.transpose(0, 2, 1)
     # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
     sq = np.maximum(sq, 0.0, out=sq).astype(np.float32)
     if config.temporal_form == 'laplace':
         table = np.exp(np.sqrt(sq) * np.float32(-1.0 / scale))
     else:
         table = np.exp(sq * np.float32(-0.5 / scale ** 2))
-    return _normalised(table.reshape(j, ma, mc, cur.shape[1]), axes=(1, 2, 3))
+    return _normalised(table.reshape(j, ma, mc, mb), axes=(1, 2, 3))
 
 
 def pair_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:

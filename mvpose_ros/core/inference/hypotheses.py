@@ -59,22 +59,20 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     """
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
-    first_view = np.concatenate([[0], np.cumsum([len(v) for v in people])]).astype(np.intp)
-    draws = [(rng.random((n_joints, m)), rng.random((n_joints, m, 2)))
-             for rng, views in zip(rngs, people) for _ in views]
-    if not draws:
+    if n_views == 0:
         return []
+    n_maps = n_views * n_joints
+    first_view = np.concatenate([[0], np.cumsum([len(v) for v in people])]).astype(np.intp)
+    # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator: one
+    # call per person gives the same stream as a call per array
+    u = np.empty((n_views, n_joints, m))
+    jitter = np.empty((n_views, n_joints, m, 2))
+    for p, rng in enumerate(rngs):
+        lo, hi = first_view[p], first_view[p + 1]
+        draws = rng.random((hi - lo, 3 * n_joints * m))
+        u[lo:hi] = draws[:, :n_joints * m].reshape(-1, n_joints, m)
+        jitter[lo:hi] = draws[:, n_joints * m:].reshape(-1, n_joints, m, 2)
     peaks = stack.peak()  # (V, J, 3)
-    # every view's m sampled pixels per joint plus its peak as draw m: one back-projection per camera
-    pixels = np.concatenate([stack.sample(np.stack([u for u, _ in draws]), np.stack([j for _, j in draws])),
-                             peaks[:, :, None, :2]], axis=2)  # (V, J, m + 1, 2)
-    dirs = np.empty(pixels.shape[:-1] + (3,))
-    centres = np.empty((n_views, 3))
-    cameras = [cam for views in people for cam, _ in views]
-    for cam in {id(c): c for c in cameras}.values():
-        idx = [v for v, c in enumerate(cameras) if c is cam]
-        dirs[idx] = cam.directions(pixels[idx])
-        centres[idx] = cam.centre
 
     # every (person, joint) seen by >= 2 cameras: its m rays per hypothesis, padded to K cameras
     seen = peaks[..., 2] > 0  # (V, J)
@@ -86,32 +84,49 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
             groups.append((p, first_view[p] + np.flatnonzero(mine[:, key == pattern][:, 0]),
                            np.flatnonzero(key == pattern)))
     width = max((len(cams) for _, cams, _ in groups), default=0)
-    view_idx, draw_idx, joint_idx, rows = [], [], [], []
+    # Rays are made only for the draws a hypothesis uses (a camera of a joint seen by 5 uses ~23
+    # of its m): first every map's peak (ray v * J + j), then each map's first need[v, j] draws.
+    need = np.zeros((n_views, n_joints), dtype=np.intp)
+    plans = []
     for p, cams, joints in groups:
         if len(cams) >= 2:
-            cam_of, draw = _plan(len(cams), m, config.peak_hypotheses, width)  # (m, K) each
-            shape = (len(joints), m, width)
-            view_idx.append(np.broadcast_to(cams[cam_of], shape))
-            draw_idx.append(np.broadcast_to(draw, shape))
-            joint_idx.append(joints)
-            rows.append(np.stack([np.full(len(joints), p), joints], axis=1))
+            plan = _plan(len(cams), m, config.peak_hypotheses, width)
+            need[cams[:, None], joints] = plan[2][:, None]
+            plans.append((p, cams, joints, plan))
+        elif len(cams) == 1:
+            need[cams[0], joints] = m  # every draw, for the rays of a single view (below)
+    first_draw = n_maps + np.concatenate([[0], np.cumsum(need.ravel())[:-1]]).reshape(n_views, n_joints)
+    maps = np.repeat(np.arange(n_maps), need.ravel())
+    k = np.arange(len(maps)) - (first_draw.ravel() - n_maps)[maps]  # each draw's index within its map
+    pixels = np.concatenate([peaks[..., :2].reshape(-1, 2),
+                             stack.sample_at(maps, u.reshape(n_maps, m)[maps, k],
+                                             jitter.reshape(n_maps, m, 2)[maps, k])])  # (R, 2)
+    view = np.concatenate([np.arange(n_maps), maps]) // n_joints  # (R,)
+    dirs = np.empty((len(pixels), 3))
+    centres = np.empty((n_views, 3))
+    cameras = [cam for views in people for cam, _ in views]
+    rig = list({id(c): c for c in cameras}.values())
+    camera_of = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])[view]  # (R,)
+    for i, cam in enumerate(rig):
+        mine = camera_of == i
+        dirs[mine] = cam.directions(pixels[mine])
+        centres[[v for v, c in enumerate(cameras) if c is cam]] = cam.centre
+
     out = np.full((len(people), n_joints, m, 3), np.nan)
-    if rows:
+    if plans:
         # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
         # shares and one solve for the whole frame; the last column is no ray at all (zeros), for
         # the slots where a subset is padded to K cameras
-        terms = np.zeros((9, dirs[..., 0].size + 1))
-        rays = terms[:, :-1].reshape((9,) + dirs.shape[:-1])  # a view: each row's rays are contiguous
-        assert np.shares_memory(rays, terms)
-        line_terms(centres[:, None, None], dirs, out=rays)
-        draw = np.concatenate(draw_idx)  # (Q, m, K)
-        ray = (np.concatenate(view_idx) * n_joints + np.concatenate(joint_idx)[:, None, None]) * (m + 1) + draw
-        ray[draw < 0] = -1
+        terms = np.zeros((9, len(dirs) + 1))
+        line_terms(centres[view], dirs, out=terms[:, :-1])
+        ray = np.concatenate([_rays(cams[cam_of], joints, draw, m, n_joints, first_draw)
+                              for _, cams, joints, (cam_of, draw, _) in plans])  # (Q, m, K)
         ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
         summed = terms[:, ray[0]]  # (9, Q, m)
         for slot in ray[1:]:
             summed += terms[:, slot]
-        pp, pj = np.concatenate(rows).T
+        pp = np.concatenate([np.full(len(joints), p) for p, _, joints, _ in plans])
+        pj = np.concatenate([joints for _, _, joints, _ in plans])
         out[pp, pj] = solve_line_terms(summed, width)  # (Q, m, 3)
 
     results: list[np.ndarray | None] = []
@@ -125,7 +140,8 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
             if q != p:
                 continue
             if len(cams) == 1:
-                origin, direction = centres[cams[0]], dirs[cams[0], joints, :m]
+                origin = centres[cams[0]]
+                direction = dirs[first_draw[cams[0], joints][:, None] + np.arange(m)]  # (joints, m, 3)
                 depth = direction @ (centre - origin)
                 hyp[joints] = origin + depth[..., None] * direction
             elif len(cams) == 0:
@@ -134,12 +150,22 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     return results
 
 
+def _rays(views: np.ndarray, joints: np.ndarray, draw: np.ndarray, m: int, n_joints: int,
+          first_draw: np.ndarray) -> np.ndarray:
+    """Ray indices (joints, m, K) of the hypotheses of `joints` from a plan's views (m, K) and
+    draws (m, K) (draw m: the peak, ray v * J + j; -1: padding, the zero column -1)."""
+    j = joints[:, None, None]
+    ray = np.where(draw == m, views * n_joints + j, first_draw[views, j] + draw)
+    return np.where(draw < 0, -1, ray)
+
+
 @functools.lru_cache(maxsize=256)
-def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray]:
+def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which rays make each of the m hypotheses of a joint seen by cameras 0..n_cams-1: camera
     (m, K) and draw (m, K) indices (draw m is the peak's ray; -1 where a subset smaller than
-    K = width (>= n_cams) is padded). First one peak triangulation per subset (when they fit in
-    m), then the m - peaks draws shared evenly over the subsets, each camera's draws used once."""
+    K = width (>= n_cams) is padded), and how many draws of each camera are used (n_cams,):
+    draws 0 .. used - 1. First one peak triangulation per subset (when they fit in m), then the
+    m - peaks draws shared evenly over the subsets, each camera's draws used once."""
     subsets = camera_subsets(range(n_cams))
     n_peaks = len(subsets) if with_peaks and len(subsets) <= m else 0
     rows = [(s, [m] * len(s)) for s in subsets[:n_peaks]]
@@ -153,4 +179,4 @@ def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray
     for i, (subset, draws) in enumerate(rows):
         cam_of[i, :len(subset)] = subset
         draw[i, :len(subset)] = draws
-    return cam_of, draw
+    return cam_of, draw, np.array(used, dtype=np.intp)

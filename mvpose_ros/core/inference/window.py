@@ -203,7 +203,8 @@ class SlidingWindow:
                     chain.best.popleft()
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
-        run_chains([self._chains[pid].bp for pid in slot.people], self.config.slide_iterations)
+        # in id order, as _add_temporal makes the tables: stacked chains then share them uncopied
+        run_chains([self._chains[pid].bp for pid in sorted(slot.people)], self.config.slide_iterations)
         self.timer.add('bp', t0)
 
     def _groups(self, pid: int, i: int, best: deque[np.ndarray]) -> list[PairwiseGroup]:
