@@ -19,9 +19,12 @@ from each camera's CameraInfo: until every camera's is known, inputs are dropped
 """
 from __future__ import annotations
 
+import json
+import os
 import time
 from collections import Counter
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -44,6 +47,7 @@ EXPIRE_PERIOD_S = 0.05
 REPORT_EVERY = 100  # sets between two skew reports
 THROTTLE_S = 2.0  # s between two logs of the same camera and drop reason (or the same missing cameras)
 NS_PER_S = 1_000_000_000
+STATE_PERIOD_S = 0.2  # s between two writes of the identity state (a person moves little in it)
 
 
 class AssociationNode(Node):
@@ -59,6 +63,8 @@ class AssociationNode(Node):
                                'seen twice)'),
             *parameter_specs(ASSOCIATION_PARAMETERS),
             ('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (for max_skew 0)'),
+            ('state_dir', '', 'folder for the person ids\' state, kept across a restart (empty: none kept)'),
+            ('state_max_age', 30.0, 's: positions in an older state are not used (ids are still not reused)'),
         ])
         rig = load_rig_parameter(p)
         n = len(rig.cameras)
@@ -82,6 +88,11 @@ class AssociationNode(Node):
         self._logged: dict[tuple, float] = {}  # (what, ...) -> when last logged
         self._suppressed: Counter[tuple] = Counter()  # (what, ...) -> not logged since
         self._skews: list[int] = []  # ns, of the sets since the last report
+        self._state = Path(p['state_dir'], self.get_fully_qualified_name().strip('/').replace('/', '_') + '.json') \
+            if p['state_dir'] else None
+        self._state_saved = -float('inf')
+        if self._state is not None:
+            self._restore_ids(p['state_max_age'])
         self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
         for c, camera in enumerate(rig.cameras):
             self.create_subscription(PointCloud2, topics.camera_topic(camera.name, topics.PEOPLE2D),
@@ -90,6 +101,38 @@ class AssociationNode(Node):
         self.get_logger().info(f'{n} cameras ({", ".join(self._names)}), max skew {1e3 * max_skew:.1f} ms, '
                                f'sync timeout {p["sync_timeout"]} s, sets of >= {p["min_cameras"]} cameras'
                                + ('' if rig.calibrated else ', intrinsics from CameraInfo'))
+
+    def _restore_ids(self, max_age: float) -> None:
+        """Take over the ids' state a previous process of this node left in state_dir."""
+        try:
+            state = json.loads(self._state.read_text(encoding='utf-8'))
+            age = time.time() - float(state['saved_at'])
+            if age > max_age:
+                state = {**state, 'people': []}
+            self._associator.identities.restore(state, self._sync.sets)
+        except FileNotFoundError:
+            self.get_logger().info(f'no identity state in {self._state}: ids from 0')
+            return
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.get_logger().error(f'identity state {self._state} not used ({exc}): ids from 0')
+            return
+        self.get_logger().info(f'identity state from {self._state}, saved {age:.1f} s ago: next id {state["next_id"]}, '
+                               f'{len(state["people"])} people restored'
+                               + (f' (positions older than {max_age:g} s not used)' if age > max_age else ''))
+
+    def _save_ids(self) -> None:
+        now = time.monotonic()
+        if now - self._state_saved < STATE_PERIOD_S:
+            return
+        self._state_saved = now
+        partial_file = self._state.with_name(self._state.name + '.partial')
+        try:
+            self._state.parent.mkdir(parents=True, exist_ok=True)
+            partial_file.write_text(json.dumps({'saved_at': time.time(), **self._associator.identities.state()}),
+                                    encoding='utf-8')
+            os.replace(partial_file, self._state)
+        except OSError as exc:
+            self._throttled(('state',), f'identity state not written to {self._state}: {exc}')
 
     def _throttled(self, key: tuple, text: str) -> None:
         """Log text as a warning unless the same key was logged less than THROTTLE_S ago."""
@@ -158,6 +201,8 @@ class AssociationNode(Node):
         observations = self._associator.update(synced.index, synced.items)
         bundles = [(obs.person_id, obs.views) for obs in observations]
         self._publisher.publish(bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
+        if self._state is not None:
+            self._save_ids()
         self._skews.append(synced.skew_ns)
         if len(self._skews) == REPORT_EVERY:
             skews = np.array(self._skews) / 1e6
