@@ -1,19 +1,36 @@
 """Respawn of dead nodes (mvpose-graph --respawn): the policy (delay, the cap per minute, the
 exit cause) and what a restart did to the output (frames lost, the times until output resumed,
-the ids before and after). The runner's whole path with fake nodes is in test_processes."""
+the ids before and after), and a real bp_solver killed during a graph run. The runner's path
+with fake nodes is in test_processes."""
 from __future__ import annotations
 
 import io
+import itertools
+import json
+import re
 import signal
 from collections import Counter
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from mvpose_ros.graph.respawn import Respawner, Restart, exit_cause
-from mvpose_ros.graph.report import print_restarts, report, restart_effects
+from msg_adapters.stamp import stamp_ns, stamp_of_frame
+from mvpose_ros.bags.io import write_bag
+from mvpose_ros.bags.recipes import shelf_recipe
+from mvpose_ros.cli import graph
+from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.evaluation.predictions import read_predictions
+from mvpose_ros.graph import runner, session
 from mvpose_ros.graph.config import GraphSettings, NodeSpec, graph_nodes, output_topics
+from mvpose_ros.graph.processes import ProcessGroup
+from mvpose_ros.graph.recorder import SkeletonRecorder
+from mvpose_ros.graph.report import print_restarts, report, restart_effects
+from mvpose_ros.graph.respawn import Respawner, Restart, exit_cause
+from ros_harness import ros_domain
+
+REPO = Path(__file__).resolve().parents[1]
 
 MS = 1_000_000
 
@@ -123,3 +140,48 @@ def test_a_frame_missing_away_from_a_restart_is_still_a_problem_and_no_resume_is
     assert effect.graph_back_s is None and effect.lost == stamps[60:]
     assert report(stamps, node, settings, io.StringIO(), [effect]) == [
         'no /skeletons of a new frame after association exited with code 1']
+
+
+def test_a_killed_bp_solver_in_a_real_graph_is_restarted_and_its_output_resumes(tmp_path, monkeypatch, capsys):
+    """The real nodes (3 cameras of Shelf, 250 frames at the recorded rate): bp_solver is killed
+    (SIGKILL) once 30 frames are out; it is restarted, the skeletons of the frames after its
+    restart come, the gap is counted lost, and the people keep their ids (association owns them)."""
+    with ros_domain(monkeypatch, profile=None) as domain:  # the runner sets the profile: undone after
+        end = stamp_ns(stamp_of_frame(SHELF_TEST_FRAMES.start + 250))
+        bag = tmp_path / 'bag'
+        items = itertools.takewhile(lambda item: item[2] < end, shelf_recipe(dataset_dir('shelf')).items())
+        write_bag(bag, (item for item in items if int(item[0].split('/')[1][3:]) < 3))  # '/cam<c>/...'
+
+        (tmp_path / 'fastdds.xml').write_text((REPO / 'config' / 'fastdds.xml').read_text())
+        config = tmp_path / 'graph.yaml'
+        config.write_text((REPO / 'config' / 'shelf.yaml').read_text().replace('cameras: 5', 'cameras: 3'))
+        groups = []
+
+        class Kept(ProcessGroup):
+            def __enter__(self):
+                groups.append(self)
+                return super().__enter__()
+
+        class Killing(SkeletonRecorder):
+            def _on_skeletons(self, cdr, info):
+                super()._on_skeletons(cdr, info)
+                if len(self.outputs) == 30 and not killed:
+                    killed.append(groups[0].procs['bp_solver'].pid)
+                    groups[0].procs['bp_solver'].send_signal(signal.SIGKILL)
+
+        killed = []
+        monkeypatch.setattr(runner, 'ProcessGroup', Kept)
+        monkeypatch.setattr(session, 'SkeletonRecorder', Killing)
+        predictions = tmp_path / 'out' / 'p.jsonl'
+        code = graph.main(['--config', str(config), '--bag', str(bag), '--predictions', str(predictions),
+                           '--respawn', '--domain-id', str(domain)])
+    out, err = capsys.readouterr()
+    assert killed and code == 0, out + err
+    assert 'node bp_solver killed by SIGKILL; restart 1 in 1 s' in err
+    line = next(x for x in out.splitlines() if x.startswith('  bp_solver killed by SIGKILL (restart 1)'))
+    lost = int(re.search(r'; lost (\d+)', line)[1])
+    got = read_predictions(predictions)
+    assert lost > 0 and len(got) + lost == 250 and max(got) == SHELF_TEST_FRAMES.start + 249, out
+    assert 'missing 0: none' in out
+    before, after = (set(json.loads(x)) for x in re.search(r'ids (\[.*\]) before, (\[.*\]) after', line).groups())
+    assert before & after, line  # the same people, the same ids
