@@ -185,3 +185,15 @@ def test_a_killed_bp_solver_in_a_real_graph_is_restarted_and_its_output_resumes(
     assert 'missing 0: none' in out
     before, after = (set(json.loads(x)) for x in re.search(r'ids (\[.*\]) before, (\[.*\]) after', line).groups())
     assert before & after, line  # the same people, the same ids
+
+
+@pytest.mark.parametrize('args, problem', [
+    (['--respawn-delay', '2'], '--respawn-delay needs --respawn'),
+    (['--respawn-limit', '2'], '--respawn-limit needs --respawn'),
+    (['--report-every', '0'], '--report-every must be > 0 s, got 0'),
+    (['--respawn', '--respawn-delay', '-1'], '--respawn-delay must be >= 0 s, got -1'),
+    (['--respawn', '--respawn-limit', '0'], '--respawn-limit must be >= 1, got 0'),
+])
+def test_respawn_options_are_checked(args, problem, capsys):
+    assert graph.main(['--config', str(REPO / 'config' / 'shelf.yaml'), '--bag', str(REPO / 'nowhere'), *args]) == 2
+    assert problem in capsys.readouterr().err

@@ -95,6 +95,10 @@ def _check_arguments(args: argparse.Namespace) -> None:
     for name in ('respawn_delay', 'respawn_limit'):
         if getattr(args, name) is not None and not args.respawn:
             raise ValueError(f'--{name.replace("_", "-")} needs --respawn')
+    if args.respawn_delay is not None and not args.respawn_delay >= 0:
+        raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
+    if args.respawn_limit is not None and args.respawn_limit < 1:
+        raise ValueError(f'--respawn-limit must be >= 1, got {args.respawn_limit}')
     if args.report_every is not None and not args.report_every > 0:
         raise ValueError(f'--report-every must be > 0 s, got {args.report_every:g}')
     if args.rig is None:
