@@ -86,23 +86,22 @@ def input_stamps(bag: Path, topic: str, loops: int = 1) -> list[int]:
     return [s + loop_offset_ns(k, stamps[0], stamps[-1]) for k in range(loops) for s in stamps]
 
 
-def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str] = (), watch: Supervision | None = None,
-                   node: SkeletonRecorder | None = None) -> None:
+def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str], watch: Supervision | None,
+                   node: SkeletonRecorder) -> None:
     """GraphFailure for the first process that has exited, unless it is in `finished_ok` with code 0
     or `watch` respawns it (then it is restarted once its delay has passed, and `node` armed)."""
     respawner = watch.respawner if watch else None
     for name, code in group.poll().items():
-        if name in finished_ok and code == 0 or respawner is not None and respawner.pending(name):
+        if (name in finished_ok and code == 0) or (respawner is not None and respawner.pending(name)):
             continue
         if respawner is None or name == PLAYER:
             raise GraphFailure(name, f'node {name} exited with code {code} (log: {group.log_path(name)})')
         why = respawner.exited(name, code, group.log_tail(name, LOG_TAIL))
         if why is not None:
             raise GraphFailure(name, f'node {name} {why} (log: {group.log_path(name)})')
-        if node is not None:
-            died = respawner.restarts[-1].died_ns
-            node.arm(watch.outputs.get(name, OUTPUT_TOPIC), died)
-            node.arm(OUTPUT_TOPIC, died)
+        died = respawner.restarts[-1].died_ns
+        node.arm(watch.outputs.get(name, OUTPUT_TOPIC), died)
+        node.arm(OUTPUT_TOPIC, died)
     for restart in respawner.due() if respawner else ():
         group.restart(restart.node, f'restart {restart.count}, {restart.cause}')
         respawner.restarted(restart.node)
