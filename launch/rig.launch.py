@@ -6,7 +6,8 @@ image topic from the rig file, synchronised into sets, the newest set detected w
 are dropped), association and bp_solver, each with the parameter file (default: the package's
 config/rig_template.yaml) and the rig file, and the package's Fast DDS profile (large heatmap
 messages). Outputs: <camera>/people2d, people/bundles, skeletons and skeletons/markers (RViz),
-relative to `namespace` (default: the root).
+relative to `namespace` (default: the root). A node that dies is started again after
+RESPAWN_DELAY_S (launch has no cap on restarts); association keeps its person ids in `state_dir`.
 """
 import os
 
@@ -15,6 +16,8 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
 
 PACKAGE = 'mvpose_ros'
 NODES = ('heatmap_detector', 'association', 'bp_solver')
@@ -25,17 +28,21 @@ def generate_launch_description():
     rig = LaunchConfiguration('rig')
     params = LaunchConfiguration('params')
     namespace = LaunchConfiguration('namespace')
-    overrides = {'heatmap_detector': {'rig': rig, 'camera': 'all'}, 'association': {'rig': rig},
+    state_dir = LaunchConfiguration('state_dir')
+    overrides = {'heatmap_detector': {'rig': rig, 'camera': 'all'}, 'association': {'rig': rig, 'state_dir': state_dir},
                  'bp_solver': {'rig': rig}}
     nodes = [Node(package=PACKAGE, executable=name, name=name, namespace=namespace,
-                  parameters=[params, overrides[name]], output='screen')
+                  parameters=[params, overrides[name]], output='screen', respawn=True, respawn_delay=RESPAWN_DELAY_S)
              for name in NODES]
+    ros_home = os.environ.get('ROS_HOME', os.path.join(os.path.expanduser('~'), '.ros'))
     return LaunchDescription([
         DeclareLaunchArgument('rig', description='rig file (YAML): cameras, topics, extrinsics; see README'),
         DeclareLaunchArgument('params', default_value=os.path.join(config, 'rig_template.yaml'),
                               description='parameter file (a copy of config/rig_template.yaml)'),
         DeclareLaunchArgument('namespace', default_value='',
                               description="the graph's namespace (relative topics of the rig move with it)"),
+        DeclareLaunchArgument('state_dir', default_value=os.path.join(ros_home, 'mvpose_ros'),
+                              description="folder where association keeps the person ids' state (restarts)"),
         SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(config, 'fastdds.xml')),
         *nodes,
     ])

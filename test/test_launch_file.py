@@ -84,25 +84,46 @@ def test_every_node_gets_the_shelf_params_and_its_overrides():
             assert overrides == {'camera': 'c'}
         elif node['executable'] == 'bag_player':
             assert overrides == {'bag': 'bag', 'rate': 'ParameterValue(rate, value_type=float)'}
+        elif node['executable'] == 'association':
+            assert overrides == {'state_dir': 'state_dir'}
         else:
             assert overrides == {}
 
 
+def test_every_node_but_the_player_is_respawned_after_the_runners_delay():
+    """respawn=True with mvpose-graph's delay; not the player: a new one would play the bag again."""
+    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
+    for path in (LAUNCH, RIG_LAUNCH):
+        tree = ast.parse(path.read_text())
+        for call in _calls(tree, 'Node'):
+            keywords = {kw.arg: ast.unparse(kw.value) for kw in call.keywords}
+            player = keywords['executable'] == "'bag_player'"
+            assert ('respawn' not in keywords) if player else (keywords['respawn'] == 'True'), path
+            assert player or keywords['respawn_delay'] == 'RESPAWN_DELAY_S', path
+        imported = {(n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
+        assert ('mvpose_ros.graph.respawn', 'RESPAWN_DELAY_S') in imported
+        (state,) = [c for c in _calls(tree, 'DeclareLaunchArgument') if ast.literal_eval(c.args[0]) == 'state_dir']
+        default = next(k.value for k in state.keywords if k.arg == 'default_value')
+        assert ast.unparse(default) == "os.path.join(ros_home, 'mvpose_ros')"
+    assert RESPAWN_DELAY_S > 0 and [n['executable'] for n in launched_nodes()].count('bag_player') == 1
+
+
 def test_launch_arguments_and_imports():
     tree = ast.parse(LAUNCH.read_text())
-    args = {ast.literal_eval(c.args[0]): ast.literal_eval(next(k.value for k in c.keywords if k.arg == 'default_value'))
+    args = {ast.literal_eval(c.args[0]): ast.unparse(next(k.value for k in c.keywords if k.arg == 'default_value'))
             for c in _calls(tree, 'DeclareLaunchArgument')}
-    assert args == {'bag': 'bags/shelf', 'rate': '1.0'}
+    assert args == {'bag': "'bags/shelf'", 'rate': "'1.0'", 'state_dir': "os.path.join(ros_home, 'mvpose_ros')"}
     configs = {ast.unparse(n.targets[0]): ast.literal_eval(n.value.args[0]) for n in ast.walk(tree)
                if isinstance(n, ast.Assign) and isinstance(n.value, ast.Call)
                and ast.unparse(n.value.func) == 'LaunchConfiguration'}
-    assert configs == {'bag': 'bag', 'rate': 'rate'}
+    assert configs == {'bag': 'bag', 'rate': 'rate', 'state_dir': 'state_dir'}
     imported = {(n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
     assert imported == {('ament_index_python.packages', 'get_package_share_directory'),
                         ('launch', 'LaunchDescription'), ('launch.actions', 'DeclareLaunchArgument'),
                         ('launch.actions', 'SetEnvironmentVariable'),
                         ('launch.substitutions', 'LaunchConfiguration'), ('launch_ros.actions', 'Node'),
-                        ('launch_ros.parameter_descriptions', 'ParameterValue')}
+                        ('launch_ros.parameter_descriptions', 'ParameterValue'),
+                        ('mvpose_ros.graph.respawn', 'RESPAWN_DELAY_S')}
     (gen,) = [f for f in tree.body if isinstance(f, ast.FunctionDef)]
     assert gen.name == 'generate_launch_description'
 
@@ -132,11 +153,11 @@ def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
                      and ast.unparse(n.targets[0]) == 'overrides')
     values = {ast.literal_eval(k): {ast.literal_eval(kk): ast.unparse(vv) for kk, vv in zip(v.keys, v.values)}
               for k, v in zip(overrides.keys, overrides.values)}
-    assert values == {'heatmap_detector': {'rig': 'rig', 'camera': "'all'"}, 'association': {'rig': 'rig'},
-                      'bp_solver': {'rig': 'rig'}}
+    assert values == {'heatmap_detector': {'rig': 'rig', 'camera': "'all'"},
+                      'association': {'rig': 'rig', 'state_dir': 'state_dir'}, 'bp_solver': {'rig': 'rig'}}
     args = {ast.literal_eval(c.args[0]): {k.arg: ast.unparse(k.value) for k in c.keywords}
             for c in _calls(tree, 'DeclareLaunchArgument')}
-    assert set(args) == {'rig', 'params', 'namespace'} and 'default_value' not in args['rig']  # rig:= is required
+    assert set(args) == {'rig', 'params', 'namespace', 'state_dir'} and 'default_value' not in args['rig']
     assert args['params']['default_value'] == "os.path.join(config, 'rig_template.yaml')"
     (env,) = _calls(tree, 'SetEnvironmentVariable')
     assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "

@@ -5,6 +5,8 @@ right answer (which skeleton is which actor) is known exactly.
 """
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -304,3 +306,33 @@ def test_a_person_nobody_matches_takes_a_new_id_rather_than_another_persons():
     ids = keeper.assign(31, [{(0, 1), (1, 1), (2, 1)}, {(4, 4), (3, 9)}, {(5, 9), (6, 9)}],
                         np.stack([a, [1.5, 2.0, 0.9], c]))
     assert ids[0] == 0 and ids[2] == 1 and ids[1] not in (0, 1, 2)
+
+
+def test_identity_state_restored_keeps_ids_by_position_and_never_reuses_one(poses):
+    """A restarted association: its new keeper takes over the old one's state; the people where
+    they were keep their ids although every camera track is new; a newcomer gets a fresh id."""
+    old = IdentityKeeper(max_jump=0.5, max_age=25)
+    centres = _gt_centres(poses, FRAME)
+    assert old.assign(40, _members([0, 1, 2]), centres) == [0, 1, 2]
+    state = json.loads(json.dumps(old.state()))  # as written to and read from the state file
+    assert state['next_id'] == 3 and [p['id'] for p in state['people']] == [0, 1, 2]
+    new = IdentityKeeper(max_jump=0.5, max_age=25)
+    new.restore(state, 0)
+    far = centres[[0]] + [[5.0, 0.0, 0.0]]
+    ids = new.assign(0, _members([7, 8, 9]), np.concatenate([centres[[2, 0]] + 0.1, far]))
+    assert ids == [2, 0, 3]
+    # without the state the same people would have been 0, 1, 2 in order: ids reused for others
+    assert IdentityKeeper(max_jump=0.5, max_age=25).assign(0, _members([7, 8, 9]),
+                                                           np.concatenate([centres[[2, 0]], far])) == [0, 1, 2]
+
+
+@pytest.mark.parametrize('state, problem', [
+    ({'people': []}, "missing or malformed 'next_id'"),
+    ({'next_id': -1, 'people': []}, 'next_id must be an integer >= 0'),
+    ({'next_id': 2, 'people': [{'id': 2, 'centre': [0, 0, 0]}]}, 'person id 2 is not in 0..next_id-1'),
+    ({'next_id': 2, 'people': [{'id': 0, 'centre': [0, 'x', 0]}]}, 'missing or malformed'),
+    ({'next_id': 2, 'people': [{'id': 0, 'centre': [0, float('nan'), 0]}]}, 'person 0: centre must be 3 finite'),
+])
+def test_identity_state_malformed_is_a_value_error(state, problem):
+    with pytest.raises(ValueError, match=problem):
+        IdentityKeeper().restore(state, 0)

@@ -205,9 +205,10 @@ def _crash(tmp_path, monkeypatch, capsys, domain):
 # waits until its writers have matched, for the runner's start signal and for the solver's (a
 # latched message once the solver's camera_info reader and skeletons writer have matched).
 FAKE_NODE = """
-import os, sys
+import os, signal, sys, time
 import numpy as np
 import rclpy
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, PointCloud2
@@ -240,6 +241,10 @@ elif role == 'bp_solver':
         frame = frame_of_stamp(info.header.stamp)
         joints = np.full((1, 14, 3), frame / 1000.0)
         pub.publish(skeletons_to_msg(np.array([7]), joints, info.header, confidence=np.ones((1, 14))))
+        died = os.path.join(os.environ['FAKE_PIDS'], 'solver_died')
+        if frame == int(os.environ.get('FAKE_DIE_AT', -1)) and not os.path.exists(died):
+            open(died, 'w').close()
+            os.kill(os.getpid(), signal.SIGKILL)  # a crash: once, at that frame
     info = node.create_subscription(CameraInfo, 'cam0/camera_info', answer, QOS)
     ready = node.create_publisher(Empty, SOLVER_READY, START_QOS)
     def check():
@@ -264,9 +269,10 @@ elif role == 'bag_player':
         for p in openpose:
             p.publish(PointCloud2(header=header))
         info.publish(CameraInfo(header=header))
+        time.sleep(float(os.environ.get('FAKE_PERIOD', 0)))
     if not os.environ.get('FAKE_HOLD'):
         for p in [*openpose, info]:
-            p.wait_for_all_acked()
+            p.wait_for_all_acked(Duration(seconds=1))  # a dead reader never acks
         sys.exit(0)
 try:
     rclpy.spin(node)
@@ -381,3 +387,54 @@ def test_runner_expects_the_stamps_of_every_loop_as_the_player_sends_them(tmp_pa
               looped(lambda: group_frames(read_bag(bag, ['/cam0/openpose'])), 3)]
     assert stamps == player and len(set(stamps)) == 30
     assert [round(s * 25 / 1e9) for s in stamps] == list(range(300, 330))  # the timeline goes on
+
+
+def test_runner_respawns_a_dead_node_and_counts_the_frames_lost(fake_graph, tmp_path, monkeypatch, capsys):
+    """--respawn: the fake solver kills itself (SIGKILL) once, at frame 310 of 300..399 paced at
+    100 ms; it is started again, named with its cause and count, and answers the frames that come
+    after; the frames between are reported lost, not missing, and the run succeeds."""
+    args, predictions, _ = fake_graph
+    frames = range(300, 400)
+    monkeypatch.setenv('FAKE_FRAMES', f'{frames.start}:{frames.stop}')
+    monkeypatch.setenv('FAKE_PERIOD', '0.1')
+    monkeypatch.setenv('FAKE_DIE_AT', '310')
+    bag = tmp_path / 'bag100'
+    write_bag(bag, [('/cam0/openpose', PointCloud2(), f * 1_000_000_000 // 25) for f in frames])
+    args = [a if a != args[args.index('--bag') + 1] else str(bag) for a in args]
+    config = Path(args[args.index('--config') + 1])
+    # the player's end waits for the dead solver's acks (1 s per writer): no stall before it
+    config.write_text(config.read_text().replace('timeout: 2.0', 'timeout: 10.0'))
+    code = graph.main([*args, '--respawn', '--respawn-delay', '0.2', '--report-every', '1'])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert 'node bp_solver killed by SIGKILL; restart 1 in 0.2 s (1 within 60 s, at most 5)' in err
+    assert 'node bp_solver started again (restart 1)' in err
+    got = sorted(read_predictions(predictions))
+    lost = sorted(set(frames) - set(got))
+    # frames up to the one it died on are out; those published while it was down are lost; the rest flow
+    assert got[:11] == list(range(300, 311)) and got[-1] == 399
+    assert lost and lost == list(range(lost[0], lost[-1] + 1)) and lost[0] == 311, lost
+    assert f'missing 0: none; lost in restarts {len(lost)};' in out
+    line = next(x for x in out.splitlines() if x.startswith('  bp_solver killed by SIGKILL (restart 1)'))
+    assert f'lost {len(lost)} (frames {lost[0]}-{lost[-1]})' in line and 'ids [7] before, [7] after' in line
+    assert re.search(r'started again 0\.[0-9] s later; /skeletons back after [0-9.]+ s', line), line
+    assert 'by 1 s of the run' in out  # the table by period
+    log = (tmp_path / 'out' / 'p_logs' / 'bp_solver.log').read_text()
+    assert '--- restarted by the supervisor: restart 1, killed by SIGKILL ---' in log
+
+
+def test_runner_gives_up_a_node_that_dies_at_once_every_time(fake_graph, tmp_path, monkeypatch, capsys):
+    args, predictions, _ = fake_graph
+    script = tmp_path / 'fake_node.py'
+    script.write_text(FAKE_NODE.replace("if role == 'heatmap_detector':",
+                                        "if role == 'association':\n    sys.exit('no calibration')\n"
+                                        "if role == 'heatmap_detector':"))
+    code = graph.main([*args, '--respawn', '--respawn-delay', '0', '--respawn-limit', '2'])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.count('node association exited with code 1; restart') == 2
+    assert ('error: node association exited with code 1 after 2 restarts within 60 s: not restarted again'
+            in err), err
+    assert 'no calibration' in err  # the end of its log
+    started = {p.name: int(p.read_text().split('\n')[0]) for p in (tmp_path / 'pids').iterdir()}
+    assert [n for n, pid in started.items() if alive(pid)] == []

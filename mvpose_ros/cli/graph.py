@@ -2,6 +2,7 @@
 
     mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
                  [--predictions FILE] [--domain-id N] [--log-dir DIR]
+                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S]
     mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--loops N] [--qos sensor|reliable] [--config FILE]
                  [--predictions FILE] [--ground-truth shelf --frame N] [--domain-id N] [--log-dir DIR]
 
@@ -17,7 +18,12 @@ the PCP table of those frames against Shelf's ground truth (actors 1-3, as `mvpo
 graph never connects, or outputs are missing. With --loops N (a soak run) the bag is replayed N
 times with its stamps moved on every loop; it then also prints each node's resident memory after
 the first loop and at the end, and one PCP line per loop. Ctrl-C stops every node and still
-writes the frames received so far (exit code 130).
+writes the frames received so far (exit code 130). With --respawn a node that dies (not the
+player) is started again after --respawn-delay s, logged with its exit cause and count; one that
+dies more than --respawn-limit times within a minute ends the run (exit 1). The report then has a
+line per restart: when the node's output and the graph's came back, the frames lost (not counted
+as missing), the person ids before and after. --report-every S adds a table by S s of the run:
+frames in / out, latency p50 / p95 and each process's resident memory.
 
 With --rig (any recorded rig: the bag's own topics, sqlite3 or mcap), the graph is ONE
 heatmap_detector for the whole rig (camera 'all', onnx backend), association and bp_solver, with
@@ -43,6 +49,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, RESPAWN_WINDOW_S
 from mvpose_ros.graph.session import PROG, run
 
 
@@ -70,11 +77,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--predictions', help='predictions file to write (default: mvpose_graph.predictions)')
     p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID for the graph (default: inherited)')
     p.add_argument('--log-dir', type=Path, help='per-node logs (default: beside the predictions, <name>_logs)')
+    p.add_argument('--respawn', action='store_true',
+                   help='restart a node that dies (not the player) instead of stopping the run; the frames lost '
+                        'are reported per restart')
+    p.add_argument('--respawn-delay', type=float,
+                   help=f'--respawn: s between a death and the restart (default {RESPAWN_DELAY_S:g})')
+    p.add_argument('--respawn-limit', type=int,
+                   help=f'--respawn: restarts of one node within {RESPAWN_WINDOW_S:g} s before the run ends '
+                        f'(default {RESPAWN_LIMIT})')
+    p.add_argument('--report-every', type=float, metavar='SECONDS',
+                   help='also print frames in / out, latency and memory per node by this many s of the run')
     return p
 
 
 def _check_arguments(args: argparse.Namespace) -> None:
     """ValueError naming the argument when the combination cannot run."""
+    for name in ('respawn_delay', 'respawn_limit'):
+        if getattr(args, name) is not None and not args.respawn:
+            raise ValueError(f'--{name.replace("_", "-")} needs --respawn')
+    if args.respawn_delay is not None and not args.respawn_delay >= 0:
+        raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
+    if args.respawn_limit is not None and args.respawn_limit < 1:
+        raise ValueError(f'--respawn-limit must be >= 1, got {args.respawn_limit}')
+    if args.report_every is not None and not args.report_every > 0:
+        raise ValueError(f'--report-every must be > 0 s, got {args.report_every:g}')
     if args.rig is None:
         if args.config is None:
             raise ValueError('one of --config (a graph parameter file) or --rig (a rig file) is required')

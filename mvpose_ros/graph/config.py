@@ -127,6 +127,22 @@ def graph_nodes(cameras: int, bag: str, rate: float, data_root: str | None = Non
             NodeSpec('bag_player', '', player)]
 
 
+def output_topics(nodes: Sequence[NodeSpec], detector_output: str = '') -> dict[str, str]:
+    """Process name -> the topic (relative) whose messages show that node at work, for telling when
+    a restarted node is back: a detector's people2d in its camera namespace (a whole-rig detector
+    in the root: `detector_output`, one camera's people2d), association's bundles, bp_solver's
+    skeletons; not the player's."""
+    out = {}
+    for spec in nodes:
+        if spec.executable == 'heatmap_detector':
+            out[spec.name] = f'{spec.namespace}/{PEOPLE2D}' if spec.namespace else detector_output
+        elif spec.executable == 'association':
+            out[spec.name] = BUNDLES
+        elif spec.executable == 'bp_solver':
+            out[spec.name] = SKELETONS
+    return out
+
+
 def _ros_value(value: bool | int | float | str) -> str:
     """A `-p name:=value` value, which ROS parses as YAML: JSON strings are YAML strings, so a
     path such as '2024' or 'true' stays a string."""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import resource
+import time
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -28,21 +29,25 @@ def rss_kib(pid: int | None = None) -> int:
 @dataclass
 class MemoryLog:
     """Per process, its resident size (bytes) when the first `baseline_after` outputs had arrived
-    (the first loop of a soak: caches and DDS buffers are warm by then), the largest and the last."""
+    (the first loop of a soak: caches and DDS buffers are warm by then), the largest and the last;
+    and every sample: (system clock ns, process -> bytes), for the report by period of the run."""
 
     baseline_after: int
     baseline: dict[str, int] = field(default_factory=dict)
     peak: dict[str, int] = field(default_factory=dict)
     last: dict[str, int] = field(default_factory=dict)
+    history: list[tuple[int, dict[str, int]]] = field(default_factory=list)
 
     def sample(self, pids: Mapping[str, int], outputs: int) -> None:
         """Record every live process's size; outputs: frames output so far."""
+        sizes: dict[str, int] = {}
+        self.history.append((time.time_ns(), sizes))
         for name, pid in pids.items():
             try:
                 rss = rss_kib(pid) * 1024
             except ProcessLookupError:
                 continue
-            self.last[name] = rss
+            sizes[name] = self.last[name] = rss
             self.peak[name] = max(rss, self.peak.get(name, 0))
             if outputs >= self.baseline_after and name not in self.baseline:
                 self.baseline[name] = rss

@@ -3,7 +3,8 @@
 Each child runs in its own session, so it has its own process group: a terminal's Ctrl-C reaches
 only the supervisor, which then stops every child in order (SIGINT, grace period, SIGTERM,
 SIGKILL) by signalling the whole group, grandchildren included. Output of each child goes to
-`<log_dir>/<name>.log`.
+`<log_dir>/<name>.log`; a child that has exited can be started again under its name with the same
+command (`restart`), its log going on in the same file.
 """
 from __future__ import annotations
 
@@ -69,6 +70,7 @@ class ProcessGroup:
         self.grace = grace
         self.term_grace = term_grace
         self.procs: dict[str, subprocess.Popen] = {}
+        self.commands: dict[str, list[str]] = {}
         self._gone: set[int] = set()  # empty groups: their ids may be reused, never signal them again
         self._saved_handlers: dict[int, object] = {}
 
@@ -81,9 +83,30 @@ class ProcessGroup:
         if name in self.procs:
             raise ValueError(f'process name {name!r} already used')
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        with open(self.log_path(name), 'wb') as log:
-            proc = subprocess.Popen(list(command), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                    env=self.env, start_new_session=True)
+        self.commands[name] = list(command)
+        return self._spawn(name, 'wb')
+
+    def restart(self, name: str, note: str = '') -> subprocess.Popen:
+        """Start `name`'s command again once its process has exited; whatever its group still holds
+        (a grandchild) is killed first, and the log goes on after a line with `note`."""
+        old = self.procs[name]
+        if old.poll() is None:
+            raise ValueError(f'process {name!r} is still running')
+        if old.pid not in self._gone:
+            if _group_alive(old.pid):
+                try:
+                    os.killpg(old.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            self._gone.add(old.pid)
+        with open(self.log_path(name), 'ab') as log:
+            log.write(f'--- restarted by the supervisor{": " + note if note else ""} ---\n'.encode())
+        return self._spawn(name, 'ab')
+
+    def _spawn(self, name: str, mode: str) -> subprocess.Popen:
+        with open(self.log_path(name), mode) as log:
+            proc = subprocess.Popen(self.commands[name], stdin=subprocess.DEVNULL, stdout=log,
+                                    stderr=subprocess.STDOUT, env=self.env, start_new_session=True)
         self.procs[name] = proc
         return proc
 

@@ -4,7 +4,8 @@
 stamp (duplicates), and records when (middleware receipt time, ns of the system clock, so queueing
 in its executor does not count) each stamp's camera 0 camera_info (for a rig: the first
 camera_info of any camera with that stamp, i.e. the first member of a set) and skeletons arrived,
-and for a rig every camera's people2d stamps (the achieved synchronisation skew); it can
+for a rig every camera's people2d stamps (the achieved synchronisation skew), and, for a node
+that was restarted, when its output topic was heard again (`arm`, `first_after`); it can
 also append every skeletons message to a predictions file as it comes and record the serialized
 size of every message the nodes publish. `mvpose-graph` runs one inside its own process.
 
@@ -82,10 +83,11 @@ class SkeletonRecorder(Node):
     def __init__(self, name: str = 'skeleton_recorder', context: Context | None = None,
                  frame_rate: float = FRAME_RATE, stream: TextIO | None = None, measure_cameras: int = 0,
                  timing_topics: Sequence[str] = (TIMING_TOPIC,), timing_qos: QoSProfile = DATA_QOS,
-                 people_topics: Sequence[str] = ()) -> None:
+                 people_topics: Sequence[str] = (), watch_topics: Sequence[str] = ()) -> None:
         """timing_topics: camera_info topics a stamp's latency is timed from (read with timing_qos:
         best effort for a player or driver publishing so); people_topics: people2d topics whose
-        stamps are kept in `people_stamps` (by the topic as given)."""
+        stamps are kept in `people_stamps` (by the topic as given); watch_topics: topics (as given,
+        PointCloud2: the nodes' outputs) that `arm` can watch."""
         super().__init__(name, context=context)
         self.frame_rate = frame_rate
         self.stream = stream
@@ -108,6 +110,12 @@ class SkeletonRecorder(Node):
                                                   raw=True)]
         # timed when there, not waited for: only bp_solver publishes it
         self.create_subscription(PointCloud2, SKELETONS_LIVE, self._on_live, DATA_QOS, raw=True)
+        # (topic, since ns) -> receipt ns of the topic's first message after `since`, once heard
+        self.first_after: dict[tuple[str, int], int] = {}
+        self._armed: set[tuple[str, int]] = set()
+        for topic in set(watch_topics) - {OUTPUT_TOPIC}:
+            self.create_subscription(PointCloud2, topic, lambda cdr, info, t=topic: self._heard(t, info), DATA_QOS,
+                                     raw=True)
         for topic, msg_type in (graph_topics(measure_cameras) if measure_cameras > 0 else {}).items():
             name = self.resolve_topic_name(topic)
             self.sizes[name] = []
@@ -134,8 +142,22 @@ class SkeletonRecorder(Node):
     def _on_live(self, cdr: bytes, info: Any) -> None:
         self.live_at.setdefault(header_stamp_ns(cdr), info['received_timestamp'])
 
+    def arm(self, topic: str, since_ns: int) -> None:
+        """Record in first_after[(topic, since_ns)] when the first message on `topic` (skeletons or
+        a watch topic) published after since_ns (system clock) was published: its source time, as
+        a restarted node's first messages may come before this reader has matched its writer."""
+        self._armed.add((topic, since_ns))
+
+    def _heard(self, topic: str, info: Any) -> None:
+        at = info['source_timestamp']
+        for key in [k for k in self._armed if k[0] == topic and at > k[1]]:
+            self._armed.discard(key)
+            self.first_after[key] = at
+
     def _on_skeletons(self, cdr: bytes, info: Any) -> None:
         self.last_activity = self.last_output = time.monotonic()
+        if self._armed:
+            self._heard(OUTPUT_TOPIC, info)
         msg = deserialize_message(cdr, PointCloud2)
         stamp = stamp_ns(msg.header.stamp)
         if self._output_name in self.sizes:

@@ -1,10 +1,13 @@
 """What `mvpose-graph` prints after a run: frames in and out, missing, duplicate and unexpected
 stamps, end-to-end latency (p50, p95, by quarter of the run) and the PCP table of the predictions;
-for a rig run, sets in / processed / dropped, the synchronisation skew, the latency, the
-predictions lines by set, and a one-scene bag scored set by set against a Shelf frame."""
+with restarted nodes, per restart the time until output resumed, the frames lost and the person
+ids before and after; by period of the run, frames, latency and memory; for a rig run, sets in /
+processed / dropped, the synchronisation skew, the latency, the predictions lines by set, and a
+one-scene bag scored set by set against a Shelf frame."""
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Protocol, Sequence, TextIO
 
@@ -17,7 +20,9 @@ from mvpose_ros.core.evaluation.identities import identity_report
 from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions, read_results
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings
+from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC
+from mvpose_ros.graph.respawn import Restart
 from mvpose_ros.topics import SKELETONS_LIVE
 
 # As printed: the graph runs in the root namespace.
@@ -35,6 +40,7 @@ class Recorded(Protocol):
     live_at: Mapping[int, int]
     received: Mapping[int, int]
     bad: Sequence[str]
+    first_after: Mapping[tuple[str, int], int]
 
 
 def frame_of(stamp: int, frame_rate: float) -> int:
@@ -71,23 +77,133 @@ def print_latency(lat: np.ndarray, start: str, unit: str, out: TextIO, output: s
     print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
 
 
-def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: TextIO) -> list[str]:
-    """Print counts and latency of the input `stamps` (ns, bag order); returns the problems
-    (missing, duplicate, unexpected, bad outputs)."""
-    wanted = set(stamps)
+@dataclass
+class RestartEffect:
+    """What a node's restart did to the output: the frames (stamps, ns) lost, s from the death until
+    the node published on its own output topic again (as heard) and until the skeletons of a frame
+    input after the death came (None: never), and the person ids in the second of output before the death and
+    after output resumed."""
+
+    restart: Restart
+    lost: list[int]
+    node_back_s: float | None
+    graph_back_s: float | None
+    ids_before: list[int]
+    ids_after: list[int]
+
+
+def restart_effects(stamps: Sequence[int], node: Recorded, restarts: Sequence[Restart], outputs: Mapping[str, str],
+                    frame_rate: float) -> list[RestartEffect]:
+    """Per restart (in order), its effect on the run of input `stamps` (ns, bag order; the graph
+    keeps their order). The frames lost to it are those without output between the last frame
+    output before the death and the first frame input after it that has its output (a frame
+    claimed by an earlier restart is not counted again). outputs: process name -> its output
+    topic (relative; a node without one: the skeletons)."""
+    done = np.array(sorted(set(stamps) & node.outputs.keys()), dtype=np.int64)
+    out_at = np.array([node.output_at[s] for s in done], dtype=np.int64)
+    in_at = np.array([node.info_at.get(s, -1) for s in done], dtype=np.int64)
     missing = [s for s in stamps if s not in node.outputs]
+    claimed: set[int] = set()
+    window = max(1, round(frame_rate))  # frames: a second of output
+    effects = []
+    for r in restarts:
+        before = np.flatnonzero(out_at < r.died_ns)
+        last = done[before.max()] if before.size else None  # stamps increase along `done`
+        after = np.flatnonzero(in_at > r.died_ns)
+        first = done[after.min()] if after.size else None
+        lost = [s for s in missing if (last is None or s > last) and (first is None or s < first) and s not in claimed]
+        claimed.update(lost)
+        heard = node.first_after.get((outputs.get(r.node, OUTPUT_TOPIC), r.died_ns))
+        i_last = -1 if last is None else int(np.searchsorted(done, last))
+        i_first = None if first is None else int(np.searchsorted(done, first))
+        effects.append(RestartEffect(
+            r, lost, None if heard is None else 1e-9 * (heard - r.died_ns),
+            None if first is None else 1e-9 * (int(out_at[i_first]) - r.died_ns),
+            _ids(node, done[max(0, i_last + 1 - window):i_last + 1]),
+            [] if i_first is None else _ids(node, done[i_first:i_first + window])))
+    return effects
+
+
+def _ids(node: Recorded, stamps: np.ndarray) -> list[int]:
+    return sorted({int(i) for s in stamps for i in node.outputs[int(s)][0]})
+
+
+def print_restarts(effects: Sequence[RestartEffect], start_ns: int, outputs: Mapping[str, str], frame_rate: float,
+                   out: TextIO) -> None:
+    """One line per restart: the node, why it died and when (s from start_ns), its restart delay,
+    when its output and the graph's came back, the frames lost, the ids before and after."""
+    if not effects:
+        return
+    lost = sum(len(e.lost) for e in effects)
+    print(f'restarts {len(effects)}, frames lost in them {lost}:', file=out)
+    for e in effects:
+        r = e.restart
+        delay = '' if r.restarted_ns is None else f', started again {1e-9 * (r.restarted_ns - r.died_ns):.1f} s later'
+        topic = '/' + outputs.get(r.node, OUTPUT_TOPIC)
+        back = 'never' if e.node_back_s is None else f'{e.node_back_s:.1f} s'
+        graph = 'never' if e.graph_back_s is None else f'{e.graph_back_s:.1f} s'
+        frames = f' (frames {frame_ranges([frame_of(s, frame_rate) for s in e.lost])})' if e.lost else ''
+        print(f'  {r.node} {r.cause} (restart {r.count}) at {1e-9 * (r.died_ns - start_ns):.1f} s{delay}; '
+              f'{topic} back after {back}, {OUTPUT_NAME} of new frames after {graph}; lost {len(e.lost)}{frames}; '
+              f'ids {e.ids_before} before, {e.ids_after} after', file=out)
+
+
+def print_periods(stamps: Sequence[int], node: Recorded, memory: MemoryLog, period_s: float, out: TextIO) -> None:
+    """A table by `period_s` of the run (by the frames' camera_info arrival): frames in, out, latency
+    p50 / p95 of those frames, and each process's largest resident size sampled in the period."""
+    seen = [s for s in stamps if s in node.info_at]
+    if not seen:
+        return
+    start = min(node.info_at[s] for s in seen)
+    period_ns = round(period_s * 1e9)
+    blocks: dict[int, list[int]] = {}
+    for s in seen:
+        blocks.setdefault((node.info_at[s] - start) // period_ns, []).append(s)
+    rss: dict[int, dict[str, int]] = {}
+    for at, sizes in memory.history:
+        block = rss.setdefault((at - start) // period_ns, {})
+        for name, size in sizes.items():
+            block[name] = max(size, block.get(name, 0))
+    names = sorted({name for _, sizes in memory.history for name in sizes})
+    print(f'by {period_s:g} s of the run (frames by camera_info arrival; resident MiB: the most sampled in the '
+          f'period):', file=out)
+    print(' '.join([f'{"s":>11}', f'{"in":>6}', f'{"out":>6}', f'{"p50 ms":>7}', f'{"p95 ms":>7}',
+                    *(f'{n:>{max(len(n), 6)}}' for n in names)]), file=out)
+    for k in sorted(blocks):
+        frames = blocks[k]
+        done = [s for s in frames if s in node.outputs]
+        lat = latency_ms(node.info_at, {s: node.output_at[s] for s in done})
+        p50, p95 = np.percentile(lat, [50, 95]) if lat.size else (float('nan'),) * 2
+        mib = [rss.get(k, {}).get(n) for n in names]
+        span = f'{k * period_s:g}-{(k + 1) * period_s:g}'
+        print(' '.join([f'{span:>11}', f'{len(frames):>6}', f'{len(done):>6}', f'{p50:>7.1f}', f'{p95:>7.1f}',
+                        *(f'{"-" if m is None else f"{m / 2 ** 20:.1f}":>{max(len(n), 6)}}'
+                          for n, m in zip(names, mib))]), file=out)
+
+
+def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: TextIO,
+           effects: Sequence[RestartEffect] = ()) -> list[str]:
+    """Print counts and latency of the input `stamps` (ns, bag order); returns the problems
+    (missing but for the frames lost in restarts (`effects`), output never resumed after a
+    restart, duplicate, unexpected, bad outputs)."""
+    wanted = set(stamps)
+    lost = {s for e in effects for s in e.lost}
+    missing = [s for s in stamps if s not in node.outputs and s not in lost]
     duplicate = [s for s, n in node.received.items() if n > 1]
     unexpected = [s for s in node.received if s not in wanted]
     fr = settings.frame_rate
     print(f'frames in {len(stamps)} (seen on {TIMING_NAME}: {len(node.info_at.keys() & wanted)}), '
           f'frames out {len(wanted & node.outputs.keys())}', file=out)
     print(f'missing {len(missing)}: {frame_ranges([frame_of(s, fr) for s in missing])}; '
-          f'duplicate {len(duplicate)}: {frame_ranges([frame_of(s, fr) for s in duplicate])}; '
+          + (f'lost in restarts {len(lost)}; ' if effects else '')
+          + f'duplicate {len(duplicate)}: {frame_ranges([frame_of(s, fr) for s in duplicate])}; '
           f'unexpected {len(unexpected)}: {frame_ranges([frame_of(s, fr) for s in unexpected])}', file=out)
     for output, at in ((OUTPUT_NAME, node.output_at), (LIVE_NAME, node.live_at)):
         print_latency(latency_ms(node.info_at, {s: t for s, t in at.items() if s in wanted}), TIMING_NAME, 'frames',
                       out, output)
     problems = [f'{len(missing)} of {len(stamps)} input stamps got no {OUTPUT_NAME}'] if missing else []
+    problems += [f'no {OUTPUT_NAME} of a new frame after {e.restart.node} {e.restart.cause}' for e in effects
+                 if e.graph_back_s is None]
     problems += [f'{len(duplicate)} stamps got more than one {OUTPUT_NAME}'] if duplicate else []
     problems += [f'{len(unexpected)} {OUTPUT_NAME} stamps are not in the bag'] if unexpected else []
     problems += [f'{len(node.bad)} undecodable {OUTPUT_NAME} messages, first: {node.bad[0]}'] if node.bad else []

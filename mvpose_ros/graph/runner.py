@@ -6,6 +6,11 @@ endpoint the graph needs is visible and the recorder's skeletons reader has matc
 writer; the player then waits until its writers have matched their readers (the detectors', the
 recorder's) and for the recorder's start signal, which the recorder sends once its camera_info
 reader has matched the player's writer. So the first frame's camera_info and skeletons arrive.
+
+With a Respawner, a node that dies is started again after its delay instead of ending the run
+(not the player: a new one would play the bag from its start again); the recorder is armed to
+note when the node's output topic is heard again, and the run ends once the player is done and
+nothing came for RESPAWN_QUIET_S (the frames lost in the restart never come).
 """
 from __future__ import annotations
 
@@ -24,8 +29,9 @@ from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings, NodeSpec, expected_connections, node_command
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
-from mvpose_ros.graph.recorder import TIMING_TOPIC, SkeletonRecorder
+from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
 from mvpose_ros.graph.report import frame_of
+from mvpose_ros.graph.respawn import Restart, Respawner
 
 PLAYER = 'bag_player'
 SPIN_S = 0.05
@@ -34,6 +40,7 @@ DRAIN_S = 0.25  # at most this long for camera infos still queued once every out
 STARTUP_TIMEOUT_S = 60.0
 LOG_TAIL = 15
 MEMORY_PERIOD_S = 1.0
+RESPAWN_QUIET_S = 5.0  # after a restart, the run is over this long after the player's end without output
 
 
 class GraphFailure(Exception):
@@ -48,7 +55,7 @@ class GraphFailure(Exception):
 class Outcome:
     """How the run ended: the input stamps (ns, bag order), why it stopped early if it did (a
     failure, a stall, or the signal that interrupted it), the end of the failed node's log, and
-    the nodes' memory."""
+    the nodes' memory, and every restart of a node (with a Respawner)."""
 
     stamps: list[int]
     memory: MemoryLog = field(default_factory=lambda: MemoryLog(0))
@@ -56,6 +63,17 @@ class Outcome:
     log_tail: str = ''
     stalled: bool = False
     interrupted: int | None = None
+    restarts: list[Restart] = field(default_factory=list)
+
+
+@dataclass
+class Supervision:
+    """What watches the node processes while the graph runs: without a respawner the first exit is
+    a GraphFailure; with one, a dead node is restarted and the recorder armed on its output topic
+    (outputs: process name -> the topic it publishes, relative)."""
+
+    respawner: Respawner | None = None
+    outputs: Mapping[str, str] = field(default_factory=dict)
 
 
 def input_stamps(bag: Path, topic: str, loops: int = 1) -> list[int]:
@@ -68,54 +86,69 @@ def input_stamps(bag: Path, topic: str, loops: int = 1) -> list[int]:
     return [s + loop_offset_ns(k, stamps[0], stamps[-1]) for k in range(loops) for s in stamps]
 
 
-def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str] = ()) -> None:
-    """GraphFailure for the first process that has exited, unless it is in `finished_ok` with code 0."""
+def _check_crashes(group: ProcessGroup, finished_ok: Sequence[str], watch: Supervision | None,
+                   node: SkeletonRecorder) -> None:
+    """GraphFailure for the first process that has exited, unless it is in `finished_ok` with code 0
+    or `watch` respawns it (then it is restarted once its delay has passed, and `node` armed)."""
+    respawner = watch.respawner if watch else None
     for name, code in group.poll().items():
-        if not (name in finished_ok and code == 0):
+        if (name in finished_ok and code == 0) or (respawner is not None and respawner.pending(name)):
+            continue
+        if respawner is None or name == PLAYER:
             raise GraphFailure(name, f'node {name} exited with code {code} (log: {group.log_path(name)})')
+        why = respawner.exited(name, code, group.log_tail(name, LOG_TAIL))
+        if why is not None:
+            raise GraphFailure(name, f'node {name} {why} (log: {group.log_path(name)})')
+        died = respawner.restarts[-1].died_ns
+        node.arm(watch.outputs.get(name, OUTPUT_TOPIC), died)
+        node.arm(OUTPUT_TOPIC, died)
+    for restart in respawner.due() if respawner else ():
+        group.restart(restart.node, f'restart {restart.count}, {restart.cause}')
+        respawner.restarted(restart.node)
 
 
-def _spin_until(executor: SingleThreadedExecutor, group: ProcessGroup, done: Callable[[], bool],
-                why_not: Callable[[], str]) -> None:
+def _spin_until(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
+                done: Callable[[], bool], why_not: Callable[[], str], watch: Supervision | None = None) -> None:
     """Spin until done(); GraphFailure on a crash, or after STARTUP_TIMEOUT_S with why_not()."""
     deadline = time.monotonic() + STARTUP_TIMEOUT_S
     while not done():
-        _check_crashes(group)
+        _check_crashes(group, (), watch, node)
         if time.monotonic() > deadline:
             raise GraphFailure('', why_not())
         executor.spin_once(timeout_sec=SPIN_S)
 
 
 def _wait_connected(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
-                    expected: Mapping[str, Sequence[str]]) -> None:
+                    expected: Mapping[str, Sequence[str]], watch: Supervision) -> None:
     """Until every expected endpoint exists and the recorder's skeletons reader has matched."""
 
     def why_not() -> str:
         missing = node.missing_links(expected) or [f'matched publisher of {t}' for t in node.unmatched_outputs()]
         return f'graph not connected after {STARTUP_TIMEOUT_S:g} s: no {", no ".join(missing)}'
 
-    _spin_until(executor, group, lambda: not node.missing_links(expected) and node.output_matched(), why_not)
+    _spin_until(node, executor, group, lambda: not node.missing_links(expected) and node.output_matched(), why_not,
+                watch)
 
 
 def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
-                  spec: NodeSpec, config: Path | Sequence[Path]) -> None:
+                  spec: NodeSpec, config: Path | Sequence[Path], watch: Supervision) -> None:
     """Start the player; with a start_topic, let it play once the recorder's camera_info readers
     have matched its writers."""
     start_topic = str(spec.parameters.get('start_topic', ''))
     group.start(spec.name, node_command(spec, config))
     if start_topic:
-        _spin_until(executor, group, node.timing_matched,
-                    lambda: f'the player did not publish /{TIMING_TOPIC} within {STARTUP_TIMEOUT_S:g} s')
+        _spin_until(node, executor, group, node.timing_matched,
+                    lambda: f'the player did not publish /{TIMING_TOPIC} within {STARTUP_TIMEOUT_S:g} s', watch)
         node.open_gate(start_topic)
 
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
-          stamps: Sequence[int], memory: MemoryLog, quiet: float = 0.0) -> bool:
+          stamps: Sequence[int], memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
     """Spin until every stamp has an output; True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
     after the player's start while neither happened yet). quiet > 0 (a paced rig run, whose
     graph drops sets): also done, not stalled, once the player has exited and nothing came for
-    `quiet` s."""
+    `quiet` s; so is a run in which a node was restarted, after RESPAWN_QUIET_S."""
     wanted = set(stamps)
     started = time.monotonic()
     player_done: float | None = None
@@ -125,12 +158,15 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
         if time.monotonic() - sampled > MEMORY_PERIOD_S:
             sampled = time.monotonic()
             memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
-        _check_crashes(group, finished_ok=(PLAYER,))
+        _check_crashes(group, (PLAYER,), watch, node)
         if player_done is None and PLAYER in group.poll():
             player_done = time.monotonic()
         limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S
         idle = time.monotonic() - max(started, player_done or 0.0, node.last_activity)
-        if quiet > 0 and player_done is not None and idle > quiet:
+        # frames lost in a restart never come: not a stall (the report checks what came after it)
+        enough = quiet or (min(RESPAWN_QUIET_S, limit) if watch and watch.respawner and watch.respawner.restarts
+                           else 0.0)
+        if enough > 0 and player_done is not None and idle > enough:
             return False
         if idle > limit:
             return True
@@ -143,26 +179,29 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
 
 def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Sequence[NodeSpec], stamps: list[int],
               log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
-              per_loop: int, expected: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0) -> Outcome:
+              per_loop: int, expected: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0,
+              watch: Supervision | None = None) -> Outcome:
     """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
     also after Ctrl-C (outcome.interrupted). config: the parameter file(s) every node gets, in
     order; input_topic: what each detector reads in its camera namespace; per_loop: stamps in one
     pass of the bag (the memory baseline); expected: the endpoints to wait for before playing
-    (default: the Shelf graph's, expected_connections); quiet: see _play."""
+    (default: the Shelf graph's, expected_connections); quiet: see _play; watch: how node exits
+    are handled (default: the first ends the run)."""
     if expected is None:
         expected = expected_connections(settings.cameras, input_topic)
-    outcome = Outcome(stamps, MemoryLog(per_loop))
+    watch = watch or Supervision()
+    outcome = Outcome(stamps, MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
     with ProcessGroup(log_dir, env) as group:
         try:
             for spec in nodes:
                 if spec.executable == PLAYER:
-                    _wait_connected(node, executor, group, expected)
-                    _start_player(node, executor, group, spec, config)
+                    _wait_connected(node, executor, group, expected, watch)
+                    _start_player(node, executor, group, spec, config, watch)
                 else:
                     group.start(spec.name, node_command(spec, config))
-            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet)
+            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)
         except GraphFailure as failure:
             outcome.failure = failure
         except Interrupted as exc:

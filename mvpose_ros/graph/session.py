@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
 from contextlib import contextmanager
-from typing import Any, Iterator, TextIO
+from typing import Any, Iterator, Sequence, TextIO
 
 import rclpy
 from rclpy.context import Context
@@ -26,12 +27,15 @@ from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
-from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, GraphSettings, RigRun, detector_backend,
-                                     graph_nodes, graph_settings, load_params, rig_connections, rig_graph_nodes,
-                                     rig_sync, runner_section, unknown_nodes, write_overrides)
+from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, GraphSettings, NodeSpec, RigRun,
+                                     detector_backend, graph_nodes, graph_settings, load_params, output_topics,
+                                     rig_connections, rig_graph_nodes, rig_sync, runner_section, unknown_nodes,
+                                     write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
-from mvpose_ros.graph.report import OUTPUT_NAME, frame_of, report, rig_prediction_lines, rig_report, score, score_sets
-from mvpose_ros.graph.runner import input_stamps, run_graph, save_predictions
+from mvpose_ros.graph.report import (OUTPUT_NAME, frame_of, print_periods, print_restarts, report, restart_effects,
+                                     rig_prediction_lines, rig_report, score, score_sets)
+from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
+from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
 from mvpose_ros.topics import PEOPLE2D, camera_topic
@@ -74,13 +78,20 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     for section in unknown_nodes(params, nodes):
         print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
 
+    watch = _supervision(args, nodes, err)
+    nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
     _environment(config.parent, args.domain_id)
-    with _recording(frame_rate=settings.frame_rate) as (node, executor):
+    with _recording(frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
-        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic, per_loop)
+        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic, per_loop,
+                            watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
-    problems = report(outcome.stamps, node, settings, out)
+    effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
+    problems = report(outcome.stamps, node, settings, out, effects)
+    print_restarts(effects, _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
+    if args.report_every:
+        print_periods(outcome.stamps, node, outcome.memory, args.report_every, out)
     n = save_predictions(outcome.stamps, node, settings.frame_rate, predictions)
     print(f'wrote {n} frames to {predictions}', file=out)
     if outcome.interrupted is not None:
@@ -94,6 +105,36 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     if settings.dataset == 'shelf' and n:
         score(predictions, [frame_of(s, settings.frame_rate) for s in stamps[:per_loop]], root, out, args.loops)
     return _verdict(outcome, problems, settings.timeout, err)
+
+
+def _supervision(args: argparse.Namespace, nodes: Sequence[NodeSpec], err: TextIO,
+                 detector_output: str = '') -> Supervision:
+    """How the run handles a node that dies: with --respawn, restarted (logged to err)."""
+    if not args.respawn:
+        return Supervision()
+    delay = RESPAWN_DELAY_S if args.respawn_delay is None else args.respawn_delay
+    limit = RESPAWN_LIMIT if args.respawn_limit is None else args.respawn_limit
+    respawner = Respawner(delay, limit, lambda text: print(f'{PROG}: {text}', file=err, flush=True))
+    return Supervision(respawner, output_topics(nodes, detector_output))
+
+
+def _keeping_ids(nodes: Sequence[NodeSpec], log_dir: Path) -> list[NodeSpec]:
+    """The nodes with association keeping its ids' state in <log_dir>/state (emptied: a run starts
+    with ids from 0), so that a restarted association keeps the ids."""
+    state = log_dir / 'state'
+    shutil.rmtree(state, ignore_errors=True)
+    return [replace(spec, parameters={**spec.parameters, 'state_dir': str(state.resolve())})
+            if spec.executable == 'association' else spec for spec in nodes]
+
+
+def _watched(watch: Supervision) -> list[str]:
+    """The topics the recorder watches for restarted nodes (none without respawn)."""
+    return sorted(set(watch.outputs.values())) if watch.respawner else []
+
+
+def _start_ns(node: SkeletonRecorder, outcome: Outcome) -> int:
+    """The run's start on the system clock: the first camera_info's arrival (else the first death)."""
+    return min(node.info_at.values(), default=min((r.died_ns for r in outcome.restarts), default=0))
 
 
 def _environment(config_dir: Path, domain_id: int | None) -> None:
@@ -161,19 +202,26 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
     stamps = [s.stamp_ns for s in sets]
+    people = [camera_topic(c.name, PEOPLE2D) for c in rig.cameras]
+    watch = _supervision(args, nodes, err, people[0])
+    nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
     files = [*files, write_overrides(nodes, log_dir / 'runner_overrides.yaml')]
     _environment(files[0].parent, args.domain_id)
     with _recording(timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
-                    people_topics=[camera_topic(c.name, PEOPLE2D) for c in rig.cameras]) as (node, executor):
+                    people_topics=people, watch_topics=_watched(watch)) as (node, executor):
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
         print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
               f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
-                            expected=rig_connections(rig), quiet=RATE_QUIET_S)
+                            expected=rig_connections(rig), quiet=RATE_QUIET_S, watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
                           round(run.max_skew * 1e9), run.lockstep, out)
+    print_restarts(restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate),
+                   _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
+    if args.report_every:
+        print_periods(stamps, node, outcome.memory, args.report_every, out)
     lines = rig_prediction_lines(stamps, node.outputs)
     predictions.parent.mkdir(parents=True, exist_ok=True)
     partial = predictions.with_name(predictions.name + '.partial')

@@ -25,10 +25,13 @@ parameters: sync_timeout, max_skew, track_iou, match_distance and the diagnostic
 """
 from __future__ import annotations
 
+import json
+import os
 import time
 from collections import Counter
 from functools import partial
 from typing import Any
+from pathlib import Path
 
 import numpy as np
 import rclpy.logging
@@ -57,6 +60,7 @@ from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, dec
 EXPIRE_PERIOD_S = 0.05
 REPORT_EVERY = 100  # sets between two skew reports
 NS_PER_S = 1_000_000_000
+STATE_PERIOD_S = 0.2  # s between two writes of the identity state (a person moves little in it)
 
 
 class AssociationNode(Node):
@@ -74,6 +78,9 @@ class AssociationNode(Node):
                                     'seen twice)', 1, 65535),
             *parameter_specs(ASSOCIATION_PARAMETERS),
             Param('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (for max_skew 0)', 0.1, 1000.0),
+            Param('state_dir', '', 'folder for the person ids\' state, kept across a restart (empty: none kept)'),
+            Param('state_max_age', 30.0, 's: positions in an older state are not used (ids are still not reused)', 0.0,
+                  86400.0),
         ])
         rig = load_rig_parameter(p)
         n = len(rig.cameras)
@@ -102,6 +109,11 @@ class AssociationNode(Node):
         self._monitor = NodeMonitor()
         self._health = NodeHealth(self, self._statuses)
         live_parameters(self, ['sync_timeout', 'max_skew', 'track_iou', 'match_distance'], self._check, self._retune)
+        self._state = Path(p['state_dir'], self.get_fully_qualified_name().strip('/').replace('/', '_') + '.json') \
+            if p['state_dir'] else None
+        self._state_saved = -float('inf')
+        if self._state is not None:
+            self._restore_ids(p['state_max_age'])
         self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
         for c, camera in enumerate(rig.cameras):
             self.create_subscription(PointCloud2, topics.camera_topic(camera.name, topics.PEOPLE2D),
@@ -126,6 +138,38 @@ class AssociationNode(Node):
         self._params = p = self._retuned(changes)
         self._sync.retune(p['sync_timeout'], p['max_skew'] or default_max_skew(self._frame_rate))
         self._associator.retune(StageConfig.from_params(p).association)
+
+    def _restore_ids(self, max_age: float) -> None:
+        """Take over the ids' state a previous process of this node left in state_dir."""
+        try:
+            state = json.loads(self._state.read_text(encoding='utf-8'))
+            age = time.time() - float(state['saved_at'])
+            if age > max_age:
+                state = {**state, 'people': []}
+            self._associator.identities.restore(state, self._sync.sets)
+        except FileNotFoundError:
+            self.get_logger().info(f'no identity state in {self._state}: ids from 0')
+            return
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.get_logger().error(f'identity state {self._state} not used ({exc}): ids from 0')
+            return
+        self.get_logger().info(f'identity state from {self._state}, saved {age:.1f} s ago: next id {state["next_id"]}, '
+                               f'{len(state["people"])} people restored'
+                               + (f' (positions older than {max_age:g} s not used)' if age > max_age else ''))
+
+    def _save_ids(self) -> None:
+        now = time.monotonic()
+        if now - self._state_saved < STATE_PERIOD_S:
+            return
+        self._state_saved = now
+        partial_file = self._state.with_name(self._state.name + '.partial')
+        try:
+            self._state.parent.mkdir(parents=True, exist_ok=True)
+            partial_file.write_text(json.dumps({'saved_at': time.time(), **self._associator.identities.state()}),
+                                    encoding='utf-8')
+            os.replace(partial_file, self._state)
+        except OSError as exc:
+            self._log.log(('state', 'not written'), f'identity state not written to {self._state}: {exc}')
 
     def _drop(self, camera: int, stamp: int, reason: str, detail: str) -> None:
         self.dropped[reason] += 1
@@ -197,6 +241,8 @@ class AssociationNode(Node):
         bundles = [(obs.person_id, obs.views) for obs in observations]
         self._publisher.publish(bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
         self._observe(synced, time.perf_counter() - t0)
+        if self._state is not None:
+            self._save_ids()
         self._skews.append(synced.skew_ns)
         if len(self._skews) == REPORT_EVERY:
             skews = np.array(self._skews) / 1e6

@@ -99,3 +99,8 @@ class Associator:
         members = [{(c, p.track_id) for c, p in v.items()} for v in views]
         ids = self._ids.assign(frame, members, centres)
         return [PersonObservation(i, v, c) for i, v, c in zip(ids, views, centres)]
+
+    @property
+    def identities(self) -> IdentityKeeper:
+        """The person ids' keeper (its state outlives a restart: IdentityKeeper.state / restore)."""
+        return self._ids

@@ -6,11 +6,16 @@ A person keeps its id while the per-camera tracks that make it up continue: each
 one camera) goes back to the id its tracks have long made up rather than to the newcomer's. When
 the tracks all changed (a new box in every camera after an occlusion), the id is recovered from
 the 3D position if the person is within `max_jump` metres of where a recently seen person was.
+
+The keeper's state that outlives a restart is small: the next id and where each recent person
+was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
+person found within `max_jump` of where it was last seen gets its old id back (its camera tracks
+are new after a restart, so only the position can match).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -64,3 +69,27 @@ class IdentityKeeper:
             self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, max(self.max_age, 1)) for t in m}, centres[i],
                                          frame)
         return ids
+
+    def state(self) -> dict[str, Any]:
+        """JSON-able: {'next_id': int, 'people': [{'id': int, 'centre': [x, y, z]}, ...]} (metres)."""
+        return {'next_id': self._next_id,
+                'people': [{'id': k, 'centre': [float(x) for x in v.centre]} for k, v in sorted(self._known.items())]}
+
+    def restore(self, state: Mapping[str, Any], frame: int) -> None:
+        """Take over a `state` (of a keeper that stopped) as if its people had been seen at `frame`;
+        ValueError naming what is malformed."""
+        try:
+            next_id = state['next_id']
+            people = [(p['id'], np.asarray(p['centre'], dtype=float)) for p in state['people']]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f'identity state: missing or malformed {exc}') from None
+        if type(next_id) is not int or next_id < 0:
+            raise ValueError(f'identity state: next_id must be an integer >= 0, got {next_id!r}')
+        for pid, centre in people:
+            if type(pid) is not int or not 0 <= pid < next_id:
+                raise ValueError(f'identity state: person id {pid!r} is not in 0..next_id-1 ({next_id - 1})')
+            if centre.shape != (3,) or not np.all(np.isfinite(centre)):
+                raise ValueError(f'identity state: person {pid}: centre must be 3 finite numbers')
+        self._next_id = max(self._next_id, next_id)
+        for pid, centre in people:
+            self._known[pid] = _Known({}, centre, frame)
