@@ -105,6 +105,8 @@ def check_image(msg: Image, expected: tuple[int, int] | None = None) -> None:
         raise ValueError(f'Image size: expected at least 1x1 pixels, got {w}x{h}')
     if expected is not None and (w, h) != tuple(expected):
         raise ValueError(f'Image size: {w}x{h}, expected {expected[0]}x{expected[1]}')
+    if w * h > MAX_PIXELS:
+        raise ValueError(f'Image size: {w}x{h}, more than {MAX_PIXELS} pixels')
     packed = _bytes_per_pixel(encoding) * w
     if step < packed:
         raise ValueError(f'Image step: {step} is less than {_bytes_per_pixel(encoding)} * width = {packed}')
@@ -186,9 +188,10 @@ def compressed_to_image(msg: CompressedImage, expected: tuple[int, int] | None =
         raise _with_prefix('CompressedImage', exc) from None
 
 
-def check_camera_image(msg: Image | CompressedImage, expected: tuple[int, int]) -> None:
-    """Every check of to_bgr short of decoding, for a camera of expected (width, height) pixels:
-    cheap enough for every message that arrives, before it is queued or decoded. ValueError."""
+def check_camera_image(msg: Image | CompressedImage, expected: tuple[int, int] | None) -> None:
+    """Every check of to_bgr short of decoding, for a camera of expected (width, height) pixels
+    (None: a camera whose size is not known yet, at most MAX_PIXELS): cheap enough for every
+    message that arrives, before it is queued or decoded. ValueError."""
     if isinstance(msg, CompressedImage):
         check_compressed(msg, expected)
     else:

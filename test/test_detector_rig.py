@@ -197,3 +197,40 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
     assert [int(g) for g in summary.groups()] == [sets, len(detected[0]), sets - len(detected[0])]
     assert 'detection is slower than the cameras' in text
     assert 'Traceback' not in text and 'dropped: ' not in text, text
+
+
+def test_the_first_set_waits_for_a_camera_info_taken_just_after_its_images(domain, tmp_path):
+    """A driver sends a camera's first image and CameraInfo together; the image may be taken
+    first. The whole-rig detector keeps it in its set (checked against the largest size until
+    then) and detects the set once the CameraInfo is in: the first set is not lost."""
+    names = ['left', 'middle', 'right']
+    rig = tmp_path / 'rig.yaml'
+    _explicit_rig(rig, names, [True, True, False])  # right's intrinsics come from its CameraInfo
+    jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
+    stamp = 1000 * MS
+    log = tmp_path / 'detector.log'
+    overrides = [a for name in names for a in
+                 ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
+                  '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+    with probe(domain, 'rig_first_set_probe') as (node, executor):
+        out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
+        for name, into in zip(names, out):
+            _collect(node, f'/rig/{name}/people2d', into)
+        pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
+        info = node.create_publisher(CameraInfo, '/rig/right/camera_info', RELIABLE)
+        proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', *overrides,
+                          '-p', 'qos_overrides./rig/right/camera_info.subscription.reliability:=reliable')
+        try:
+            assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs + [info]), 30.0)
+            for c, pub in enumerate(pubs):
+                pub.publish(CompressedImage(header=_header(stamp, f'{names[c]}_optical'), format=jpegs[c].format,
+                                            data=jpegs[c].data))
+            spin_until(executor, lambda: False, 0.1)
+            info.publish(camera_to_info(shelf_cameras()[2], _header(stamp, 'right_optical')))
+            assert spin_until(executor, lambda: all(stamp in o for o in out), 60.0), log.read_text()
+        finally:
+            stop(proc)
+    text = log.read_text()
+    assert 'dropped: ' not in text and 'sets: 1 released, 1 detected' in text, text
+    assert all(len(msg_to_people(o[stamp][0])) >= 2 for o in out)

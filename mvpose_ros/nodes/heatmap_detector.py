@@ -281,6 +281,7 @@ class HeatmapDetectorNode(Node):
         queue = math.ceil(2 * p['sync_timeout'] * p['frame_rate']) + 2
         self._sync = ApproximateSync(len(self._cameras), p['sync_timeout'], p['max_skew'], p['min_cameras'], queue)
         self._waiting: NewestQueue[SyncedSet] = NewestQueue(p['waiting_sets'])
+        self._intrinsics_in = threading.Condition()  # notified when a camera's first CameraInfo is taken
         self._stopping = False
         self._processed = 0
         self._expire_timer = self.create_timer(min(0.05, p['sync_timeout'] / 2), self._expire)
@@ -342,6 +343,9 @@ class HeatmapDetectorNode(Node):
                 cam.source = f'the CameraInfo of stamp {stamp_ns(msg.header.stamp)} ns'
                 self.get_logger().info(f'{cam.rig.name}: intrinsics from {cam.info_topic} '
                                        f'({cam.camera.width}x{cam.camera.height})')
+                if self._whole_rig:
+                    with self._intrinsics_in:
+                        self._intrinsics_in.notify_all()
                 return
             check_info(msg, cam.camera)
         except ValueError as exc:
@@ -357,9 +361,12 @@ class HeatmapDetectorNode(Node):
 
     # --- detection ----------------------------------------------------------------------------
 
-    def _admit(self, cam: _Camera, msg: Any) -> None:
+    def _admit(self, cam: _Camera, msg: Any, queued: bool = False) -> None:
         """The checks of an input before it is queued or worked on, none of them decoding (see the
-        module's "Bounded input"); ValueError (one line) when it cannot be used."""
+        module's "Bounded input"); ValueError (one line) when it cannot be used. queued: it goes
+        into the synchroniser, where a camera's first images may wait for its first CameraInfo
+        (sent with them): checked against the largest size until then, against the camera's
+        when worked on."""
         if msg.header.frame_id != cam.rig.frame_id:
             raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
         if self._backend == 'openpose':
@@ -367,10 +374,10 @@ class HeatmapDetectorNode(Node):
                 raise ValueError(f'OpenPose output of {len(msg.data)} bytes, more than one image can have '
                                  f'({max_openpose_bytes()})')
             return
-        if cam.camera is None:
+        if cam.camera is None and not queued:
             raise ValueError(f'no intrinsics yet (the rig file has none: waiting for a CameraInfo on '
                              f'{cam.info_topic})')
-        check_camera_image(msg, (cam.camera.width, cam.camera.height))
+        check_camera_image(msg, None if cam.camera is None else (cam.camera.width, cam.camera.height))
 
     def _people(self, cam: _Camera, msg: Any) -> PointCloud2:
         """The people2d message of one input; ValueError (one line) when it cannot be used."""
@@ -460,7 +467,7 @@ class HeatmapDetectorNode(Node):
         stamp = stamp_ns(msg.header.stamp)
         self._inputs[cam.index].received(time.monotonic(), stamp)
         try:
-            self._admit(cam, msg)  # before the synchroniser holds it: refused junk takes no real image's place
+            self._admit(cam, msg, queued=True)  # before the synchroniser holds it: junk takes no real image's place
         except ValueError as exc:
             self._drop(cam, stamp, str(exc))
             return
@@ -508,6 +515,13 @@ class HeatmapDetectorNode(Node):
         """Detect every image of the set, then publish them together (the set reaches the
         association at once, not spread over the detection time)."""
         t0 = time.perf_counter()
+        # a camera's first images come with its first CameraInfo, which may be taken just after
+        # them: wait for it as long as a set waits for a camera, rather than lose the first sets
+        unknown = [cam for cam, msg in zip(self._cameras, synced.items) if msg is not None and cam.camera is None]
+        if unknown:
+            with self._intrinsics_in:
+                self._intrinsics_in.wait_for(lambda: all(cam.camera is not None for cam in unknown),
+                                             timeout=self._sync.timeout)
         outputs = []
         if self._backend == 'onnx':
             # every image decoded, then one detect_set: EfficientPose takes the crops of all cameras
