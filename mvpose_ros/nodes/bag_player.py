@@ -10,8 +10,8 @@ with them; a set's stamp is its earliest member stamp, the stamp the graph's bun
 skeletons of that set carry): rate 0, sets and max_in_flight 1 is lockstep, the next set going out
 once the previous one is acknowledged. Messages go out as the bag's CDR bytes; for loop k >= 1
 only the header stamp bytes are rewritten (pacing and stamp arithmetic: mvpose_ros.bags.replay).
-Optionally publishes /clock with the bag stamp. `qos`: 'reliable' (reliable, keep-all: every
-reader gets every message) or 'sensor' (best-effort, keep-last 5, as a camera driver publishes:
+Optionally publishes /clock with the bag stamp. `qos`: 'reliable' (the graph's DATA_QOS: every
+reader that keeps up gets every message) or 'sensor' (best-effort, keep-last 5, as a camera driver publishes:
 only best-effort readers match).
 
 Topics are published relative (the bag's '/cam0/openpose' as 'cam0/openpose'), so a namespace
@@ -121,7 +121,8 @@ class BagPlayerNode(Node):
             Param('ack_topic', SKELETONS, 'downstream output whose stamps release frames when rate is 0'),
             Param('max_in_flight', 16, 'rate 0: at most this many frames (sets) published but not yet seen on '
                   'ack_topic', 1, 1_000_000),
-            Param('qos', 'reliable', "'reliable' (keep-all) or 'sensor' (best-effort keep-last, as a camera driver)"),
+            Param('qos', 'reliable',
+                  "'reliable' (the graph's own links) or 'sensor' (best-effort keep-last, as a camera driver)"),
             Param('sets', False, 'play synchronised sets of the image topics instead of frames of one log stamp'),
             Param('max_skew', default_max_skew(FRAME_RATE), 'sets: s between the oldest and newest stamp of a set '
                   '(as the graph)', 0.0, 3600.0),
