@@ -1,7 +1,7 @@
 """The heatmap_detector node: the rig's cameras' 2D people with their joint heatmaps.
 
 Backends: 'openpose' turns each camera's raw OpenPose output (`<camera>/openpose`, PointCloud2
-encoding A, reliable as the recorded data it is) into people; 'onnx' detects them in the
+encoding A, reliable keep-last as the recorded data it is) into people; 'onnx' detects them in the
 camera image (MoveNet MultiPose and EfficientPose on onnxruntime, core.onnx_detector). People go
 out on `<camera>/people2d` (PointCloud2 encoding B) with the input's stamp and the rig camera's
 frame_id, one message per used input, empty when nobody is seen.
@@ -94,8 +94,9 @@ from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog, short_cause
 from mvpose_ros.nodes.health import NodeHealth
-from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, StartupError, camera_subscription, declare,
-                                      live_parameters, load_rig_parameter, rig_parameters, run)
+from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, StartupError,
+                                      camera_subscription, declare, live_parameters, load_rig_parameter,
+                                      rig_parameters, run)
 from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
@@ -294,8 +295,8 @@ class HeatmapDetectorNode(Node):
 
     def _subscribe(self, cam: _Camera) -> None:
         callback = partial(self._on_set_input if self._whole_rig else self._on_input, cam)
-        if self._backend == 'openpose':  # recorded data, not a camera: reliable (DATA_QOS)
-            cam.subscription = self.create_subscription(PointCloud2, cam.input_topic, callback, DATA_QOS)
+        if self._backend == 'openpose':  # recorded data, not a camera: reliable, but bounded
+            cam.subscription = self.create_subscription(PointCloud2, cam.input_topic, callback, RECORDED_INPUT_QOS)
             return
         cam.subscription = camera_subscription(self, cam.input_type, cam.input_topic, callback, self._depth)
 

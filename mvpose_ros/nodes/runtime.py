@@ -26,13 +26,17 @@ from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.package_files import package_path
 
-# Reliable, so that a node a little behind queues frames rather than losing them, but keep-last
-# DATA_DEPTH: 4 s of frames at 25 Hz, far above any burst of the graph's own, and a bound on what
-# a reader holds when it cannot keep up or a foreign publisher floods it. Keep-all had none: a
-# 1000/s flood of an OpenPose input grew its detector to 2.2 GB (Fast DDS's 5000 samples).
-DATA_DEPTH = 100
-DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DATA_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+# Reliable and keep-all between the graph's own nodes: a node that falls behind queues frames (and
+# in the end slows its publishers down) rather than dropping them; no frame may be lost silently.
+DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+# The detector's recorded input (OpenPose output), reliable as recorded data but keep-last: the
+# graph's outside edge, where a foreign flood lands. Keep-all held up to Fast DDS's 5000 samples
+# there: a 1000/s junk flood of /cam1/openpose took its detector to 2.2 GB. 25 is 1 s at 25 Hz.
+RECORDED_INPUT_DEPTH = 25
+RECORDED_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORDED_INPUT_DEPTH,
+                                reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 # Camera inputs (images, CameraInfo) as a camera driver's subscribers take them: best effort, so
 # that both best-effort (sensor data) and reliable publishers connect, and keep-last of a small
