@@ -10,7 +10,7 @@ reader has matched the player's writer. So the first frame's camera_info and ske
 With a Respawner, a node that dies is started again after its delay instead of ending the run
 (not the player: a new one would play the bag from its start again); the recorder is armed to
 note when the node's output topic is heard again, and the run ends once the player is done and
-nothing came for RESPAWN_QUIET_S (the frames lost in the restart never come).
+the last frame's output is in (the frames lost in the restart never come).
 """
 from __future__ import annotations
 
@@ -40,7 +40,6 @@ DRAIN_S = 0.25  # at most this long for camera infos still queued once every out
 STARTUP_TIMEOUT_S = 60.0
 LOG_TAIL = 15
 MEMORY_PERIOD_S = 1.0
-RESPAWN_QUIET_S = 5.0  # after a restart, the run is over this long after the player's end without output
 
 
 class GraphFailure(Exception):
@@ -148,7 +147,9 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
     after the player's start while neither happened yet). quiet > 0 (a paced rig run, whose
     graph drops sets): also done, not stalled, once the player has exited and nothing came for
-    `quiet` s; so is a run in which a node was restarted, after RESPAWN_QUIET_S."""
+    `quiet` s. A run in which a node was restarted is done once the player has exited and the
+    last frame's output is in: the graph keeps the frames' order, so every frame still to come
+    has come, and those lost in the restart never will."""
     wanted = set(stamps)
     started = time.monotonic()
     player_done: float | None = None
@@ -163,10 +164,10 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
             player_done = time.monotonic()
         limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S
         idle = time.monotonic() - max(started, player_done or 0.0, node.last_activity)
-        # frames lost in a restart never come: not a stall (the report checks what came after it)
-        enough = quiet or (min(RESPAWN_QUIET_S, limit) if watch and watch.respawner and watch.respawner.restarts
-                           else 0.0)
-        if enough > 0 and player_done is not None and idle > enough:
+        restarted = bool(watch and watch.respawner and watch.respawner.restarts)
+        if restarted and player_done is not None and stamps and stamps[-1] in node.outputs:
+            break
+        if quiet > 0 and player_done is not None and idle > quiet:
             return False
         if idle > limit:
             return True
