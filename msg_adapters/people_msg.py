@@ -28,12 +28,19 @@ def people_dtype(n_cells: int, keys: Sequence[tuple[str, str]] = ()) -> np.dtype
                      ('stride', '<f4'), ('grid', '<u2', (2,)), ('heatmap', 'u1', (n_cells,))])
 
 
-def max_people_bytes(width: int, height: int) -> int:
+def max_people_bytes(width: int, height: int, keys: Sequence[tuple[str, str]] = ()) -> int:
     """The most data bytes an encoding B message of a width x height camera can honestly carry:
     MAX_PEOPLE records whose maps cover the whole image in MIN_STRIDE px cells (1032 x 776:
-    52 MB). A larger message is refused before it is decoded (decoding quadruples it)."""
+    52 MB); with BUNDLE_KEYS, that camera's share of an encoding C message. A larger message is
+    refused before it is decoded (decoding quadruples it)."""
     cells = (int(np.ceil(height / MIN_STRIDE)) + 1) * (int(np.ceil(width / MIN_STRIDE)) + 1)
-    return MAX_PEOPLE * people_dtype(J * cells).itemsize
+    return MAX_PEOPLE * people_dtype(J * cells, keys).itemsize
+
+
+def max_bundles_bytes(sizes: Sequence[tuple[int, int]]) -> int:
+    """The most data bytes an encoding C message of a rig whose cameras are (width, height) can
+    honestly carry: every camera's views of MAX_PEOPLE people."""
+    return sum(max_people_bytes(w, h, BUNDLE_KEYS) for w, h in sizes)
 
 
 def quantise(maps: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ import pytest
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, people_to_msg
+from msg_adapters.people_msg import bundles_to_msg, max_bundles_bytes, msg_to_bundles, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
 from mvpose_ros.core.evaluation.datasets import calibration_file
@@ -137,6 +137,35 @@ def test_killed_and_restarted_solver_resumes_within_a_window(domain, bundles, tm
     # it is connected, within one window, with no frame of the new stream lost
     assert min(restarted) == second[0]
     assert all(len(msg_to_skeletons(got[f][0])[0]) for f in second)
+
+
+def test_oversize_bundles_are_refused_undecoded_and_answered_with_no_people(domain, tmp_path):
+    """The byte bound of a rig of two 64 x 48 cameras: a message one byte over it is not decoded,
+    yet answered (no people) and logged; the frames around it go on."""
+    rig = tmp_path / 'rig.yaml'
+    rig.write_text('world_frame: world\ncameras:\n' + ''.join(
+        f'  - name: c{c}\n    image: c{c}/image\n    camera_info: c{c}/camera_info\n'
+        f'    position: [{c}.0, 0.0, 0.0]\n    orientation: [0.0, 0.0, 0.0, 1.0]\n'
+        f'    width: 64\n    height: 48\n    K: [50.0, 0.0, 32.0, 0.0, 50.0, 24.0, 0.0, 0.0, 1.0]\n' for c in range(2)))
+    limit = max_bundles_bytes([(64, 48)] * 2)
+    junk = PointCloud2(header=Header(stamp=stamp_of_frame(301), frame_id='world'), height=1, width=limit + 1,
+                       point_step=1, row_step=limit + 1, data=bytes(limit + 1))
+    log = tmp_path / 'bp.log'
+    with probe(domain, 'oversize_probe') as (node, executor):
+        got = _outputs(node)
+        pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+        proc = start_node('bp_solver', domain, log, *SOLVER_ARGS, '-p', f'rig:={rig}')
+        try:
+            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            _connected(executor, pub, got, range(200, 250))
+            pub.publish(bundles_to_msg([], Header(stamp=stamp_of_frame(300), frame_id='world')))
+            pub.publish(junk)
+            pub.publish(bundles_to_msg([], Header(stamp=stamp_of_frame(302), frame_id='world')))
+            assert spin_until(executor, lambda: {300, 301, 302} <= set(got), 20.0), log.read_text()
+        finally:
+            stop(proc)
+    assert len(msg_to_skeletons(got[301][0])[0]) == 0
+    assert f'{limit + 1} data bytes, more than the views of 64 people in every camera take ({limit})' in log.read_text()
 
 
 @pytest.mark.parametrize('content, problem', [

@@ -42,7 +42,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.markers import camera_markers, skeleton_markers
-from msg_adapters.people_msg import msg_to_bundles
+from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros import topics
@@ -68,6 +68,10 @@ LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durabi
 
 class _NotReady(ValueError):
     """A bundle with a camera whose CameraInfo has not come yet (logged throttled)."""
+
+
+class _Oversize(ValueError):
+    """A bundles message larger than any the rig's cameras can honestly produce (not decoded)."""
 
 
 class BpSolverNode(Node):
@@ -163,6 +167,7 @@ class BpSolverNode(Node):
                                               f'duplicate, dropped', 'error')
             return
         try:
+            self._check_size(msg)
             bundles = msg_to_bundles(msg)
             for pid, views in bundles:
                 bad = [c for c in views if c >= self._n_cameras]
@@ -177,7 +182,7 @@ class BpSolverNode(Node):
             self._first_ns, self._last_ns = first, stamp
             self._next_frame += 1
         except ValueError as exc:
-            cause = 'no intrinsics' if isinstance(exc, _NotReady) else 'malformed'
+            cause = {_NotReady: 'no intrinsics', _Oversize: 'oversize'}.get(type(exc), 'malformed')
             self._bundles_in.dropped(arrival, cause)
             self._log.log(('bundles', cause), f'bundles stamp {stamp} ns: {exc}; published with no people', 'error')
             nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
@@ -191,6 +196,18 @@ class BpSolverNode(Node):
         self._stamps[frame] = msg.header.stamp
         for result in results:
             self._publish(result, self._stamps.pop(result.frame))
+
+    def _check_size(self, msg: PointCloud2) -> None:
+        """_Oversize for more data than the rig's views of people_msg.MAX_PEOPLE people take (a camera
+        whose size is not known yet counts as the largest known one); _NotReady before any is known."""
+        cameras = self._inference.cameras if self._intrinsics is None else self._intrinsics.known
+        sizes = [(c.width, c.height) for c in cameras if c is not None]
+        if not sizes:
+            raise _NotReady('intrinsics of every camera not known yet (no CameraInfo)')
+        limit = max_bundles_bytes(sizes + [max(sizes, key=lambda s: s[0] * s[1])] * (self._n_cameras - len(sizes)))
+        if len(msg.data) > limit:
+            raise _Oversize(f'{len(msg.data)} data bytes, more than the views of {MAX_PEOPLE} people in every camera '
+                            f'take ({limit})')
 
     def _on_timer(self) -> None:
         if not self._cameras_sent:
