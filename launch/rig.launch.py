@@ -44,5 +44,6 @@ def generate_launch_description():
         DeclareLaunchArgument('state_dir', default_value=os.path.join(ros_home, 'mvpose_ros'),
                               description="folder where association keeps the person ids' state (restarts)"),
         SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(config, 'fastdds.xml')),
+        SetEnvironmentVariable('RMW_FASTRTPS_USE_QOS_FROM_XML', '1'),
         *nodes,
     ])

@@ -25,6 +25,7 @@ from mvpose_ros.nodes.bag_player import START_QOS
 REPO = Path(__file__).resolve().parents[1]
 FASTDDS_PROFILE = REPO / 'config' / 'fastdds.xml'
 PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')  # Fast DDS 2 and 3
+QOS_FROM_XML = 'RMW_FASTRTPS_USE_QOS_FROM_XML'  # the profile's history memory policy applies only with it
 # Domains 1..101: valid with the default port mapping on Linux (0 is everybody's default: never).
 DOMAINS = range(1, 102)
 _LOCK_DIR = Path(tempfile.gettempdir()) / 'mvpose_ros_test_domains'
@@ -72,11 +73,11 @@ def ros_env(domain: int, profile: Path | None = FASTDDS_PROFILE, base: Mapping[s
     this checkout importable, one BLAS thread, the Fast DDS profile `profile` (None: Fast DDS's
     defaults); `extra` on top."""
     env = {k: v for k, v in (os.environ if base is None else base).items()
-           if k not in ('ROS_STATIC_PEERS', 'ROS_LOCALHOST_ONLY', *PROFILE_VARS)}
+           if k not in ('ROS_STATIC_PEERS', 'ROS_LOCALHOST_ONLY', QOS_FROM_XML, *PROFILE_VARS)}
     env |= {'PYTHONPATH': str(REPO), 'ROS_DOMAIN_ID': str(domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
             'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'PYTHONUNBUFFERED': '1'}
     if profile is not None:
-        env |= {var: str(profile) for var in PROFILE_VARS}
+        env |= {var: str(profile) for var in PROFILE_VARS} | {QOS_FROM_XML: '1'}
     return env | extra
 
 
@@ -87,7 +88,7 @@ def ros_domain(monkeypatch=None, profile: Path | None = FASTDDS_PROFILE) -> Iter
     domain = acquire_domain()
     try:
         if monkeypatch is not None:
-            for var in PROFILE_VARS:
+            for var in (*PROFILE_VARS, QOS_FROM_XML):
                 monkeypatch.delenv(var, raising=False)
             for key, value in ros_env(domain, profile, base={}).items():
                 if key != 'PYTHONPATH':
@@ -107,6 +108,7 @@ def probe(domain_id: int, name: str) -> Iterator[tuple[Node, SingleThreadedExecu
     """An rclpy node with its own context and executor on domain_id."""
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(FASTDDS_PROFILE)  # read at context init
+    os.environ[QOS_FROM_XML] = '1'
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = Node(name, context=context)

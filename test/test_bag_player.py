@@ -36,7 +36,8 @@ FAST_HEARTBEAT = """<?xml version="1.0" encoding="UTF-8"?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"><profiles>
   <data_writer profile_name="test_writer" is_default_profile="true"><times>
     <heartbeatPeriod><sec>0</sec><nanosec>50000000</nanosec></heartbeatPeriod>
-  </times></data_writer>
+  </times><historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>
+  <qos><publishMode><kind>ASYNCHRONOUS</kind></publishMode></qos></data_writer>
 </profiles></dds>
 """
 

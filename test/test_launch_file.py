@@ -71,9 +71,10 @@ def test_every_node_gets_the_shelf_params_and_its_overrides():
     assert assigned['config'] == "os.path.join(get_package_share_directory(PACKAGE), 'config')"
     assert assigned['params'] == "os.path.join(config, 'shelf.yaml')"
     # The same Fast DDS profile as mvpose-graph, set before any node starts.
-    (env,) = _calls(tree, 'SetEnvironmentVariable')
+    env, qos = _calls(tree, 'SetEnvironmentVariable')
     assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "
                                 "os.path.join(config, 'fastdds.xml'))")
+    assert ast.unparse(qos) == "SetEnvironmentVariable('RMW_FASTRTPS_USE_QOS_FROM_XML', '1')"
     actions = [ast.unparse(a) for a in _calls(tree, 'LaunchDescription')[0].args[0].elts]
     assert actions.index(ast.unparse(env)) < actions.index('*detectors')
     for node in launched_nodes():
@@ -159,9 +160,10 @@ def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
             for c in _calls(tree, 'DeclareLaunchArgument')}
     assert set(args) == {'rig', 'params', 'namespace', 'state_dir'} and 'default_value' not in args['rig']
     assert args['params']['default_value'] == "os.path.join(config, 'rig_template.yaml')"
-    (env,) = _calls(tree, 'SetEnvironmentVariable')
+    env, qos = _calls(tree, 'SetEnvironmentVariable')
     assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "
                                 "os.path.join(config, 'fastdds.xml'))")
+    assert ast.unparse(qos) == "SetEnvironmentVariable('RMW_FASTRTPS_USE_QOS_FROM_XML', '1')"
     assert (REPO / 'config' / 'rig_template.yaml').is_file()
 
 

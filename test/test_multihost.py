@@ -107,14 +107,14 @@ def base_env() -> dict[str, str]:
     """The inherited environment without any DDS choice of its own, one BLAS thread per node."""
     env = {k: v for k, v in os.environ.items()
            if k not in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_STATIC_PEERS', 'ROS_LOCALHOST_ONLY', 'ROS_DOMAIN_ID',
-                        'RMW_IMPLEMENTATION', *PROFILE_VARS)}
+                        'RMW_IMPLEMENTATION', ros_harness.QOS_FROM_XML, *PROFILE_VARS)}
     return env | {'PYTHONPATH': str(REPO), 'PYTHONUNBUFFERED': '1', 'OMP_NUM_THREADS': '1',
                   'OPENBLAS_NUM_THREADS': '1', 'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}
 
 
 def dds_env(domain: int, profile: Path, discovery: str, peers: Sequence[str] = ()) -> dict[str, str]:
     env = {'ROS_DOMAIN_ID': str(domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': discovery,
-           **{var: str(profile) for var in PROFILE_VARS}}
+           **{var: str(profile) for var in PROFILE_VARS}, ros_harness.QOS_FROM_XML: '1'}
     return env | ({'ROS_STATIC_PEERS': ';'.join(peers)} if peers else {})
 
 

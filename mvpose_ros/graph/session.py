@@ -46,6 +46,8 @@ RECORDER_NAME = 'mvpose_graph'
 # enough for the heatmap messages), used by this process and every node unless already chosen.
 DDS_PROFILE = 'fastdds.xml'
 DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+# rmw_fastrtps takes the history memory policy and publication mode from the profile only with this
+DDS_QOS_FROM_XML_ENV = 'RMW_FASTRTPS_USE_QOS_FROM_XML'
 RATE_QUIET_S = 5.0  # a rig run is over this long after the player's end without output
 
 
@@ -142,6 +144,7 @@ def _environment(config_dir: Path, domain_id: int | None) -> None:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     if (config_dir / DDS_PROFILE).is_file():
         os.environ.setdefault(DDS_PROFILE_ENV, str(config_dir / DDS_PROFILE))
+        os.environ.setdefault(DDS_QOS_FROM_XML_ENV, '1')
     if domain_id is not None:
         os.environ['ROS_DOMAIN_ID'] = str(domain_id)
 
