@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
+from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_people,
@@ -89,6 +90,8 @@ def test_split_draws(total, n):
 def test_sampling_config_is_validated():
     with pytest.raises(ValueError):
         SamplingConfig(hypotheses=0)
+    with pytest.raises(ValueError, match='single_view_depth'):
+        SamplingConfig(single_view_depth='middle')
 
 
 def test_hypotheses_land_on_the_joints(views, truth):
@@ -140,7 +143,7 @@ def test_joint_seen_by_one_camera_lies_on_its_rays(views, truth):
     single, unseen = 6, 11  # r_wrist seen by camera 2 only, l_wrist by none
     sub = _without(views, [single], {0, 1, 3, 4})
     sub = _without(sub, [unseen], set(range(5)))
-    hyp = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    hyp = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='centre'))
     assert hyp.shape == (16, 32, 3) and np.isfinite(hyp).all()
     others = np.setdiff1d(np.arange(16), [single, unseen])
     centre = hyp[others].reshape(-1, 3).mean(axis=0)
@@ -158,6 +161,41 @@ def test_joint_seen_by_one_camera_lies_on_its_rays(views, truth):
     # the joints seen by the other four cameras are unaffected in quality
     err = np.linalg.norm(hyp[others] - truth[others, None], axis=-1)
     assert np.median(err) < 0.01
+
+
+def test_joint_seen_by_one_camera_at_its_bone_length(views, truth):
+    """single_view_depth 'limb': the l_wrist seen by camera 2 only lies on camera 2's rays where
+    they meet the sphere of the forearm's prior length around the elbow's peak triangulation (or,
+    a ray missing it, at its point nearest the elbow), and nearer the truth than at the centre's
+    depth; with its elbow seen once too, it falls back to the centre's depth."""
+    wrist, elbow = 11, 10  # this actor's left forearm is 27 cm long in the ground truth (the prior: 26)
+    assert INFERENCE_PARENT[wrist] == elbow
+    sub = _without(views, [wrist], {0, 1, 3, 4})
+    limb = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    centre = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='centre'))
+    cam = sub[2][0]
+    uv = cam.project(limb[wrist])
+    assert np.all(np.linalg.norm(uv - cam.project(truth[wrist]), axis=1) <= SAMPLE_RADIUS_PX)
+    np.testing.assert_allclose(uv, cam.project(centre[wrist]), atol=1e-6)  # the same rays
+    anchor = limb[elbow, 0]
+    dist = np.linalg.norm(limb[wrist] - anchor, axis=1)
+    ray = (limb[wrist] - cam.centre) / np.linalg.norm(limb[wrist] - cam.centre, axis=1, keepdims=True)
+    on_sphere = np.isclose(dist, PRIOR_BONE_LENGTH[wrist], atol=1e-9)
+    nearest = np.isclose(np.einsum('md,md->m', limb[wrist] - anchor, ray), 0.0, atol=1e-9)
+    assert np.all(on_sphere | (nearest & (dist > PRIOR_BONE_LENGTH[wrist])))
+    assert on_sphere.mean() > 0.5
+    err_limb = np.linalg.norm(limb[wrist] - truth[wrist], axis=1)
+    err_centre = np.linalg.norm(centre[wrist] - truth[wrist], axis=1)
+    assert np.median(err_limb) < 0.05 < np.median(err_centre)
+    others = np.setdiff1d(np.arange(16), [wrist])
+    np.testing.assert_array_equal(limb[others], centre[others])
+
+    no_parent = _without(sub, [elbow], {0, 1, 3, 4})
+    limb = sample_hypotheses(no_parent, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    centre = sample_hypotheses(no_parent, np.random.default_rng(0),
+                               SamplingConfig(hypotheses=32, single_view_depth='centre'))
+    np.testing.assert_allclose(limb[wrist], centre[wrist], atol=1e-12)
+    assert not np.allclose(limb[elbow], centre[elbow])  # the elbow's own parent is seen twice
 
 
 def test_none_without_a_joint_seen_twice(views):

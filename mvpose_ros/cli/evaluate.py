@@ -30,6 +30,7 @@ from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP
 from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
 from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
 from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS
 from mvpose_ros.core.inference.window import TERMS
 from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig
 from mvpose_ros.core.timing import StageTimer
@@ -65,6 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f'with --window: {SOLVER_PARAMETERS["slide_iterations"]}')
     p.add_argument('--hypotheses', type=int, default=d['hypotheses'], help=SOLVER_PARAMETERS['hypotheses'])
     p.add_argument('--bp-hypotheses', type=int, default=d['bp_hypotheses'], help=SOLVER_PARAMETERS['bp_hypotheses'])
+    p.add_argument('--single-view-depth', choices=SINGLE_VIEW_DEPTHS, default=d['single_view_depth'],
+                   help=SOLVER_PARAMETERS['single_view_depth'])
     p.add_argument('--head-model', choices=HEAD_MODELS, default=d['head_model'])
     p.add_argument('--heatmap-stride', type=float, default=OpenPoseDetectorConfig.stride,
                    help='heatmap cell size in pixels (the ROS graph config uses 8)')

@@ -22,7 +22,7 @@ from mvpose_ros.core.association.matching import MatchingConfig
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.factors import FactorConfig
-from mvpose_ros.core.inference.hypotheses import SamplingConfig
+from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, SamplingConfig
 from mvpose_ros.core.inference.solver import Inference3D, SolverConfig
 from mvpose_ros.core.inference.window import TERMS, InferenceConfig
 from mvpose_ros.core.parameters import Param
@@ -38,6 +38,8 @@ SOLVER_PARAMETERS = {
     'slide_iterations': 'iterations per new frame, warm-started from the last slide (0: re-solve every window)',
     'hypotheses': 'hypotheses M per joint (paper: 64)',
     'bp_hypotheses': 'hypotheses kept per joint inside BP, best data term first (0: all M)',
+    'single_view_depth': f'depth of a joint seen by one camera on its rays, from {", ".join(SINGLE_VIEW_DEPTHS)}: '
+                         'nearest the person\'s centre, or at the bone\'s typical length from the parent joint',
     'terms': f'CRF terms, from {", ".join(TERMS)}',
     'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
     'seed': 'seed of the hypothesis sampling',
@@ -83,7 +85,9 @@ class StageConfig:
                                     iterations=int(d['iterations']), bp_hypotheses=int(d['bp_hypotheses']) or None,
                                     slide_iterations=int(d['slide_iterations']) or None, factors=factors,
                                     frame_rate=float(d['frame_rate']), max_gap=float(d['max_gap']))
-        solver = SolverConfig(sampling=replace(SamplingConfig(), hypotheses=int(d['hypotheses'])),
+        sampling = replace(SamplingConfig(), hypotheses=int(d['hypotheses']),
+                           single_view_depth=str(d['single_view_depth']))
+        solver = SolverConfig(sampling=sampling,
                               inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
         association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
                               matching=replace(MatchingConfig(), max_distance=float(d['match_distance'])))
@@ -95,7 +99,8 @@ class StageConfig:
         return {
             'window': inference.window or 0, 'lag': inference.lag, 'iterations': inference.iterations,
             'slide_iterations': inference.slide_iterations or 0, 'hypotheses': solver.sampling.hypotheses,
-            'bp_hypotheses': inference.bp_hypotheses or 0, 'terms': list(inference.terms),
+            'bp_hypotheses': inference.bp_hypotheses or 0, 'single_view_depth': solver.sampling.single_view_depth,
+            'terms': list(inference.terms),
             'head_model': solver.head_model, 'seed': solver.seed,
             'collision_centre': inference.factors.collision_centre,
             'collision_width': inference.factors.collision_width,

@@ -86,6 +86,19 @@ def _inference_mirror() -> np.ndarray:
 
 INFERENCE_MIRROR = _inference_mirror()  # (16,) left/right counterpart of each inference joint
 
+# The limb joints' parents towards the torso and the typical length of the bone between them
+# (adult anthropometry: Winter, Biomechanics and Motor Control of Human Movement, segment lengths
+# as fractions of a 1.75 m stature; not fitted to any dataset). The hips, neck, head and ears have
+# no parent here (-1, length NaN): giving the head and ears one measured worse on Shelf.
+_PARENTS: dict[str, tuple[str, float]] = {
+    'r_ankle': ('r_knee', 0.43), 'r_knee': ('r_hip', 0.43), 'l_knee': ('l_hip', 0.43), 'l_ankle': ('l_knee', 0.43),
+    'r_wrist': ('r_elbow', 0.26), 'r_elbow': ('r_shoulder', 0.33), 'r_shoulder': ('neck', 0.20),
+    'l_shoulder': ('neck', 0.20), 'l_elbow': ('l_shoulder', 0.33), 'l_wrist': ('l_elbow', 0.26),
+}
+INFERENCE_PARENT = np.array([INFERENCE_NAMES.index(_PARENTS[n][0]) if n in _PARENTS else -1
+                             for n in INFERENCE_NAMES])  # (16,)
+PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n in INFERENCE_NAMES])  # (16,) m
+
 # 'paper': bottom/top head = neck/nose + 10 cm up (Schwarcz & Pollard's scoring).
 # 'anatomical': from the 3D ears and neck, as VoxelPose and mvpose derive it for COCO: head
 #   centre = ear midpoint, bottom = midway between neck and head centre, top = as far above the

@@ -15,20 +15,30 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
 from mvpose_ros.core.geometry.camera import Camera, line_terms, solve_line_terms
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
+SINGLE_VIEW_DEPTHS = ('centre', 'limb')
+
+
 @dataclass(frozen=True)
 class SamplingConfig:
-    """hypotheses: M per joint; peak_hypotheses: add one peak triangulation per camera subset."""
+    """hypotheses: M per joint; peak_hypotheses: add one peak triangulation per camera subset;
+    single_view_depth: where on its rays a joint seen by one camera is put, 'centre' (the depth
+    nearest the person's centre) or 'limb' (where the ray meets the sphere of the bone's typical
+    length around the parent joint, when the parent is seen twice; else as 'centre')."""
 
     hypotheses: int = 64
     peak_hypotheses: bool = True
+    single_view_depth: str = 'limb'
 
     def __post_init__(self) -> None:
         if self.hypotheses < 1:
             raise ValueError(f'hypotheses must be >= 1, got {self.hypotheses}')
+        if self.single_view_depth not in SINGLE_VIEW_DEPTHS:
+            raise ValueError(f'single_view_depth must be one of {SINGLE_VIEW_DEPTHS}, got {self.single_view_depth!r}')
 
 
 def camera_subsets(cameras: Sequence[int], min_size: int = 2) -> list[tuple[int, ...]]:
@@ -54,8 +64,9 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     so a person's hypotheses do not depend on who else is in the frame).
 
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
-    closest to the person's centre (so it stays near the body instead of being dropped); a joint
-    seen by none gets the centre itself.
+    closest to the person's centre (so it stays near the body instead of being dropped) or, with
+    single_view_depth 'limb', at its bone's length from its parent; a joint seen by none gets the
+    centre itself.
     """
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
@@ -136,6 +147,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
             results.append(None)
             continue
         centre = np.nanmean(hyp.reshape(-1, 3), axis=0)
+        anchors = _anchors(hyp, config) if config.single_view_depth == 'limb' else None
         for q, cams, joints in groups:
             if q != p:
                 continue
@@ -143,11 +155,43 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
                 origin = centres[cams[0]]
                 direction = dirs[first_draw[cams[0], joints][:, None] + np.arange(m)]  # (joints, m, 3)
                 depth = direction @ (centre - origin)
+                if config.single_view_depth == 'limb':
+                    depth = _limb_depths(depth, direction, origin, joints, anchors)
                 hyp[joints] = origin + depth[..., None] * direction
             elif len(cams) == 0:
                 hyp[joints] = centre
         results.append(hyp)
     return results
+
+
+def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
+    """(J, 3) best single point of each joint seen by >= 2 cameras (NaN for the others): with
+    peaks, its first hypothesis (the peak triangulation of all its cameras when the peaks fit in
+    M), else the median of its hypotheses."""
+    if config.peak_hypotheses:
+        return hyp[:, 0].copy()
+    out = np.full((len(hyp), 3), np.nan)
+    seen = ~np.isnan(hyp[:, 0, 0])
+    out[seen] = np.median(hyp[seen], axis=1)
+    return out
+
+
+def _limb_depths(depth: np.ndarray, direction: np.ndarray, origin: np.ndarray, joints: np.ndarray,
+                 anchors: np.ndarray) -> np.ndarray:
+    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (3,) of `joints` (n,)
+    where each ray meets the sphere of its bone's length around its parent's anchor (anchors
+    (J, 3)); of the two, the one nearer the given depth (the person's centre). A ray missing the
+    sphere takes its point nearest the parent; a joint without a located parent keeps `depth`."""
+    parent = INFERENCE_PARENT[joints]
+    length = PRIOR_BONE_LENGTH[joints]
+    anchor = anchors[np.maximum(parent, 0)]  # (n, 3)
+    rel = anchor - origin
+    mid = np.einsum('nmd,nd->nm', direction, rel)  # depth of the point nearest the parent
+    half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
+    near, far = mid - half, mid + half
+    limb = np.where(np.abs(near - depth) <= np.abs(far - depth), near, far)
+    located = (parent >= 0) & ~np.isnan(anchor[:, 0]) & ~np.isnan(length)
+    return np.where(located[:, None], limb, depth)
 
 
 def _rays(views: np.ndarray, joints: np.ndarray, draw: np.ndarray, m: int, n_joints: int,
