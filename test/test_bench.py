@@ -3,6 +3,7 @@ OpenCV plots, and a smoke run of the command on a few real Shelf frames. No test
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -225,6 +226,19 @@ def test_two_processes_give_the_results_of_one():
         assert a.person_ids == b.person_ids and len(a.person_ids) >= 2
         np.testing.assert_array_equal(a.joints, b.joints)
     assert {'grouping and heatmaps', 'association', 'sampling', 'bp'} <= set(two.seconds) and two.wall_s > 0
+
+
+def test_crowd_lines_give_the_time_per_person_of_each_people_run(capsys):
+    def fake(name, sweep, people, seconds):
+        config = {**asdict(replace(GRAPH, sweep=sweep)), 'name': name}
+        return {'config': config, 'frames': 10, 'cameras': 5, 'people_3d': people,
+                'stages_s': {'grouping and heatmaps': 1.0, 'association': seconds / 2, 'sampling': seconds / 2}}
+    bench_report.print_crowds([fake('graph (default)', None, 3.2, 0.1), fake('people~20', 'people', 19.5, 0.39),
+                               fake('people~40', 'people', 0.0, 0.0)], sys.stdout)
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].startswith('crowd scenes') and len(lines) == 2  # only people runs with people
+    assert lines[1].split() == ['people~20', '19.5', '3D', 'people', 'per', 'frame', '39.00', 'ms/frame', '->', '2.00',
+                                'ms', 'per', 'person']
 
 
 def test_plots_of_the_sweeps(tmp_path):

@@ -138,6 +138,18 @@ def print_default(result: dict, out: TextIO) -> None:
               f'{p["mpjpe_mm"]:.1f} mm', file=out)
 
 
+def print_crowds(results: Sequence[dict], out: TextIO) -> None:
+    """A line per run of the people sweep: time from 2D people on per frame and per 3D person (the
+    crowd scenes: issue 14's target is <= 1.2 ms per person at 20 people)."""
+    rows = [r for r in results if r['config'].get('sweep') == 'people' and 'error' not in r and r['people_3d'] > 0]
+    if rows:
+        print('\ncrowd scenes (shifted copies of the Shelf scene), from 2D people on:', file=out)
+    for r in rows:
+        ms = figures(r)['from_2d_ms']
+        print(f'  {r["config"]["name"]:12s} {r["people_3d"]:5.1f} 3D people per frame {ms:8.2f} ms/frame -> '
+              f'{ms / r["people_3d"]:.2f} ms per person', file=out)
+
+
 def _sweep_value(result: dict, sweep: str) -> float:
     c = result['config']
     return {'cameras': result['cameras'], 'people': result['people_3d'], 'window': c['window'] or result['frames'],

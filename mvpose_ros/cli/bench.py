@@ -113,6 +113,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     report.print_tables(main_rows + sweep_rows, out)
     if 'error' not in results[0]:
         report.print_default(results[0], out)
+    report.print_crowds(results, out)
     pipelined = None if args.no_two_processes else two_processes(replace(base, frames=args.frames),
                                                                  args.data_root, args.repeat)
     if pipelined:
