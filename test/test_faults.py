@@ -217,6 +217,14 @@ def test_association_with_a_camera_gone_for_good_and_stamps_out_of_order_or_repe
                 header = Header(stamp=stamp_of_frame(f), frame_id=f'cam{c}')
                 pubs[c].publish(people_to_msg([] if nobody else people[f][c], header))
 
+            # warm up until a set of nobody comes out: a reliable volatile reader that has not yet
+            # matched a writer the writer already sees gets its first samples late, out of order
+            for f in range(200, 250):
+                for c in range(5):
+                    send(c, f, nobody=True)
+                if spin_until(executor, lambda: f in got, 0.2):
+                    break
+            assert got, log.read_text()
             for f in frames:
                 for c in range(5):
                     if c == 4 and f >= 304:
@@ -233,7 +241,7 @@ def test_association_with_a_camera_gone_for_good_and_stamps_out_of_order_or_repe
             spin_until(executor, lambda: False, 0.5)
         finally:
             stop(proc)
-    assert sorted(got) == list(frames) and all(len(v) == 1 for v in got.values())
+    assert sorted(f for f in got if f >= FIRST) == list(frames) and all(len(v) == 1 for v in got.values())
     bundles = {f: msg_to_bundles(got[f][0]) for f in frames}
     assert all(len(bundles[f]) >= 2 for f in frames)  # the four cameras left still see everybody twice
     assert all(4 not in views for f in frames if f >= 304 for _, views in bundles[f])
