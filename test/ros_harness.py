@@ -20,12 +20,13 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import Empty
 
+from mvpose_ros.graph.session import DDS_QOS_FROM_XML_ENV
 from mvpose_ros.nodes.bag_player import START_QOS
 
 REPO = Path(__file__).resolve().parents[1]
 FASTDDS_PROFILE = REPO / 'config' / 'fastdds.xml'
 PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')  # Fast DDS 2 and 3
-QOS_FROM_XML = 'RMW_FASTRTPS_USE_QOS_FROM_XML'  # the profile's history memory policy applies only with it
+QOS_FROM_XML = DDS_QOS_FROM_XML_ENV  # the profile's history memory policy applies only with it
 # Domains 1..101: valid with the default port mapping on Linux (0 is everybody's default: never).
 DOMAINS = range(1, 102)
 _LOCK_DIR = Path(tempfile.gettempdir()) / 'mvpose_ros_test_domains'

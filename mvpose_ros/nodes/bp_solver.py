@@ -13,8 +13,10 @@ are numbered by arrival (the association's set order), not by stamp x rate; the 
 uses the real time between the bundles' stamps, so sets dropped upstream (uneven gaps) are
 bridged, and a gap longer than `max_gap` seconds breaks the temporal chains. Every bundle message
 yields exactly one skeleton message, but for a late one (a stamp not after the last one taken: a
-duplicate, or out of order), which is logged and dropped. With no input for `idle_flush` seconds
-(the end of a replay, or a stalled graph) every pending frame is decoded and published. A rig
+duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
+of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged). With no input
+for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
+decoded and published. A rig
 without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
 published with no people (logged).
 
