@@ -117,6 +117,21 @@ def test_heatmaps_from_multipose_keypoints_without_efficientpose(multipose_detec
         multipose_detector.detect_set([shelf_image], [np.array([[100.0, 100.0, 300.0, 600.0]])])
 
 
+def test_multipose_workers_find_the_same_people_in_each_image_of_a_set(shelf_image):
+    """MultiPose on two images at once: each camera's people as one after the other (threads 1:
+    onnxruntime's sums depend on the thread split)."""
+    config = OnnxDetectorConfig(model_dir=MODELS, heatmaps='multipose', threads=1)
+    images = [shelf_image, None, shelf_image[:, ::-1].copy(), np.zeros_like(shelf_image), shelf_image[::-1].copy()]
+    one = OnnxPoseDetector(config).detect_set(images)
+    pool = OnnxPoseDetector(replace(config, multipose_workers=2))
+    two = pool.detect_set(images)
+    assert pool.timing.multipose_runs == 4 and two[1] is None and two[3] == []
+    assert [len(p) for p in one if p] == [len(p) for p in two if p] and len(two[0]) >= 3
+    for a, b in zip(sum([p for p in one if p], []), sum([p for p in two if p], [])):
+        np.testing.assert_array_equal(a.keypoints, b.keypoints)
+        np.testing.assert_array_equal(a.heatmap.maps, b.heatmap.maps)
+
+
 def test_fused_heatmaps_hold_the_efficientpose_evidence_and_multipose_keypoints(detector, shelf_image):
     fused = OnnxPoseDetector(OnnxDetectorConfig(model_dir=MODELS, heatmaps='fused')).detect(shelf_image)
     alone = detector.detect(shelf_image)
@@ -192,6 +207,7 @@ def test_a_file_that_is_not_onnx_is_a_clear_error(tmp_path):
     ({'heatmap_floor': 1.0}, r'heatmap_floor 1.0 in \[0, 1\)'),
     ({'heatmaps': 'openpose'}, "heatmaps 'openpose' is not one of efficientpose, multipose, fused"),
     ({'keypoint_sigma': 0.0}, 'keypoint_sigma 0.0 must be > 0'),
+    ({'multipose_workers': 0}, 'multipose_workers 0 must be >= 1'),
 ])
 def test_bad_settings(changes, message):
     with pytest.raises(ValueError, match=message):

@@ -3,7 +3,7 @@
     mvpose-images (--rig FILE | --calibration FILE) --images CAM0 CAM1 ... [--output DIR] [--frame N]
                   [--model rt|i] [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
                   [--sets N] [--person-detector-every K] [--max-batch B] [--threads T]
-                  [--heatmaps efficientpose|multipose|fused] [--keypoint-sigma F]
+                  [--heatmaps efficientpose|multipose|fused] [--keypoint-sigma F] [--multipose-workers W]
 
 Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose + EfficientPose),
 associates them across the cameras, samples the 3D hypotheses and runs BP on this one frame, and
@@ -74,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='onnxruntime intra-op threads per model (default: 0, one per core)')
     p.add_argument('--max-batch', type=int, default=DEFAULTS.max_batch,
                    help=f'EfficientPose crops per run, 0 = all crops of the set in one (default: {DEFAULTS.max_batch})')
+    p.add_argument('--multipose-workers', type=int, default=DEFAULTS.multipose_workers,
+                   help='images MultiPose runs on at once, each with --threads intra-op threads (default: '
+                        f'{DEFAULTS.multipose_workers}; on two cores 2 with --threads 1 was faster)')
     p.add_argument('--sets', type=int, default=1, help='detect the images this many times as a sequence (default: 1)')
     p.add_argument('--person-detector-every', type=int, default=1,
                    help='run MultiPose on every K-th set only; crops from the previous 3D skeletons between '
@@ -153,7 +156,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
                                                    threads=args.threads, input_size=args.input_size,
                                                    stride=args.stride, ears=args.ears, max_batch=args.max_batch,
-                                                   keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps))
+                                                   keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps,
+                                                   multipose_workers=args.multipose_workers))
     planner = CropPlanner(cameras, args.person_detector_every)
     detector.detect(images[0])  # warm-up: onnxruntime's first run allocates; not a steady-state latency
     source = 'MultiPose keypoints' if args.heatmaps == 'multipose' else f'{args.heatmaps} {args.model.upper()}'

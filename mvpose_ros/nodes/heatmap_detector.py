@@ -201,6 +201,8 @@ class HeatmapDetectorNode(Node):
             Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
             Param('max_batch', onnx.max_batch, 'onnx: EfficientPose crops per run (0 = all crops of a set in one run, '
                   'for a GPU)', 0, 4096),
+            Param('multipose_workers', onnx.multipose_workers, 'onnx, whole rig: images of a set MultiPose runs on at '
+                  'once, each with `threads` intra-op threads (two cores: 2 with threads 1 was faster)', 1, 64),
             Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
                   32, 4096),
             Param('box_margin', onnx.box_margin,
@@ -334,7 +336,7 @@ class HeatmapDetectorNode(Node):
                 box_margin=p['box_margin'], min_person_score=p['min_person_score'],
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
                 ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'], heatmaps=p['heatmaps'],
-                keypoint_sigma=p['keypoint_sigma'])
+                keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
