@@ -1,4 +1,5 @@
-"""The ONNX backend with the real models on a real Shelf image, and the clear errors for a
+"""The ONNX backend with the real models on a real Shelf image (heatmaps from EfficientPose, from
+MultiPose's keypoints, or fused), the rendering of keypoints as maps, and the clear errors for a
 missing model, another model's file, a file that is not ONNX, and bad settings."""
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_ros.core.geometry.body import L_EAR, NUM_INFERENCE_JOINTS, R_EAR
+from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt_2d
-from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector, keypoint_people
 from mvpose_ros.core.detection.onnx_models import EFFICIENTPOSE, MULTIPOSE, ModelError
 
 MODELS = data_root() / 'models'
@@ -46,14 +47,107 @@ def test_real_models_find_the_people_of_a_shelf_image(detector, shelf_image):
         assert np.all(np.linalg.norm(peak[seen, :2] - kp[seen, :2], axis=1) <= 2 * person.heatmap.stride)
     # every annotated actor has a detection whose joints are near the annotation: median joint
     # error (14 joints) measured 12-24 px on this image, 1032x776; 40 px would be a real regression
+    _near_annotations(people, 40.0)
+    t = detector.timing
+    assert t.people == len(people) and 0 < t.multipose < t.total and 0 < t.efficientpose < t.total
+
+
+def _near_annotations(people, errors_px: float) -> None:
+    """Every annotated actor of the image has a detection whose median joint error (14 joints) is
+    below errors_px."""
     gt = load_actors_gt_2d(dataset_dir('shelf') / 'actorsGT.mat', [FRAME])[0, :, CAMERA]  # (A, 14, 2)
     annotated = np.isfinite(gt).all(axis=(1, 2))
     assert annotated.sum() == 3
     for truth in gt[annotated]:
         errors = [np.nanmedian(np.linalg.norm(p.keypoints[:14, :2] - truth, axis=1)) for p in people]
-        assert min(errors) < 40.0
-    t = detector.timing
-    assert t.people == len(people) and 0 < t.multipose < t.total and 0 < t.efficientpose < t.total
+        assert min(errors) < errors_px
+
+
+def test_keypoint_people_render_each_joint_as_a_score_weighted_gaussian():
+    keypoints = np.full((2, NUM_INFERENCE_JOINTS, 3), np.nan)
+    keypoints[..., 2] = 0.0
+    keypoints[0, :3] = [[101.3, 200.7, 0.9], [150.0, 260.2, 0.4], [170.0, 300.0, 0.0]]
+    keypoints[0, 2, :2] = (170.0, 300.0)  # a joint of score 0 where a point is given: still no evidence
+    keypoints[0, NECK] = [130.0, 120.0, 1.0]
+    sigma = 12.0
+    people = keypoint_people(keypoints, np.array([sigma, 5.0]), 4.0)
+    assert len(people) == 1  # the second person has no joint
+    heatmap = people[0].heatmap
+    np.testing.assert_array_equal(people[0].keypoints[:2], keypoints[0, :2])
+    peak = heatmap.peak()
+    seen = [0, 1, NECK]
+    # each map peaks in the cell holding its keypoint, at about its score (the cell centre is at
+    # most half a cell's diagonal away)
+    assert np.all(np.abs(peak[seen, :2] - keypoints[0, seen, :2]) <= 2.0)
+    np.testing.assert_allclose(peak[seen, 2], keypoints[0, seen, 2], rtol=0.02)
+    uv = keypoints[0, :, None, :2] + np.array([[0.0, 0.0], [sigma, 0.0], [0.0, -2 * sigma]])  # (16, 3, 2)
+    values = heatmap.lookup(np.nan_to_num(uv))
+    # score-weighted Gaussians of std sigma: exp(-1/2) of the peak one sigma off, exp(-2) two sigmas off
+    np.testing.assert_allclose(values[seen, 1] / values[seen, 0], np.exp(-0.5), rtol=0.03)
+    np.testing.assert_allclose(values[seen, 2] / values[seen, 0], np.exp(-2.0), rtol=0.1)
+    empty = np.setdiff1d(np.arange(NUM_INFERENCE_JOINTS), seen)
+    assert not heatmap.maps[empty].any() and np.all(peak[empty, 2] == 0)
+
+
+@pytest.fixture(scope='module')
+def multipose_detector() -> OnnxPoseDetector:
+    return OnnxPoseDetector(OnnxDetectorConfig(model_dir=MODELS, heatmaps='multipose'))
+
+
+def test_heatmaps_from_multipose_keypoints_without_efficientpose(multipose_detector, shelf_image, tmp_path):
+    people = multipose_detector.detect(shelf_image)
+    assert 3 <= len(people) <= 5
+    for person in people:
+        seen = person.keypoints[:, 2] > 0
+        assert seen[:12].sum() >= 8 and seen[NECK]
+        peak = person.heatmap.peak()
+        assert np.all(np.linalg.norm(peak[seen, :2] - person.keypoints[seen, :2], axis=1) <= person.heatmap.stride)
+        np.testing.assert_allclose(peak[seen, 2], np.minimum(person.keypoints[seen, 2], 1.0), rtol=0.05)
+        assert not person.heatmap.maps[~seen].any()
+    # measured 15, 31, 24 px on this image (EfficientPose: 12, 23, 21 px)
+    _near_annotations(people, 40.0)
+    t = multipose_detector.timing
+    assert t.people == len(people) and 0 < t.multipose < t.total and t.efficientpose < 0.1 * t.multipose
+    # EfficientPose is not even loaded: a model folder without it will do
+    folder = _folder(tmp_path, **{MULTIPOSE.file: MODELS / MULTIPOSE.file})
+    assert len(OnnxPoseDetector(OnnxDetectorConfig(model_dir=folder, heatmaps='multipose')).detect(shelf_image)) \
+        == len(people)
+    # its keypoints need MultiPose's run on the image: given boxes are refused, not ignored
+    with pytest.raises(ValueError, match="heatmaps 'multipose' takes its keypoints from MultiPose on every image"):
+        multipose_detector.detect_set([shelf_image], [np.array([[100.0, 100.0, 300.0, 600.0]])])
+
+
+def test_multipose_workers_find_the_same_people_in_each_image_of_a_set(shelf_image):
+    """MultiPose on two images at once: each camera's people as one after the other (threads 1:
+    onnxruntime's sums depend on the thread split)."""
+    config = OnnxDetectorConfig(model_dir=MODELS, heatmaps='multipose', threads=1)
+    images = [shelf_image, None, shelf_image[:, ::-1].copy(), np.zeros_like(shelf_image), shelf_image[::-1].copy()]
+    one = OnnxPoseDetector(config).detect_set(images)
+    pool = OnnxPoseDetector(replace(config, multipose_workers=2))
+    two = pool.detect_set(images)
+    assert pool.timing.multipose_runs == 4 and two[1] is None and two[3] == []
+    assert [len(p) for p in one if p] == [len(p) for p in two if p] and len(two[0]) >= 3
+    for a, b in zip(sum([p for p in one if p], []), sum([p for p in two if p], [])):
+        np.testing.assert_array_equal(a.keypoints, b.keypoints)
+        np.testing.assert_array_equal(a.heatmap.maps, b.heatmap.maps)
+
+
+def test_fused_heatmaps_hold_the_efficientpose_evidence_and_multipose_keypoints(detector, shelf_image):
+    fused = OnnxPoseDetector(OnnxDetectorConfig(model_dir=MODELS, heatmaps='fused')).detect(shelf_image)
+    alone = detector.detect(shelf_image)
+    assert len(fused) == len(alone)  # the same crops
+    raised = 0
+    for f, e in zip(fused, alone):
+        seen = e.keypoints[:12, 2] > 0
+        at = np.nan_to_num(e.keypoints[:12, None, :2])
+        # at EfficientPose's keypoints the fused maps are the pointwise max: never below its own
+        assert np.all(f.heatmap.lookup(np.pad(at, ((0, 4), (0, 0), (0, 0))))[:12, 0][seen]
+                      >= e.heatmap.lookup(np.pad(at, ((0, 4), (0, 0), (0, 0))))[:12, 0][seen] - 1e-6)
+        assert np.all(f.keypoints[:12, 2] >= e.keypoints[:12, 2])  # the better-scoring source's keypoint
+        raised += int((f.keypoints[:12, 2] > e.keypoints[:12, 2]).sum())
+        np.testing.assert_array_equal(f.keypoints[12:], e.keypoints[12:])  # neck, head, ears: not fused
+    assert raised > 0  # MultiPose's keypoint scores higher somewhere
+    _near_annotations(fused, 40.0)
 
 
 def test_no_people_in_a_black_image_and_bad_images(detector):
@@ -111,6 +205,9 @@ def test_a_file_that_is_not_onnx_is_a_clear_error(tmp_path):
     ({'input_size': 100}, 'input_size 100 is not a positive multiple of 32'),
     ({'stride': 0.0}, 'stride 0.0 and sigma 6.0 must be > 0'),
     ({'heatmap_floor': 1.0}, r'heatmap_floor 1.0 in \[0, 1\)'),
+    ({'heatmaps': 'openpose'}, "heatmaps 'openpose' is not one of efficientpose, multipose, fused"),
+    ({'keypoint_sigma': 0.0}, 'keypoint_sigma 0.0 must be > 0'),
+    ({'multipose_workers': 0}, 'multipose_workers 0 must be >= 1'),
 ])
 def test_bad_settings(changes, message):
     with pytest.raises(ValueError, match=message):

@@ -18,6 +18,7 @@ from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
 from mvpose_ros.core.evaluation.datasets import calibration_file
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_models import MULTIPOSE
 from mvpose_ros.graph.config import (NodeSpec, detector_backend, expected_connections, graph_settings, load_params,
                                      node_command)
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS, HeatmapDetectorNode
@@ -91,6 +92,45 @@ def test_a_missing_model_stops_the_node_with_one_line(domain, tmp_path):
     assert proc.wait(30) == 2
     text = log.read_text()
     assert f'backend onnx: {tmp_path}/models/movenet_multipose.onnx: MoveNet MultiPose model file not found' in text
+    assert 'Traceback' not in text
+
+
+def test_heatmaps_multipose_runs_without_efficientpose_and_a_bad_source_stops_the_node(domain, tmp_path):
+    """heatmaps multipose: the node starts with a models folder holding only MultiPose and sends
+    the ROS-free detector's people; an unknown source stops it at start-up with one line."""
+    bgr = cv2.imread(str(dataset_dir('shelf') / 'frames' / 'cam1_000572.png'))
+    (tmp_path / 'models').mkdir()
+    (tmp_path / 'models' / MULTIPOSE.file).symlink_to(data_root() / 'models' / MULTIPOSE.file)
+    rig = tmp_path / 'rig.yaml'
+    rig.write_text(f'calibration: {CALIBRATION}\nwidth: 1032\nheight: 776\n')
+    overrides = 'qos_overrides./cam1/image_raw.subscription'  # reliable: the one image must not be lost
+    args = ['-r', '__ns:=/cam1', '-p', 'camera:=1', '-p', 'backend:=onnx', '-p', 'threads:=1',
+            '-p', f'data_root:={tmp_path}', '-p', f'rig:={rig}', '-p', f'{overrides}.reliability:=reliable']
+    log = tmp_path / 'detector.log'
+    with probe(domain, 'onnx_multipose_probe') as (node, executor):
+        out: list[PointCloud2] = []
+        node.create_subscription(PointCloud2, '/cam1/people2d', out.append, DATA_QOS)
+        pub = node.create_publisher(Image, '/cam1/image_raw', DATA_QOS)
+        proc = start_node('heatmap_detector', domain, log, *args, '-p', 'heatmaps:=multipose',
+                          '-p', 'keypoint_sigma:=0.03')
+        try:
+            assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30.0), log.read_text()
+            pub.publish(image_to_msg(bgr, _header(572, 'cam1')))
+            assert spin_until(executor, lambda: out, 30.0), log.read_text()
+        finally:
+            stop(proc)
+    config = OnnxDetectorConfig(model_dir=tmp_path / 'models', threads=1, heatmaps='multipose', keypoint_sigma=0.03)
+    expected = OnnxPoseDetector(config).detect(bgr)
+    got = msg_to_people(out[0])
+    assert len(got) == len(expected) >= 3
+    for a, b in zip(got, expected):
+        np.testing.assert_allclose(a.keypoints, b.keypoints, atol=0.05)
+        np.testing.assert_allclose(a.heatmap.peak()[:, 2], b.heatmap.peak()[:, 2], atol=1 / 255 + 1e-3)
+
+    bad = tmp_path / 'bad.log'
+    assert start_node('heatmap_detector', domain, bad, *args, '-p', 'heatmaps:=mpii').wait(30) == 2
+    text = bad.read_text()
+    assert "backend onnx: heatmaps 'mpii' is not one of efficientpose, multipose, fused" in text
     assert 'Traceback' not in text
 
 

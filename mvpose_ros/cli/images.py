@@ -3,6 +3,7 @@
     mvpose-images (--rig FILE | --calibration FILE) --images CAM0 CAM1 ... [--output DIR] [--frame N]
                   [--model rt|i] [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
                   [--sets N] [--person-detector-every K] [--max-batch B] [--threads T]
+                  [--heatmaps efficientpose|multipose|fused] [--keypoint-sigma F] [--multipose-workers W]
 
 Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose + EfficientPose),
 associates them across the cameras, samples the 3D hypotheses and runs BP on this one frame, and
@@ -16,6 +17,10 @@ frame against Shelf's actorsGT.
 set's stage times and their medians; with --person-detector-every K, MultiPose runs on every K-th
 set only and the sets between take their crops from the previous set's 3D skeletons
 (core.tracked_crops). The files written and the score are those of the last set.
+
+--heatmaps multipose renders MultiPose's own keypoints as Gaussians (std --keypoint-sigma times
+the person's box diagonal) instead of running EfficientPose; its keypoints need MultiPose on every
+set, so it refuses --person-detector-every above 1. fused takes both (core.onnx_detector).
 """
 from __future__ import annotations
 
@@ -35,7 +40,7 @@ from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
 from mvpose_ros.core.detection.image_file import read_image
-from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.evaluation.overlay import overlay, person_colour
 from mvpose_ros.core.stage import StageConfig, Stage3D
@@ -69,10 +74,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help='onnxruntime intra-op threads per model (default: 0, one per core)')
     p.add_argument('--max-batch', type=int, default=DEFAULTS.max_batch,
                    help=f'EfficientPose crops per run, 0 = all crops of the set in one (default: {DEFAULTS.max_batch})')
+    p.add_argument('--multipose-workers', type=int, default=DEFAULTS.multipose_workers,
+                   help='images MultiPose runs on at once, each with --threads intra-op threads (default: '
+                        f'{DEFAULTS.multipose_workers}; on two cores 2 with --threads 1 was faster)')
     p.add_argument('--sets', type=int, default=1, help='detect the images this many times as a sequence (default: 1)')
     p.add_argument('--person-detector-every', type=int, default=1,
                    help='run MultiPose on every K-th set only; crops from the previous 3D skeletons between '
                         '(default: 1, every set)')
+    p.add_argument('--heatmaps', choices=HEATMAP_SOURCES, default=DEFAULTS.heatmaps,
+                   help="heatmap source: EfficientPose on crops, MultiPose's keypoints as Gaussians, or both fused "
+                        f'(default: {DEFAULTS.heatmaps})')
+    p.add_argument('--keypoint-sigma', type=float, default=DEFAULTS.keypoint_sigma,
+                   help="multipose, fused: std of the Gaussians of MultiPose's keypoints, as a fraction of the "
+                        f"person's box diagonal (default: {DEFAULTS.keypoint_sigma:g})")
     p.add_argument('--stride', type=float, default=DEFAULTS.stride, help='heatmap cell size, pixels (default: 4)')
     p.add_argument('--no-ears', dest='ears', action='store_false',
                    help="leave the ear joints empty instead of taking MultiPose's COCO ears")
@@ -134,14 +148,20 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
     if args.sets < 1:
         raise ValueError(f'--sets {args.sets} must be >= 1')
+    if args.heatmaps == 'multipose' and args.person_detector_every != 1:
+        raise ValueError(f'--person-detector-every {args.person_detector_every}: --heatmaps multipose takes every '
+                         'keypoint from MultiPose, which must then run on every set')
     cameras, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
                                                    threads=args.threads, input_size=args.input_size,
-                                                   stride=args.stride, ears=args.ears, max_batch=args.max_batch))
+                                                   stride=args.stride, ears=args.ears, max_batch=args.max_batch,
+                                                   keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps,
+                                                   multipose_workers=args.multipose_workers))
     planner = CropPlanner(cameras, args.person_detector_every)
     detector.detect(images[0])  # warm-up: onnxruntime's first run allocates; not a steady-state latency
-    print(f'{PROG}: {len(cameras)} cameras, EfficientPose {args.model.upper()}, MultiPose input '
+    source = 'MultiPose keypoints' if args.heatmaps == 'multipose' else f'{args.heatmaps} {args.model.upper()}'
+    print(f'{PROG}: {len(cameras)} cameras, heatmaps {source}, MultiPose input '
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
     stage = Stage3D(cameras, StageConfig.from_params({'window': 0, 'head_model': args.head_model}))
     nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))

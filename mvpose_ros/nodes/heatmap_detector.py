@@ -2,9 +2,9 @@
 
 Backends: 'openpose' turns each camera's raw OpenPose output (`<camera>/openpose`, PointCloud2
 encoding A, reliable keep-last as the recorded data it is) into people; 'onnx' detects them in the
-camera image (MoveNet MultiPose and EfficientPose on onnxruntime, core.onnx_detector). People go
-out on `<camera>/people2d` (PointCloud2 encoding B) with the input's stamp and the rig camera's
-frame_id, one message per used input, empty when nobody is seen.
+camera image (MoveNet MultiPose, and EfficientPose unless `heatmaps` is multipose, on onnxruntime,
+core.onnx_detector). People go out on `<camera>/people2d` (PointCloud2 encoding B) with the input's
+stamp and the rig camera's frame_id, one message per used input, empty when nobody is seen.
 
 Modes, by the parameter `camera`:
 
@@ -83,7 +83,7 @@ from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
-from mvpose_ros.core.detection.onnx_detector import MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.camera import Camera
@@ -190,12 +190,19 @@ class HeatmapDetectorNode(Node):
             Param('secondary_radius', defaults.secondary_radius,
                   "openpose: other candidates within this fraction of the person's box diagonal also enter its map",
                   0.0, 10.0, live=True),
+            Param('heatmaps', onnx.heatmaps, f'onnx: heatmap source, {" or ".join(HEATMAP_SOURCES)}: EfficientPose on '
+                  "each person's crop, MultiPose's own keypoints as Gaussians (EfficientPose not loaded), or both "
+                  'fused per limb joint'),
+            Param('keypoint_sigma', onnx.keypoint_sigma, "onnx, heatmaps multipose or fused: std of the Gaussians of "
+                  "MultiPose's keypoints, as a fraction of the person's box diagonal", 0.001, 1.0),
             Param('model', onnx.model, f'onnx: EfficientPose variant, {" or ".join(MODELS)} (<data_root>/models/'
                   'efficientpose_<model>.onnx)'),
             Param('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
             Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
             Param('max_batch', onnx.max_batch, 'onnx: EfficientPose crops per run (0 = all crops of a set in one run, '
                   'for a GPU)', 0, 4096),
+            Param('multipose_workers', onnx.multipose_workers, 'onnx, whole rig: images of a set MultiPose runs on at '
+                  'once, each with `threads` intra-op threads (two cores: 2 with threads 1 was faster)', 1, 64),
             Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
                   32, 4096),
             Param('box_margin', onnx.box_margin,
@@ -321,14 +328,15 @@ class HeatmapDetectorNode(Node):
 
     @staticmethod
     def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:
-        """Both ONNX sessions, created once; a bad value or model file is a StartupError."""
+        """The ONNX sessions, created once; a bad value or model file is a StartupError."""
         try:
             config = OnnxDetectorConfig(
                 model_dir=data_root(p['data_root'] or None) / 'models', model=p['model'],
                 providers=tuple(p['providers']), threads=p['threads'], input_size=p['input_size'],
                 box_margin=p['box_margin'], min_person_score=p['min_person_score'],
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
-                ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'])
+                ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'], heatmaps=p['heatmaps'],
+                keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None

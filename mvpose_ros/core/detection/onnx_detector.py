@@ -13,6 +13,17 @@ the dataset's bottom and top of the head. MPII has no ears: with `ears`, the r_e
 inference joints come from MultiPose's COCO ears (keypoint, and a Gaussian of std `sigma` px as
 their map), which the 'anatomical' head model needs.
 
+Heatmap source (`heatmaps`): 'efficientpose' as above. 'multipose': EfficientPose is not loaded;
+each person's 16 inference joints are MultiPose's own COCO keypoints (body.to_inference 'coco17':
+limbs one-to-one, neck = shoulder midpoint, head = nose, COCO ears), each rendered as a Gaussian
+with its score as peak (heatmap.render_heatmaps, as the OpenPose backend renders its candidates),
+of std `keypoint_sigma` times the diagonal of the person's MultiPose box: MultiPose's keypoint
+error grows with the person's size in the image; MultiPose must then run on every image (no given
+boxes). 'fused': both models;
+per limb joint (not the neck and head: MPII's upper neck and head top are other points than COCO's
+shoulder midpoint and nose), the EfficientPose map and the MultiPose Gaussian on the crop's grid,
+pointwise max, and the keypoint of the source that scores higher.
+
 Heatmaps: EfficientPose's values are not probabilities (peaks 0.3-0.9, small negatives): they
 are clipped to [0, 1], so a map's peak is the joint's confidence as with the OpenPose backend's
 Gaussians; cells below `heatmap_floor` of their map's peak are set to 0 so that sampling a map as
@@ -23,15 +34,16 @@ cells and each is cut to the cells holding its evidence, which keeps messages sm
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import (COCO17_NAMES, L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX,
+from mvpose_ros.core.geometry.body import (L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR, SOURCE_INDEX,
                                            to_inference)
-from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmaps
 from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
 from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
                                                    load_session)
@@ -39,11 +51,14 @@ from mvpose_ros.core.detection.tracked_crops import carried_ears
 from mvpose_ros.core.types import Person2D
 
 MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
+HEATMAP_SOURCES = ('efficientpose', 'multipose', 'fused')
 # EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])
 _MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
 _STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
 _EARS = (R_EAR, L_EAR)
-_COCO_EARS = [COCO17_NAMES.index('r_ear'), COCO17_NAMES.index('l_ear')]
+# the joints 'fused' fuses: the limbs; MPII's upper neck and head top are other points than COCO's
+# shoulder midpoint and nose
+_LIMBS = np.arange(NUM_INFERENCE_JOINTS) < NECK
 _MULTIPOSE_KEYPOINTS = 17
 
 
@@ -58,7 +73,11 @@ class OnnxDetectorConfig:
     ear joints from MultiPose's COCO ears, rendered as Gaussians of std sigma px. max_batch:
     EfficientPose crops per run (0 = all crops of a set in one run): on two CPU cores runs of 1 to 4
     crops were as fast as one run of a set's 19 (the larger batch's tensors leave the cache); a GPU
-    gains from 0."""
+    gains from 0. heatmaps: one of HEATMAP_SOURCES, see the module docstring; keypoint_sigma: the
+    std of the Gaussians of MultiPose's keypoints there, as a fraction of the person's box
+    diagonal. multipose_workers: images of a set MultiPose runs on at once, each run with `threads`
+    intra-op threads: on two CPU cores two workers of threads 1 took 0.8x the time of one worker of
+    threads 0 (one run keeps both cores busy only part of the time)."""
 
     model_dir: Path
     model: str = 'rt'
@@ -73,15 +92,22 @@ class OnnxDetectorConfig:
     ears: bool = True
     sigma: float = 6.0
     max_batch: int = 4
+    heatmaps: str = 'efficientpose'
+    keypoint_sigma: float = 0.025
+    multipose_workers: int = 1
 
     def __post_init__(self) -> None:
         problems = []
         if self.model not in MODELS:
             problems.append(f'model {self.model!r} is not one of {", ".join(MODELS)}')
+        if self.heatmaps not in HEATMAP_SOURCES:
+            problems.append(f'heatmaps {self.heatmaps!r} is not one of {", ".join(HEATMAP_SOURCES)}')
         if not (self.input_size >= 32 and self.input_size % 32 == 0):
             problems.append(f'input_size {self.input_size} is not a positive multiple of 32')
         if self.threads < 0 or self.max_batch < 0:
             problems.append(f'threads {self.threads} and max_batch {self.max_batch} must be >= 0')
+        if self.multipose_workers < 1:
+            problems.append(f'multipose_workers {self.multipose_workers} must be >= 1')
         if not self.box_margin >= 0:
             problems.append(f'box_margin {self.box_margin} is negative')
         if not (0 <= self.min_person_score <= 1 and 0 <= self.min_joint_score <= 1 and 0 <= self.heatmap_floor < 1):
@@ -89,6 +115,8 @@ class OnnxDetectorConfig:
                             f'must lie in [0, 1] and heatmap_floor {self.heatmap_floor} in [0, 1)')
         if not (self.stride > 0 and self.sigma > 0):
             problems.append(f'stride {self.stride} and sigma {self.sigma} must be > 0')
+        if not self.keypoint_sigma > 0:
+            problems.append(f'keypoint_sigma {self.keypoint_sigma} must be > 0')
         if problems:
             raise ValueError('; '.join(problems))
 
@@ -117,17 +145,19 @@ class _Found:
 
 @dataclass
 class _Crop:
-    """One EfficientPose crop: its camera, letterbox, and the ears (2, 3) u, v, score from
-    MultiPose's COCO ears, or None to carry them from the camera's previous people."""
+    """One EfficientPose crop: its camera, letterbox, and MultiPose's keypoints of the person as
+    inference joints (16, 3) u, v, score, or None (given boxes: the ears are carried from the
+    camera's previous people), with the std of their Gaussians (px)."""
 
     camera: int
     box: Letterbox
-    ears: np.ndarray | None
+    keypoints: np.ndarray | None
+    sigma: float
 
 
 class OnnxPoseDetector:
-    """Both sessions are created (and checked) once, here; detect() runs them on one image,
-    detect_set() on a synchronised set."""
+    """The sessions are created (and checked) once, here (EfficientPose's not with heatmaps
+    'multipose'); detect() runs them on one image, detect_set() on a synchronised set."""
 
     def __init__(self, config: OnnxDetectorConfig) -> None:
         self.config = config
@@ -135,9 +165,12 @@ class OnnxPoseDetector:
         model_dir = Path(config.model_dir)
         self._multipose = load_session(model_dir / MULTIPOSE.file, MULTIPOSE, providers, config.threads)
         self._spec = EFFICIENTPOSE[config.model]
-        self._efficientpose = load_session(model_dir / self._spec.file, self._spec, providers, config.threads)
-        self.providers = tuple(self._efficientpose.get_providers())  # those onnxruntime actually uses
+        self._efficientpose = (None if config.heatmaps == 'multipose' else
+                               load_session(model_dir / self._spec.file, self._spec, providers, config.threads))
+        # those onnxruntime actually uses
+        self.providers = tuple((self._efficientpose or self._multipose).get_providers())
         self.timing = DetectionTiming()
+        self._pool = ThreadPoolExecutor(config.multipose_workers) if config.multipose_workers > 1 else None
 
     def detect(self, bgr: np.ndarray) -> list[Person2D]:
         """The people in bgr (H, W, 3) uint8, each with its 16 inference keypoints and heatmaps;
@@ -150,43 +183,57 @@ class OnnxPoseDetector:
         image: None out). boxes: per camera, None to find the people with MultiPose, else their
         boxes (Q, 4) u0, v0, u1, v1 (pixel edges; tracked_crops.projected_boxes); previous: per
         camera, the inference keypoints (R, 16, 3) of its people in the previous set, whose ears
-        given boxes carry. ValueError naming the camera for an image that is not uint8 BGR."""
+        given boxes carry. ValueError naming the camera for an image that is not uint8 BGR, and for
+        boxes with heatmaps 'multipose' (its keypoints come from MultiPose's run on the image)."""
         cfg = self.config
         boxes = boxes if boxes is not None else [None] * len(images)
         if len(boxes) != len(images) or (previous is not None and len(previous) != len(images)):
             raise ValueError(f'detect_set: {len(images)} images, {len(boxes)} box lists and '
                              f'{len(previous) if previous is not None else "no"} previous people lists')
+        if cfg.heatmaps == 'multipose' and any(b is not None for b in boxes):
+            raise ValueError("detect_set: heatmaps 'multipose' takes its keypoints from MultiPose on every image, "
+                             'not from given boxes (run the person detector on every set)')
         for c, bgr in enumerate(images):
             if bgr is not None and (bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8):
                 raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
                                  f'got {bgr.dtype} {bgr.shape}')
         t0 = time.perf_counter()
         crops: list[_Crop] = []
-        runs = 0
         side = self._spec.input_side
+        searched = [bgr for bgr, given in zip(images, boxes) if bgr is not None and given is None]
+        finds = iter(self._pool.map(self._find_people, searched) if self._pool else map(self._find_people, searched))
+        out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
+        # heatmaps 'multipose': per camera its people's keypoints (P, 16, 3) and Gaussian stds (P,)
+        alone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         for c, (bgr, given) in enumerate(zip(images, boxes)):
             if bgr is None:
                 continue
             if given is None:
-                found = self._find_people(bgr)
-                runs += 1
-                ears: list[np.ndarray | None] = list(found.keypoints[:, _COCO_EARS])
+                found = next(finds)
+                inference = self._inference_keypoints(found.keypoints, bgr.shape)
+                sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
+                if cfg.heatmaps == 'multipose':
+                    alone[c] = (inference, sigmas)
+                    continue
+                keypoints: list[np.ndarray | None] = list(inference)
                 given = found.boxes
             else:
-                ears = [None] * len(given)
-            for box, ear in zip(_grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin), ears):
-                crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side), ear))
+                keypoints, sigmas = [None] * len(given), np.zeros(len(given))
+            grown = _grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
+            for box, kp, sigma in zip(grown, keypoints, sigmas):
+                crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side), kp, float(sigma)))
         t1 = time.perf_counter()
         maps = self._heatmaps(images, crops)
         t2 = time.perf_counter()
-        out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
+        for c, (inference, sigmas) in alone.items():
+            out[c] = keypoint_people(inference, sigmas, cfg.stride)
         for crop, raw in zip(crops, maps):
             before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
             person = self._person(crop, raw, before)
             if person is not None:
                 out[crop.camera].append(person)
         self.timing = DetectionTiming(t1 - t0, t2 - t1, time.perf_counter() - t0,
-                                      sum(len(p) for p in out if p is not None), runs)
+                                      sum(len(p) for p in out if p is not None), len(searched))
         return out
 
     def _find_people(self, bgr: np.ndarray) -> _Found:
@@ -208,6 +255,20 @@ class OnnxPoseDetector:
         keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > -0.5) & (boxes[:, :2] < edge)).all(axis=1)
         return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64))
 
+    def _inference_keypoints(self, coco: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+        """MultiPose's COCO keypoints (P, 17, 3) as inference joints (P, 16, 3): those scoring below
+        min_joint_score or outside the image (letterbox padding) missing, the ears too without
+        `ears`."""
+        keypoints = to_inference(coco, 'coco17')
+        edge = np.array([shape[1], shape[0]]) - 0.5
+        with np.errstate(invalid='ignore'):  # NaN rows are missing already
+            inside = ((keypoints[..., :2] >= -0.5) & (keypoints[..., :2] <= edge)).all(axis=-1)
+        drop = (keypoints[..., 2] < self.config.min_joint_score) | ~inside
+        if not self.config.ears:
+            drop[:, _EARS] = True
+        keypoints[drop] = (np.nan, np.nan, 0.0)
+        return keypoints
+
     def _heatmaps(self, images: Sequence[np.ndarray | None], crops: list[_Crop]) -> np.ndarray:
         """EfficientPose heatmaps (N, side, side, 16), channel last, clipped to [0, 1], of the
         letterboxed crops, in runs of at most max_batch crops."""
@@ -227,7 +288,8 @@ class OnnxPoseDetector:
     def _person(self, crop: _Crop, raw: np.ndarray, previous: np.ndarray) -> Person2D | None:
         """One person from its crop's MPII-16 maps raw (side, side, 16), clipped to [0, 1], with
         the crop's ears, or those carried from the camera's previous people's keypoints previous
-        (R, 16, 3); None when no joint is detected."""
+        (R, 16, 3), and with heatmaps 'fused' the crop's MultiPose keypoints' Gaussians; None when
+        no joint is detected."""
         cfg = self.config
         lb = crop.box
         peaks = _peaks(raw)
@@ -240,9 +302,15 @@ class OnnxPoseDetector:
         has = source >= 0
         maps = np.zeros((NUM_INFERENCE_JOINTS,) + shape, dtype=np.float32)
         maps[has] = lb.maps_to_image(raw[..., source[has]], origin, cfg.stride, shape)
+        if cfg.heatmaps == 'fused' and crop.keypoints is not None:
+            for joint in np.flatnonzero(_LIMBS & (crop.keypoints[:, 2] > 0) & lb.contains(crop.keypoints[:, :2])):
+                np.maximum(maps[joint], _gaussian(crop.keypoints[joint], origin, cfg.stride, shape, crop.sigma),
+                           out=maps[joint])
+                if crop.keypoints[joint, 2] > keypoints[joint, 2]:
+                    keypoints[joint] = crop.keypoints[joint]
         if cfg.ears:
             x0, y0, x1, y1 = lb.roi
-            ears = crop.ears
+            ears = crop.keypoints[list(_EARS)] if crop.keypoints is not None else None
             if ears is None:
                 ears = carried_ears(keypoints[NECK], previous, max(x1 - x0, y1 - y0))
             for joint, ear in zip(_EARS, ears):
@@ -254,6 +322,16 @@ class OnnxPoseDetector:
         if not (keypoints[:, 2] > 0).any():
             return None
         return Person2D(keypoints, _trimmed(maps, origin, float(cfg.stride)))
+
+
+def keypoint_people(keypoints: np.ndarray, sigmas: np.ndarray, stride: float) -> list[Person2D]:
+    """People from their inference keypoints (P, 16, 3) u, v, score alone (heatmaps 'multipose'):
+    each joint's map a Gaussian of its person's std sigmas (P,) px with the joint's score as peak
+    (heatmap.render_heatmaps, cells of stride px), empty for a joint of score 0; people without
+    any joint are dropped."""
+    keep = (keypoints[..., 2] > 0).any(axis=1)
+    return [Person2D(kp, render_heatmaps(kp[None, :, None], stride, float(sigma))[0])
+            for kp, sigma in zip(keypoints[keep], sigmas[keep])]
 
 
 def _grown(boxes: np.ndarray, margin: float) -> np.ndarray:
