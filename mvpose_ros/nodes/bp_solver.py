@@ -16,9 +16,8 @@ yields exactly one skeleton message, but for a late one (a stamp not after the l
 duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
 of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged). With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
-decoded and published. A rig
-without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
-published with no people (logged).
+decoded and published. A rig without intrinsics in its file waits for every camera's
+CameraInfo; bundles before that are published with no people (logged).
 
 Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
 node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
@@ -103,6 +102,7 @@ class BpSolverNode(Node):
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
         self._inference = Inference3D(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
                                       config.solver)
+        self._byte_limit: int | None = None  # of a bundles message, once every camera's size is known
         self._idle = p['idle_flush']
         self._marker_lifetime = p['marker_lifetime']
         self._cameras_sent = False
@@ -201,12 +201,18 @@ class BpSolverNode(Node):
 
     def _check_size(self, msg: PointCloud2) -> None:
         """_Oversize for more data than the rig's views of people_msg.MAX_PEOPLE people take (a camera
-        whose size is not known yet counts as the largest known one); _NotReady before any is known."""
-        cameras = self._inference.cameras if self._intrinsics is None else self._intrinsics.known
-        sizes = [(c.width, c.height) for c in cameras if c is not None]
-        if not sizes:
-            raise _NotReady('intrinsics of every camera not known yet (no CameraInfo)')
-        limit = max_bundles_bytes(sizes + [max(sizes, key=lambda s: s[0] * s[1])] * (self._n_cameras - len(sizes)))
+        whose size is not known yet counts as the largest known one); _NotReady before any is known.
+        The bound is computed once every camera is known, not per message."""
+        limit = self._byte_limit
+        if limit is None:
+            cameras = self._inference.cameras if self._intrinsics is None else self._intrinsics.known
+            sizes = [(c.width, c.height) for c in cameras if c is not None]
+            if not sizes:
+                raise _NotReady('intrinsics of every camera not known yet (no CameraInfo)')
+            missing = self._n_cameras - len(sizes)
+            limit = max_bundles_bytes(sizes + [max(sizes, key=lambda s: s[0] * s[1])] * missing)
+            if not missing:
+                self._byte_limit = limit
         if len(msg.data) > limit:
             raise _Oversize(f'{len(msg.data)} data bytes, more than the views of {MAX_PEOPLE} people in every camera '
                             f'take ({limit})')
