@@ -37,11 +37,12 @@ def _header(frame: int, frame_id: str) -> Header:
     return Header(stamp=stamp_of_frame(frame), frame_id=frame_id)
 
 
-def _collect(node, topic: str, msg_type, into: dict) -> None:
-    node.create_subscription(msg_type, topic, lambda m: into.setdefault(frame_of_stamp(m.header.stamp)
-                                                                        if hasattr(m, 'header') else
-                                                                        frame_of_stamp(m.markers[0].header.stamp),
-                                                                        []).append(m), DATA_QOS)
+def _collect(node, topic: str, msg_type, into: dict):
+    """Subscribe `into` (frame -> messages of that frame); returns the subscription."""
+    def keep(m) -> None:
+        stamp = m.header.stamp if hasattr(m, 'header') else m.markers[0].header.stamp
+        into.setdefault(frame_of_stamp(stamp), []).append(m)
+    return node.create_subscription(msg_type, topic, keep, DATA_QOS)
 
 
 def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(domain, shelf, tmp_path):
@@ -216,11 +217,13 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
         live: dict[int, list] = {}
         _collect(node, '/skeletons', PointCloud2, skeletons)
         _collect(node, '/skeletons/live', PointCloud2, live)
-        _collect(node, '/skeletons/markers', MarkerArray, markers)
+        marker_sub = _collect(node, '/skeletons/markers', MarkerArray, markers)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
         proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=2', '-p', 'idle_flush:=0.3')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            # markers are built only while the node has a subscriber
+            assert spin_until(executor, lambda: marker_sub.get_publisher_count() > 0), log.read_text()
             for f in frames:
                 pub.publish(wire[f])
                 if f == 305:

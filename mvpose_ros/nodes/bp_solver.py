@@ -4,7 +4,8 @@ causal estimate at once.
 
 In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
 record per person joint with its confidence, empty when nobody is seen) and skeletons/markers
-(MarkerArray for RViz, living `marker_lifetime` s), both with the input bundle's stamp;
+(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes: a
+third of the node's publishing time), both with the input bundle's stamp;
 skeletons/live (encoding D, the same ids) as soon as a bundle is in: its frame decoded from the
 frames up to it (no lag: for a robot that reacts, where skeletons, smoothed by the `lag` frames
 after it, is for analysis); and once, as soon as every camera's intrinsics are known,
@@ -244,8 +245,9 @@ class BpSolverNode(Node):
         header = Header(stamp=stamp, frame_id=self._world_frame)
         ids = np.asarray(result.person_ids, dtype=np.int64)
         self._skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
-        self._markers.publish(skeleton_markers(ids, result.joints, header, confidence=result.confidence,
-                                               lifetime_s=self._marker_lifetime))
+        if self._markers.get_subscription_count():
+            self._markers.publish(skeleton_markers(ids, result.joints, header, confidence=result.confidence,
+                                                   lifetime_s=self._marker_lifetime))
         self._observe(result, stamp)
         self._frames_out += 1
         if self._frames_out % REPORT_EVERY == 0 and self._inference is not None:
