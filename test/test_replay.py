@@ -1,14 +1,10 @@
-"""Replay pacing without ROS: frames, loop stamp offsets, due times, the in-flight rule and
-header stamps rewritten inside CDR bytes."""
+"""Replay pacing without ROS: frames, loop stamp offsets, due times and the in-flight rule."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from rclpy.serialization import deserialize_message, serialize_message
-from sensor_msgs.msg import CameraInfo, PointCloud2
 
-from mvpose_ros.bags.replay import (FRAME_PERIOD_NS, Frame, InFlight, due_s, group_frames, header_stamp_ns,
-                                    loop_offset_ns, looped, with_header_stamp)
+from mvpose_ros.bags.replay import FRAME_PERIOD_NS, Frame, InFlight, due_s, group_frames, loop_offset_ns, looped
 
 S = 1_000_000_000
 
@@ -93,31 +89,6 @@ def test_in_flight_limits_frames_ahead_of_downstream():
         flight.published(3 * FRAME_PERIOD_NS)  # not after the last published stamp
     with pytest.raises(ValueError):
         InFlight(0)
-
-
-@pytest.mark.parametrize('msg', [CameraInfo(d=[0.1, 0.2, 0.0, 0.0, 0.3], width=1032, height=776),
-                                 PointCloud2(width=3, point_step=4, row_step=12, data=bytes(range(12)))])
-def test_header_stamp_rewritten_in_the_cdr_bytes(msg):
-    msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 12, 40_000_000, 'cam3'
-    cdr = serialize_message(msg)
-    assert header_stamp_ns(cdr) == 12 * S + 40_000_000
-    new_stamp = 36 * S + 80_000_000
-    moved = with_header_stamp(cdr, new_stamp)
-    assert len(moved) == len(cdr) and header_stamp_ns(moved) == new_stamp
-    back = deserialize_message(moved, type(msg))
-    assert (back.header.stamp.sec, back.header.stamp.nanosec) == (36, 80_000_000)
-    back.header.stamp = msg.header.stamp
-    assert back == msg  # nothing but the stamp changed
-
-
-def test_header_stamp_needs_cdr_bytes():
-    with pytest.raises(ValueError, match='CDR'):
-        header_stamp_ns(b'\x01\x02\x00\x00' + bytes(8))
-    with pytest.raises(ValueError, match='CDR'):
-        with_header_stamp(b'\x00\x01\x00\x00', 0)
-    cdr = serialize_message(PointCloud2())
-    with pytest.raises(ValueError, match='Time'):
-        with_header_stamp(cdr, 2 ** 31 * S)
 
 
 def test_frame_defaults_to_no_messages():

@@ -14,7 +14,8 @@ import yaml
 
 from msg_adapters.skeleton_msg import Skeletons
 from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_stamps
-from mvpose_ros.bags.replay import InFlight, group_sets, header_stamp_ns
+from msg_adapters.cdr_header import header_stamp_ns
+from mvpose_ros.bags.replay import InFlight, group_sets
 from mvpose_ros.cli.graph import main as graph_main
 from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,

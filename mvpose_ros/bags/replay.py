@@ -1,6 +1,6 @@
 """Replay pacing, free of ROS: which bag messages form a frame, when each frame is due, how stamps
-move on for later loops, how far ahead of downstream the player may run, and header stamps
-rewritten in place in the serialised (CDR) bytes.
+move on for later loops and how far ahead of downstream the player may run (stamps are read and
+rewritten in the serialised bytes: msg_adapters.cdr_header).
 
 A frame is every message sharing one log stamp (all cameras of one dataset frame). A *set* (for
 bags of a rig whose cameras stamp their own capture times) is one synchronised capture: the
@@ -12,20 +12,15 @@ stays strictly increasing and keeps its frame spacing across the seam.
 """
 from __future__ import annotations
 
-import struct
 from bisect import bisect_right
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Iterator, Sequence
 
+from msg_adapters.cdr_header import NS, header_stamp_ns
 from mvpose_ros.core.association.approximate_sync import ApproximateSync
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 
 FRAME_PERIOD_NS = round(1e9 / FRAME_RATE)  # the datasets' frame f has stamp f * FRAME_PERIOD_NS
-NS = 1_000_000_000
-
-# CDR encapsulation identifiers (first two bytes, big-endian) and the struct order they imply.
-_BYTE_ORDER = {b'\x00\x00': '>', b'\x00\x01': '<'}
-_ENCAPSULATION = 4  # bytes before the payload; a leading std_msgs/Header puts its stamp right after
 
 
 @dataclass
@@ -203,26 +198,3 @@ class InFlight:
         done = bisect_right(self._stamps, stamp_ns)
         del self._stamps[:done]
         return done
-
-
-def _byte_order(cdr: bytes) -> str:
-    if len(cdr) < _ENCAPSULATION + 8 or cdr[:2] not in _BYTE_ORDER:
-        raise ValueError(f'not a plain CDR message with a header stamp (first bytes {cdr[:4].hex()}, '
-                         f'{len(cdr)} bytes)')
-    return _BYTE_ORDER[cdr[:2]]
-
-
-def header_stamp_ns(cdr: bytes) -> int:
-    """Header stamp (ns) of a serialised message whose first field is a std_msgs/Header."""
-    sec, nanosec = struct.unpack_from(_byte_order(cdr) + 'iI', cdr, _ENCAPSULATION)
-    return sec * NS + nanosec
-
-
-def with_header_stamp(cdr: bytes, stamp_ns: int) -> bytes:
-    """The serialised message with its header stamp replaced; every other byte unchanged."""
-    sec, nanosec = divmod(int(stamp_ns), NS)
-    if not -2 ** 31 <= sec < 2 ** 31:
-        raise ValueError(f'stamp {stamp_ns} ns does not fit builtin_interfaces/Time')
-    out = bytearray(cdr)
-    struct.pack_into(_byte_order(cdr) + 'iI', out, _ENCAPSULATION, sec, nanosec)
-    return bytes(out)

@@ -49,7 +49,7 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters.skeleton_msg import Skeletons, msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
 from mvpose_ros.bags.io import read_bag
-from mvpose_ros.bags.replay import header_stamp_ns
+from msg_adapters.cdr_header import header_stamp_ns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.inference.window import FrameResult

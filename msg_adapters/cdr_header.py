@@ -1,0 +1,54 @@
+"""The std_msgs/Header at the front of a serialised (CDR) message, read and rewritten in the
+bytes without deserialising the message: the player moves stamps on for later loops, the
+recorder times raw messages, and a node checks an input's stamp, frame and size before paying
+for its message objects."""
+from __future__ import annotations
+
+import struct
+
+NS = 1_000_000_000
+
+# CDR encapsulation identifiers (first two bytes, big-endian) and the struct order they imply.
+_BYTE_ORDER = {b'\x00\x00': '>', b'\x00\x01': '<'}
+_ENCAPSULATION = 4  # bytes before the payload; a leading std_msgs/Header puts its stamp right after
+_FRAME_ID = _ENCAPSULATION + 8  # the frame_id string (uint32 length with its NUL, then the bytes)
+
+
+def _byte_order(cdr: bytes) -> str:
+    if len(cdr) < _ENCAPSULATION + 8 or cdr[:2] not in _BYTE_ORDER:
+        raise ValueError(f'not a plain CDR message with a header stamp (first bytes {cdr[:4].hex()}, '
+                         f'{len(cdr)} bytes)')
+    return _BYTE_ORDER[cdr[:2]]
+
+
+def header_stamp_ns(cdr: bytes) -> int:
+    """Header stamp (ns) of a serialised message whose first field is a std_msgs/Header."""
+    sec, nanosec = struct.unpack_from(_byte_order(cdr) + 'iI', cdr, _ENCAPSULATION)
+    return sec * NS + nanosec
+
+
+def header_frame_id(cdr: bytes) -> str:
+    """Header frame_id of a serialised message whose first field is a std_msgs/Header;
+    ValueError for bytes that cannot hold one."""
+    order = _byte_order(cdr)
+    if len(cdr) < _FRAME_ID + 4:
+        raise ValueError(f'not a plain CDR message with a header frame_id ({len(cdr)} bytes)')
+    (size,) = struct.unpack_from(order + 'I', cdr, _FRAME_ID)
+    start = _FRAME_ID + 4
+    if not 1 <= size <= len(cdr) - start or cdr[start + size - 1] != 0:
+        raise ValueError(f'not a plain CDR message with a header frame_id (string of {size} bytes in '
+                         f'{len(cdr)})')
+    try:
+        return cdr[start:start + size - 1].decode()
+    except UnicodeDecodeError:
+        raise ValueError('header frame_id is not UTF-8') from None
+
+
+def with_header_stamp(cdr: bytes, stamp_ns: int) -> bytes:
+    """The serialised message with its header stamp replaced; every other byte unchanged."""
+    sec, nanosec = divmod(int(stamp_ns), NS)
+    if not -2 ** 31 <= sec < 2 ** 31:
+        raise ValueError(f'stamp {stamp_ns} ns does not fit builtin_interfaces/Time')
+    out = bytearray(cdr)
+    struct.pack_into(_byte_order(cdr) + 'iI', out, _ENCAPSULATION, sec, nanosec)
+    return bytes(out)

@@ -1,0 +1,52 @@
+"""The header of serialised messages, read and rewritten in the bytes: stamp, frame_id."""
+from __future__ import annotations
+
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from msg_adapters.cdr_header import header_frame_id, header_stamp_ns, with_header_stamp
+
+S = 1_000_000_000
+
+
+@pytest.mark.parametrize('msg', [CameraInfo(d=[0.1, 0.2, 0.0, 0.0, 0.3], width=1032, height=776),
+                                 PointCloud2(width=3, point_step=4, row_step=12, data=bytes(range(12)))])
+def test_header_stamp_rewritten_in_the_cdr_bytes(msg):
+    msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 12, 40_000_000, 'cam3'
+    cdr = serialize_message(msg)
+    assert header_stamp_ns(cdr) == 12 * S + 40_000_000
+    new_stamp = 36 * S + 80_000_000
+    moved = with_header_stamp(cdr, new_stamp)
+    assert len(moved) == len(cdr) and header_stamp_ns(moved) == new_stamp
+    back = deserialize_message(moved, type(msg))
+    assert (back.header.stamp.sec, back.header.stamp.nanosec) == (36, 80_000_000)
+    back.header.stamp = msg.header.stamp
+    assert back == msg  # nothing but the stamp changed
+
+
+def test_header_stamp_needs_cdr_bytes():
+    with pytest.raises(ValueError, match='CDR'):
+        header_stamp_ns(b'\x01\x02\x00\x00' + bytes(8))
+    with pytest.raises(ValueError, match='CDR'):
+        with_header_stamp(b'\x00\x01\x00\x00', 0)
+    cdr = serialize_message(PointCloud2())
+    with pytest.raises(ValueError, match='Time'):
+        with_header_stamp(cdr, 2 ** 31 * S)
+
+
+@pytest.mark.parametrize('frame_id', ['cam3', '', 'a' * 4, 'kamera_überall'])
+def test_header_frame_id_read_from_the_cdr_bytes(frame_id):
+    msg = Image(height=2, width=3, encoding='mono8', step=3, data=bytes(6))
+    msg.header.frame_id = frame_id
+    assert header_frame_id(serialize_message(msg)) == frame_id
+
+
+@pytest.mark.parametrize('cdr', [b'\x00\x01\x00\x00' + bytes(8),  # no room for the string length
+                                 b'\x00\x01\x00\x00' + bytes(8) + (100).to_bytes(4, 'little') + b'ab\x00',
+                                 b'\x00\x01\x00\x00' + bytes(8) + (0).to_bytes(4, 'little'),
+                                 b'\x00\x01\x00\x00' + bytes(8) + (3).to_bytes(4, 'little') + b'abc',  # no NUL
+                                 b'\x00\x01\x00\x00' + bytes(8) + (3).to_bytes(4, 'little') + b'\xff\xfe\x00'])
+def test_header_frame_id_of_bytes_that_cannot_hold_one_is_a_value_error(cdr):
+    with pytest.raises(ValueError, match='frame_id'):
+        header_frame_id(cdr)
