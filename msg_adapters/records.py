@@ -3,6 +3,9 @@ the carrier shared by every record encoding of the ROS graph contract."""
 from __future__ import annotations
 
 import array
+import math
+from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
@@ -29,10 +32,24 @@ def _datatype_name(datatype: int) -> str:
     return f'{_DATATYPE_NAMES.get(datatype, "unknown")} ({datatype})'
 
 
+class _Field(NamedTuple):
+    name: str
+    offset: int
+    datatype: int
+    count: int
+
+
 def fields_of(dtype: np.dtype) -> list[PointField]:
     """The PointFields of a packed little-endian structured dtype, in its field order; a subarray
     field of shape s becomes one PointField of count prod(s)."""
-    dtype = np.dtype(dtype)
+    return [PointField(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
+            for f in _layout(np.dtype(dtype))]
+
+
+@lru_cache(maxsize=64)
+def _layout(dtype: np.dtype) -> tuple[_Field, ...]:
+    """fields_of's layout, worked out once per dtype: every message of an encoding shares it, and
+    a flood of junk is checked against it at the cost of a comparison."""
     if dtype.names is None:
         raise ValueError(f'record dtype must be structured, got {dtype}')
     fields = []
@@ -47,12 +64,11 @@ def fields_of(dtype: np.dtype) -> list[PointField]:
         if offset != end:
             raise ValueError(f'record field {name!r}: offset {offset}, expected {end} '
                              f'(records must be packed)')
-        fields.append(PointField(name=name, offset=offset, datatype=_DATATYPES[key],
-                                 count=int(np.prod(sub.shape, dtype=np.int64))))
+        fields.append(_Field(name, offset, _DATATYPES[key], math.prod(sub.shape)))
         end = offset + sub.itemsize
     if end != dtype.itemsize:
         raise ValueError(f'record dtype has {dtype.itemsize - end} trailing padding bytes')
-    return fields
+    return tuple(fields)
 
 
 def to_cloud(records: np.ndarray, header: Header) -> PointCloud2:
@@ -74,7 +90,7 @@ def from_cloud(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
     datatypes, counts and offsets, point_step, row_step and the data length are checked, and the
     first mismatch raises ValueError. Returns a copy, independent of the message."""
     dtype = np.dtype(dtype)
-    expected = fields_of(dtype)
+    expected = _layout(dtype)
     if msg.height != 1:
         raise ValueError(f'PointCloud2 height: expected 1, got {msg.height}')
     if msg.is_bigendian:

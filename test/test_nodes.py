@@ -8,12 +8,13 @@ import dataclasses
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.camera_info_msg import camera_to_info
-from msg_adapters.openpose_msg import openpose_to_msg
+from msg_adapters.openpose_msg import max_openpose_bytes, openpose_to_msg
 from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, msg_to_people, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
@@ -21,6 +22,7 @@ from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.stage import StageConfig
+from mvpose_ros.nodes.heatmap_detector import OPENPOSE_CDR_OVERHEAD
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 
@@ -69,6 +71,12 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(dom
                 pub.publish(openpose_to_msg(raw[1][f - FIRST], _header(f, 'cam1')))
             pub.publish(openpose_to_msg(raw[1][303 - FIRST], _header(303, 'cam7')))  # not this camera
             pub.publish(PointCloud2(header=_header(304, 'cam1'), fields=[PointField(name='x', datatype=7, count=1)]))
+            # serialised junk, refused before it is deserialised: cut short, and over the size bound
+            real = serialize_message(openpose_to_msg(raw[1][304 - FIRST], _header(304, 'cam1')))
+            pub.publish(real[:-7])
+            big = PointCloud2(header=_header(304, 'cam1'), data=bytes(max_openpose_bytes() + OPENPOSE_CDR_OVERHEAD))
+            pub.publish(serialize_message(big))
+            pub.publish(b'\x07\x07' + real[2:])  # no CDR header
             pub.publish(openpose_to_msg(raw[1][305 - FIRST], _header(305, 'cam1')))
             assert spin_until(executor, lambda: 305 in out), log.read_text()
             spin_until(executor, lambda: False, 0.5)
@@ -85,6 +93,9 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(dom
     text = log.read_text()
     assert "stamp 12120000000 ns dropped: frame_id 'cam7' is not this camera" in text
     assert 'stamp 12160000000 ns dropped' in text
+    assert 'stamp 12160000000 ns dropped: failed to deserialize' in text
+    assert f'more than one image can have ({max_openpose_bytes()} data bytes)' in text
+    assert 'openpose with no readable stamp dropped: not a plain CDR message' in text
     # the CameraInfo that contradicts the calibration parameter: named, once; the node goes on
     assert text.count('contradicts the calibration parameter: CameraInfo fx') == 1, text
     assert 'camera_info stamp 12040000000 ns' in text and 'camera_info stamp 12000000000' not in text

@@ -41,8 +41,10 @@ once per camera and problem and never acted on.
 Bounded input: every input is checked before it is queued or worked on (_admit, no decoding):
 the camera's frame_id; an image against its camera's size (the data at most what such an image
 takes, encoded_image.max_image_bytes; the Image fields or the JPEG/PNG header declaring exactly that
-size), OpenPose output against openpose_msg.max_openpose_bytes. A flood of junk costs a check
-per message; what the middleware keeps is bounded by the keep-last depth of the subscriptions.
+size), OpenPose output against openpose_msg.max_openpose_bytes. OpenPose output is taken as
+serialised bytes, its frame_id and size read there (msg_adapters.cdr_header), and deserialised only
+when they pass: a flood of junk costs a check per message, not its message objects. What the
+middleware keeps is bounded by the keep-last depth of the subscriptions.
 
 An input that cannot be used (another frame_id, too large, an encoding or size that does not decode,
 no intrinsics yet, out of sync) is logged once per camera and cause, with its stamp, and counted
@@ -72,10 +74,12 @@ import rclpy.logging
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
 from msg_adapters.camera_info_msg import check_info, info_to_intrinsics
+from msg_adapters.cdr_header import header_frame_id, header_stamp_ns
 from msg_adapters.image_msg import check_camera_image, to_bgr
 from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
@@ -101,6 +105,8 @@ from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
+# serialised bytes of an OpenPose cloud beyond its data: header, fields and counts (under 1 KB)
+OPENPOSE_CDR_OVERHEAD = 4096
 BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
 IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
@@ -164,6 +170,11 @@ class _Camera:
     typed_by: str = 'backend'  # 'graph', 'name' or 'backend' (openpose)
     subscription: Subscription | None = None
     info_problems: set[str] = field(default_factory=set)
+
+
+def _check_frame_id(cam: _Camera, frame_id: str) -> None:
+    if frame_id != cam.rig.frame_id:
+        raise ValueError(f'frame_id {frame_id!r} is not this camera ({cam.rig.frame_id!r})')
 
 
 class HeatmapDetectorNode(Node):
@@ -303,7 +314,9 @@ class HeatmapDetectorNode(Node):
     def _subscribe(self, cam: _Camera) -> None:
         callback = partial(self._on_set_input if self._whole_rig else self._on_input, cam)
         if self._backend == 'openpose':  # recorded data, not a camera: reliable, but bounded
-            cam.subscription = self.create_subscription(PointCloud2, cam.input_topic, callback, RECORDED_INPUT_QOS)
+            cam.subscription = self.create_subscription(PointCloud2, cam.input_topic,
+                                                        partial(self._on_openpose_cdr, cam, callback),
+                                                        RECORDED_INPUT_QOS, raw=True)
             return
         cam.subscription = camera_subscription(self, cam.input_type, cam.input_topic, callback, self._depth)
 
@@ -376,8 +389,7 @@ class HeatmapDetectorNode(Node):
         into the synchroniser, where a camera's first images may wait for its first CameraInfo
         (sent with them): checked against the largest size until then, against the camera's
         when worked on."""
-        if msg.header.frame_id != cam.rig.frame_id:
-            raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
+        _check_frame_id(cam, msg.header.frame_id)
         if self._backend == 'openpose':
             if len(msg.data) > max_openpose_bytes():
                 raise ValueError(f'OpenPose output of {len(msg.data)} bytes, more than one image can have '
@@ -403,12 +415,29 @@ class HeatmapDetectorNode(Node):
     def _what(self) -> str:
         return 'openpose' if self._backend == 'openpose' else 'image'
 
-    def _drop(self, cam: _Camera, stamp: int, cause: str) -> None:
+    def _on_openpose_cdr(self, cam: _Camera, callback: Any, cdr: bytes) -> None:
+        """An OpenPose input as serialised bytes: deserialised for `callback` only once its header
+        and size pass (see the module's "Bounded input")."""
+        stamp = None
+        try:
+            stamp = header_stamp_ns(cdr)
+            _check_frame_id(cam, header_frame_id(cdr))
+            if len(cdr) > max_openpose_bytes() + OPENPOSE_CDR_OVERHEAD:
+                raise ValueError(f'OpenPose output of {len(cdr)} serialised bytes, more than one image can have '
+                                 f'({max_openpose_bytes()} data bytes)')
+            msg = deserialize_message(cdr, PointCloud2)
+        except (ValueError, RuntimeError) as exc:  # RuntimeError: rclpy's, for bytes that do not deserialise
+            self._inputs[cam.index].received(time.monotonic(), stamp)
+            self._drop(cam, stamp, str(exc))
+            return
+        callback(msg)
+
+    def _drop(self, cam: _Camera, stamp: int | None, cause: str) -> None:
         """An input that could not be used: counted for diagnostics, logged throttled per camera and cause."""
         cause = short_cause(cause)
         self._inputs[cam.index].dropped(time.monotonic(), cause.split(':')[0])
-        self._log.log((cam.rig.name, cause), f'{cam.rig.name}: {self._what()} stamp {stamp} ns dropped: {cause}',
-                      'error')
+        what = 'with no readable stamp' if stamp is None else f'stamp {stamp} ns'
+        self._log.log((cam.rig.name, cause), f'{cam.rig.name}: {self._what()} {what} dropped: {cause}', 'error')
 
     def _delivered(self, stamps: list[int], started: float, seconds: float) -> None:
         """Diagnostics of one detection (a message, or a set): its time, latency since `started`
