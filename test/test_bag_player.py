@@ -37,7 +37,7 @@ FAST_HEARTBEAT = """<?xml version="1.0" encoding="UTF-8"?>
   <data_writer profile_name="test_writer" is_default_profile="true"><times>
     <heartbeatPeriod><sec>0</sec><nanosec>50000000</nanosec></heartbeatPeriod>
   </times><historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>
-  <qos><publishMode><kind>ASYNCHRONOUS</kind></publishMode></qos></data_writer>
+  <qos><publishMode><kind>SYNCHRONOUS</kind></publishMode></qos></data_writer>
 </profiles></dds>
 """
 

@@ -271,14 +271,22 @@ def test_graph_across_two_hosts_gives_the_one_host_output(link, bags, domains, o
             f'frames {sorted(set(FRAMES) ^ (set(frames) - set(WARMUP_FRAMES)))} missing or unexpected\n{logs}'
         assert [f for f, v in frames.items() if len(v) > 1] == [], logs
     assert run.stats['bad'] == one_host.stats['bad'] == []
-    # the same people and joints (files hold 0.1 mm: equal float32 values round the same)
-    worst = 0.0
+    # the same people and joints (files hold 0.1 mm: equal float32 values round the same). bp_solver
+    # numbers frames by arrival and seeds each frame's hypotheses with its number, so a warm-up frame
+    # lost before discovery ended shifts the draws of every later frame: then the same people, with
+    # joints as close as two samplings are (measured: median 3 mm, largest 5 cm)
+    same_numbers = set(got) & set(WARMUP_FRAMES) == set(ref) & set(WARMUP_FRAMES)
+    worst, distances = 0.0, []
     for f in FRAMES:
         ids, joints = _people(got[f][0])
         ref_ids, ref_joints = _people(ref[f][0])
         assert ids == ref_ids, f'frame {f}: people {ids}, one host {ref_ids}\n{run.logs}'
-        np.testing.assert_allclose(joints, ref_joints, rtol=0, atol=1e-4 + 1e-9, err_msg=f'frame {f}')
+        if same_numbers:
+            np.testing.assert_allclose(joints, ref_joints, rtol=0, atol=1e-4 + 1e-9, err_msg=f'frame {f}')
+        distances.append(np.linalg.norm(joints - ref_joints, axis=-1).ravel())
         worst = max(worst, float(np.abs(joints - ref_joints).max(initial=0.0)))
+    distances = np.concatenate(distances)
+    assert np.median(distances) <= 0.01 and distances.max() <= 0.1, (np.median(distances), distances.max())
     assert sum(len(_people(got[f][0])[0]) for f in FRAMES) >= 2 * len(FRAMES)  # people were seen
 
     # the 2D people really crossed the link: the compute host received at least their volume

@@ -244,7 +244,7 @@ elif role == 'bp_solver':
         died = os.path.join(os.environ['FAKE_PIDS'], 'solver_died')
         if frame == int(os.environ.get('FAKE_DIE_AT', -1)) and not os.path.exists(died):
             open(died, 'w').close()
-            # its answer is out first (publication is asynchronous), then a crash: once, at that frame
+            # its answer is out and acknowledged first, then a crash: once, at that frame
             pub.wait_for_all_acked(Duration(seconds=5))
             os.kill(os.getpid(), signal.SIGKILL)
     info = node.create_subscription(CameraInfo, 'cam0/camera_info', answer, QOS)
