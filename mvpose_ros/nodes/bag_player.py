@@ -47,11 +47,11 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty
 
+from msg_adapters.cdr_header import NS, header_stamp_ns, with_header_stamp
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
+from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped
 from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
-from msg_adapters.cdr_header import NS, header_stamp_ns, with_header_stamp
-from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped
 from mvpose_ros.core.health.monitor import NodeMonitor, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds

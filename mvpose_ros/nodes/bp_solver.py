@@ -4,8 +4,8 @@ causal estimate at once.
 
 In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
 record per person joint with its confidence, empty when nobody is seen) and skeletons/markers
-(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes: a
-third of the node's publishing time), both with the input bundle's stamp;
+(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes: 2 ms
+a frame of four people), both with the input bundle's stamp;
 skeletons/live (encoding D, the same ids) as soon as a bundle is in: its frame decoded from the
 frames up to it (no lag: for a robot that reacts, where skeletons, smoothed by the `lag` frames
 after it, is for analysis); and once, as soon as every camera's intrinsics are known,

@@ -105,7 +105,7 @@ from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
-# serialised bytes of an OpenPose cloud beyond its data: header, fields and counts (under 1 KB)
+# serialised bytes of an OpenPose cloud beyond its data: header, fields and counts (205 on Shelf)
 OPENPOSE_CDR_OVERHEAD = 4096
 BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
