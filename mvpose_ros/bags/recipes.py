@@ -11,6 +11,10 @@
   images upscaled to 1548x1164, per-camera stamp offsets with jitter, a late camera and three
   dropped frames; sensor_msgs/CompressedImage (jpeg) or, for `_raw`, sensor_msgs/Image (rgb8),
   plus CameraInfo with every image. Its rig file (extrinsics only) is written by `rig_file_text`.
+- `shelf_crowd`: the `shelf` bag's camera infos and OpenPose output with the scene multiplied to
+  about CROWD_PEOPLE people per frame (bench.crowd_openpose: shifted copies of its people, the
+  crowd `mvpose-bench --people` builds), for the graph under a crowd; no images (they would not
+  show the copies).
 - `campus`: a user's CampusSeq1 folder; per test frame with images, `/cam{c}/image_raw`,
   `/cam{c}/camera_info` and the annotated actors on `/ground_truth/skeletons` (encoding D,
   person id = actor index).
@@ -37,6 +41,7 @@ from msg_adapters.image_msg import image_to_compressed_msg, image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
+from mvpose_ros.bench.crowd_openpose import crowd_openpose
 from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
                                                  load_actors_gt)
@@ -51,7 +56,8 @@ from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
 # so bags made by older code count as out of date.
 RECIPE_VERSION = 1
-RECIPES = ('shelf', 'shelf_images', 'shelf_rig', 'shelf_rig_raw', 'campus')
+RECIPES = ('shelf', 'shelf_images', 'shelf_crowd', 'shelf_rig', 'shelf_rig_raw', 'campus')
+CROWD_PEOPLE = 20  # 3D people per frame the shelf_crowd bag aims at
 SHELF_IMAGE_FRAMES = (572,)
 GROUND_TRUTH_TOPIC = '/ground_truth/skeletons'
 RIG_FILE = 'rig.yaml'  # a bag's own rig file, inside its folder (ros2 bag ignores it)
@@ -96,6 +102,8 @@ def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path 
     if name in ('shelf', 'shelf_images'):
         return shelf_recipe(dataset_dir('shelf', data_root), images_only=name == 'shelf_images', drop=drop,
                             fault=fault)
+    if name == 'shelf_crowd':
+        return shelf_crowd_recipe(dataset_dir('shelf', data_root))
     if name in ('shelf_rig', 'shelf_rig_raw'):
         return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name == 'shelf_rig')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
@@ -188,6 +196,28 @@ def shelf_recipe(shelf: Path, images_only: bool = False, drop: FrameDrop = Frame
     name = 'shelf_images' if images_only else 'shelf'
     name += f' ({fault.describe()})' if fault is not None else ''
     return Recipe(name, (calibration, *images.values(), *detections), items, variant=drop.label)
+
+
+def shelf_crowd_recipe(shelf: Path, people: float = CROWD_PEOPLE) -> Recipe:
+    """The `shelf_crowd` bag from the Shelf folder `shelf`: the shelf bag's camera infos and
+    OpenPose output, every frame with the copies that bring it to about `people` 3D people."""
+    calibration = shelf / 'calibration' / 'calibration_shelf.json'
+    _require(calibration)
+    rig = dataset_cameras('shelf', calibration=calibration)
+    detections = [shelf / 'openpose_body25' / f'{c}.txt' for c in range(len(rig))]
+    _require(*detections)
+
+    def items() -> Iterator[Item]:
+        openpose = [read_body25(path, cam.width, cam.height) for path, cam in zip(detections, rig)]
+        crowd = crowd_openpose(rig, list(zip(*openpose)), people)
+        for f, per_camera in zip(SHELF_TEST_FRAMES, crowd.frames):
+            ns, headers = _headers(f, len(rig))
+            for c, cam in enumerate(rig):
+                yield f'/cam{c}/camera_info', camera_to_info(cam, headers[c]), ns
+            for c, frame in enumerate(per_camera):
+                yield f'/cam{c}/openpose', openpose_to_msg(frame, headers[c]), ns
+
+    return Recipe('shelf_crowd', (calibration, *detections), items, variant=f'people {people:g}')
 
 
 class ForeignRig:

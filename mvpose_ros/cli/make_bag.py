@@ -1,6 +1,6 @@
 """`mvpose-make-bag`: build a rosbag2 (MCAP) bag of the real data for the ROS graph.
 
-    mvpose-make-bag shelf|shelf_images|shelf_rig|shelf_rig_raw [--data-root DIR] [--output DIR] [--force]
+    mvpose-make-bag shelf|shelf_images|shelf_crowd|shelf_rig|shelf_rig_raw [--data-root DIR] [--output DIR] [--force]
     mvpose-make-bag shelf --drop-every N | --drop-fraction F [--drop-seed S]   (bags/shelf_every2, ...)
     mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]
     mvpose-make-bag shelf --rotate-camera C --degrees D [--axis y] --from-frame F   (a bumped camera)

@@ -78,6 +78,12 @@ def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,
 def detect_people(frame: OpenPoseFrame, config: OpenPoseDetectorConfig) -> list[Person2D]:
     """Group one camera frame's candidates into people and build each one's 16 keypoints and
     heatmaps (16 of each); each map covers its own candidates (heatmap.render_heatmaps)."""
+    return detect_grouped(frame, config)[1]
+
+
+def detect_grouped(frame: OpenPoseFrame, config: OpenPoseDetectorConfig) -> tuple[np.ndarray, list[Person2D]]:
+    """detect_people's people and, row p for people[p], their BODY25 candidate indices (P, 25)
+    (-1: no candidate), for callers that work on the candidates themselves."""
     groups = group_body25(frame, paf_power=config.paf_power, min_paf=config.min_paf,
                           min_joints=config.min_joints, min_mean_score=config.min_mean_score)
     keypoints = to_inference(grouped_keypoints(frame, groups), 'body25')
@@ -85,4 +91,4 @@ def detect_people(frame: OpenPoseFrame, config: OpenPoseDetectorConfig) -> list[
     keep = (keypoints[..., 2] > 0).any(axis=1)
     groups, keypoints = groups[keep], keypoints[keep]
     heatmaps = render_heatmaps(_centres(frame, groups, keypoints, config), config.stride, config.sigma)
-    return [Person2D(keypoints=kp, heatmap=hm) for kp, hm in zip(keypoints, heatmaps)]
+    return groups, [Person2D(keypoints=kp, heatmap=hm) for kp, hm in zip(keypoints, heatmaps)]
