@@ -44,7 +44,7 @@ class FactorConfig:
 
 def _normalised(table: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
     total = table.sum(axis=axes, keepdims=True)
-    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32)
+    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32, copy=False)
 
 
 def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple[Camera, PersonHeatmap]]],
@@ -100,13 +100,17 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     mb = cur.shape[1]
     sq = np.repeat(np.einsum('jkd,jkd->jk', mid, mid), mb, axis=1).reshape(j, ma * mc, mb)
     sq += np.einsum('jbd,jbd->jb', cur, cur)[:, None, :]
-    sq -= 2.0 * mid @ cur.transpose(0, 2, 1)
+    # 2 mid.b as one product with 2b (exact: a power of two) and b^T contiguous, so the matmul
+    # takes its fast path; every M^3 step below works in place, the arrays being large
+    sq -= mid @ np.ascontiguousarray(2.0 * cur.transpose(0, 2, 1))
     # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
-    sq = np.maximum(sq, 0.0, out=sq).astype(np.float32)
+    table = np.maximum(sq, 0.0, out=sq).astype(np.float32)
     if config.temporal_form == 'laplace':
-        table = np.exp(np.sqrt(sq) * np.float32(-1.0 / scale))
+        np.sqrt(table, out=table)
+        table *= np.float32(-1.0 / scale)
     else:
-        table = np.exp(sq * np.float32(-0.5 / scale ** 2))
+        table *= np.float32(-0.5 / scale ** 2)
+    np.exp(table, out=table)
     return _normalised(table.reshape(j, ma, mc, mb), axes=(1, 2, 3))
 
 
