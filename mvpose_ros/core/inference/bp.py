@@ -119,10 +119,19 @@ class ChainBP:
         self.total = np.concatenate([self.total, _log(data)[None]])
 
     def drop_front(self, n: int) -> None:
-        """Forget the first n frames. What they already told the remaining frames stays in those
-        beliefs as a prior; the factors that touched them are frozen."""
+        """Forget the first n frames, and with them the temporal factors that touched them (centred
+        at frames 1..n): their messages leave the kept frames' beliefs. So the chain remembers its
+        window only: a wrong mode that evidence no longer supports cannot outlive the frames that
+        supported it (kept as a prior, it held a wrist 0.5 m off for as long as the evidence
+        stayed ambiguous). The other messages are recomputed by the next iterations."""
         if n <= 0:
             return
+        if n < len(self.total):
+            tm = self.messages.temporal
+            self.total[n] -= tm[2, n - 1] + tm[1, n]
+            if n + 1 < len(self.total):
+                self.total[n + 1] -= tm[2, n]
+            tm[1:, n] = 0.0
         self.temporal = self.temporal[n:]
         if self.temporal:
             self.temporal[0] = None
