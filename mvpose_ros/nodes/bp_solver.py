@@ -44,11 +44,13 @@ import numpy as np
 import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
+from msg_adapters.cdr_header import header_stamp_ns
 from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
@@ -119,7 +121,8 @@ class BpSolverNode(Node):
         # taking messages in while a frame is solved
         self._lock = threading.Lock()
         self._input_lock = threading.Lock()
-        self._waiting: NewestQueue[tuple[PointCloud2, float]] = NewestQueue(p['waiting_frames'])
+        # (serialised bundles, header stamp ns or None, arrival)
+        self._waiting: NewestQueue[tuple[bytes, int | None, float]] = NewestQueue(p['waiting_frames'])
         self._byte_limit: int | None = None  # of a bundles message, once every camera's size is known
         self._idle = p['idle_flush']
         self._marker_lifetime = p['marker_lifetime']
@@ -144,7 +147,7 @@ class BpSolverNode(Node):
         self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
         self._camera_markers = self.create_publisher(MarkerArray, topics.CAMERA_MARKERS, LATCHED_QOS)
-        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS)
+        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS, raw=True)
         self.create_timer(IDLE_CHECK_S, self._on_timer)
         self._worker = threading.Thread(target=self._work, name='bp_solver_frames', daemon=True)
         self._worker.start()
@@ -180,29 +183,40 @@ class BpSolverNode(Node):
         factors = replace(config.factors, **{k: v for k, v in changes.items() if k.startswith('collision_')})
         return replace(config, factors=factors, max_gap=changes.get('max_gap', config.max_gap))
 
-    def _on_bundles(self, msg: PointCloud2) -> None:
+    def _on_bundles(self, cdr: bytes) -> None:
+        # bytes only: this thread must not hold the GIL long while the worker solves
         arrival = time.monotonic()
-        dropped = self._waiting.put((msg, arrival))
+        try:
+            stamp = header_stamp_ns(cdr)
+        except ValueError:
+            stamp = None
+        dropped = self._waiting.put((cdr, stamp, arrival))
         self._last_input = arrival
         with self._input_lock:
-            self._bundles_in.received(arrival, stamp_ns(msg.header.stamp))
-            for old, _ in dropped:
+            self._bundles_in.received(arrival, stamp)
+            for _, old, _ in dropped:
                 self._bundles_in.dropped(arrival, 'behind')
                 self._log.log(('bundles', 'behind'),
-                              f'solving is slower than the input: bundles stamp {stamp_ns(old.header.stamp)} ns '
-                              f'dropped unsolved, {self._waiting.dropped} of {self._waiting.put_count} so far (the '
-                              f'newest {self._waiting.capacity} wait)')
+                              f'solving is slower than the input: bundles stamp {old} ns dropped unsolved, '
+                              f'{self._waiting.dropped} of {self._waiting.put_count} so far (the newest '
+                              f'{self._waiting.capacity} wait)')
 
     def _work(self) -> None:
         while (item := self._waiting.take()) is not None:
-            msg, arrival = item
+            cdr, stamp, arrival = item
             with self._lock:
+                try:
+                    msg = deserialize_message(cdr, PointCloud2)
+                except (RuntimeError, ValueError) as exc:  # RuntimeError: rclpy's, for bytes that do not deserialise
+                    self._input_dropped(arrival, 'malformed')
+                    self._log.log(('bundles', 'not deserialised'), f'bundles of {len(cdr)} bytes (stamp {stamp}): '
+                                                                   f'{exc}; dropped', 'error')
+                    continue
                 try:
                     self._solve(msg, arrival)
                 except Exception:  # the worker must survive a bug in one frame
                     self._input_dropped(arrival, 'error')
-                    self.get_logger().error(f'bundles stamp {stamp_ns(msg.header.stamp)} ns: '
-                                            f'{traceback.format_exc(limit=3)}')
+                    self.get_logger().error(f'bundles stamp {stamp} ns: {traceback.format_exc(limit=3)}')
 
     def _solve(self, msg: PointCloud2, arrival: float) -> None:
         """Solve one bundles message and publish what is due: its causal estimate, and the frame
