@@ -5,7 +5,7 @@ import threading
 
 import pytest
 
-from mvpose_ros.core.newest_queue import NewestQueue
+from mvpose_ros.core.detection.newest_queue import NewestQueue
 
 
 def test_only_the_newest_waits_with_capacity_one():

@@ -17,12 +17,8 @@ yields exactly one skeleton message, but for a late one (a stamp not after the l
 duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
 of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged). With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
-decoded and published. Bundles are taken in as they come and solved by a worker thread: while one
-is solved, the newest `waiting_frames` wait and an older one is dropped when a newer one comes (a
-solver slower than its input, a crowd on a small machine: logged and counted, where DDS would
-otherwise hold every message, memory and latency growing without bound). A rig without
-intrinsics in its file waits for every camera's CameraInfo; bundles before that are published
-with no people (logged).
+decoded and published. A rig without intrinsics in its file waits for every camera's
+CameraInfo; bundles before that are published with no people (logged).
 
 Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
 node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
@@ -34,9 +30,7 @@ read-only.
 """
 from __future__ import annotations
 
-import threading
 import time
-import traceback
 from dataclasses import replace
 from typing import Any
 
@@ -44,13 +38,11 @@ import numpy as np
 import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters.cdr_header import header_stamp_ns
 from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
@@ -62,7 +54,6 @@ from mvpose_ros.core.health.residual import ResidualMonitor, frame_residuals, re
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.solver import Inference3D
-from mvpose_ros.core.newest_queue import NewestQueue
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, parameter_specs
 from mvpose_ros.core.throttled_log import ThrottledLog
@@ -97,10 +88,6 @@ class BpSolverNode(Node):
                   live=True),
             Param('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
                                           'keep it above the time between two frames', 0.0, 3600.0, live=True),
-            Param('waiting_frames', 250, 'bundles that wait while one is solved; when one more comes, the oldest '
-                                         'is dropped (logged, counted): bounds latency and memory when solving is '
-                                         'slower than the input (250: 10 s at 25 Hz, so replays that burst pass '
-                                         'whole; a live rig wants a few frames)', 1, 100000),
         ])
         rig = load_rig_parameter(p)
         try:
@@ -116,13 +103,6 @@ class BpSolverNode(Node):
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
         self._inference = Inference3D(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
                                       config.solver)
-        # the worker solves under _lock, which the timers, parameter and diagnostics callbacks take
-        # too; the input callback takes only _input_lock (the input's statistics), so that it keeps
-        # taking messages in while a frame is solved
-        self._lock = threading.Lock()
-        self._input_lock = threading.Lock()
-        # (serialised bundles, header stamp ns or None, arrival)
-        self._waiting: NewestQueue[tuple[bytes, int | None, float]] = NewestQueue(p['waiting_frames'])
         self._byte_limit: int | None = None  # of a bundles message, once every camera's size is known
         self._idle = p['idle_flush']
         self._marker_lifetime = p['marker_lifetime']
@@ -147,13 +127,10 @@ class BpSolverNode(Node):
         self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
         self._camera_markers = self.create_publisher(MarkerArray, topics.CAMERA_MARKERS, LATCHED_QOS)
-        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS, raw=True)
+        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS)
         self.create_timer(IDLE_CHECK_S, self._on_timer)
-        self._worker = threading.Thread(target=self._work, name='bp_solver_frames', daemon=True)
-        self._worker.start()
         self.get_logger().info(f'window {p["window"]}, lag {p["lag"]}, terms {",".join(p["terms"])}, '
-                               f'M={p["hypotheses"]}, {self._n_cameras} cameras, max gap {p["max_gap"]} s, '
-                               f'the newest {p["waiting_frames"]} bundles wait'
+                               f'M={p["hypotheses"]}, {self._n_cameras} cameras, max gap {p["max_gap"]} s'
                                + ('' if rig.calibrated else ', intrinsics from CameraInfo'))
 
     def _unknown(self, cameras: set[int]) -> list[str]:
@@ -165,17 +142,15 @@ class BpSolverNode(Node):
 
     def _check(self, changes: dict[str, Any]) -> str | None:
         try:
-            with self._lock:
-                self._retuned(changes)
+            self._retuned(changes)
         except ValueError as exc:
             return str(exc)
         return None
 
     def _retune(self, changes: dict[str, Any]) -> None:
-        with self._lock:
-            self._idle = changes.get('idle_flush', self._idle)
-            self._marker_lifetime = changes.get('marker_lifetime', self._marker_lifetime)
-            self._inference.window.config = self._retuned(changes)
+        self._idle = changes.get('idle_flush', self._idle)
+        self._marker_lifetime = changes.get('marker_lifetime', self._marker_lifetime)
+        self._inference.window.config = self._retuned(changes)
 
     def _retuned(self, changes: dict[str, Any]) -> Any:
         """The window's InferenceConfig with the live changes (ValueError when invalid)."""
@@ -183,49 +158,14 @@ class BpSolverNode(Node):
         factors = replace(config.factors, **{k: v for k, v in changes.items() if k.startswith('collision_')})
         return replace(config, factors=factors, max_gap=changes.get('max_gap', config.max_gap))
 
-    def _on_bundles(self, cdr: bytes) -> None:
-        # bytes only: this thread must not hold the GIL long while the worker solves
-        arrival = time.monotonic()
-        try:
-            stamp = header_stamp_ns(cdr)
-        except ValueError:
-            stamp = None
-        dropped = self._waiting.put((cdr, stamp, arrival))
-        self._last_input = arrival
-        with self._input_lock:
-            self._bundles_in.received(arrival, stamp)
-            for _, old, _ in dropped:
-                self._bundles_in.dropped(arrival, 'behind')
-                self._log.log(('bundles', 'behind'),
-                              f'solving is slower than the input: bundles stamp {old} ns dropped unsolved, '
-                              f'{self._waiting.dropped} of {self._waiting.put_count} so far (the newest '
-                              f'{self._waiting.capacity} wait)')
-
-    def _work(self) -> None:
-        while (item := self._waiting.take()) is not None:
-            cdr, stamp, arrival = item
-            with self._lock:
-                try:
-                    msg = deserialize_message(cdr, PointCloud2)
-                except (RuntimeError, ValueError) as exc:  # RuntimeError: rclpy's, for bytes that do not deserialise
-                    self._input_dropped(arrival, 'malformed')
-                    self._log.log(('bundles', 'not deserialised'), f'bundles of {len(cdr)} bytes (stamp {stamp}): '
-                                                                   f'{exc}; dropped', 'error')
-                    continue
-                try:
-                    self._solve(msg, arrival)
-                except Exception:  # the worker must survive a bug in one frame
-                    self._input_dropped(arrival, 'error')
-                    self.get_logger().error(f'bundles stamp {stamp} ns: {traceback.format_exc(limit=3)}')
-
-    def _solve(self, msg: PointCloud2, arrival: float) -> None:
-        """Solve one bundles message and publish what is due: its causal estimate, and the frame
-        `lag` frames before it (or no people, for a message that cannot be solved: logged)."""
+    def _on_bundles(self, msg: PointCloud2) -> None:
+        self._last_input = arrival = time.monotonic()
         stamp = stamp_ns(msg.header.stamp)
+        self._bundles_in.received(arrival, stamp)
         if self._last_ns is not None and stamp <= self._last_ns:
             # its output exists or is pending (a duplicate), or the window has moved past it
             cause = 'duplicate' if stamp == self._last_ns else 'late'
-            self._input_dropped(arrival, cause)
+            self._bundles_in.dropped(arrival, cause)
             self._log.log(('bundles', cause), f'bundles stamp {stamp} ns came after stamp {self._last_ns} ns: late or '
                                               f'duplicate, dropped', 'error')
             return
@@ -246,7 +186,7 @@ class BpSolverNode(Node):
             self._next_frame += 1
         except ValueError as exc:
             cause = {_NotReady: 'no intrinsics', _Oversize: 'oversize'}.get(type(exc), 'malformed')
-            self._input_dropped(arrival, cause)
+            self._bundles_in.dropped(arrival, cause)
             self._log.log(('bundles', cause), f'bundles stamp {stamp} ns: {exc}; published with no people', 'error')
             nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
             self._publish_live(nobody, msg.header.stamp)
@@ -259,10 +199,6 @@ class BpSolverNode(Node):
         self._stamps[frame] = msg.header.stamp
         for result in results:
             self._publish(result, self._stamps.pop(result.frame))
-
-    def _input_dropped(self, arrival: float, cause: str) -> None:
-        with self._input_lock:
-            self._bundles_in.dropped(arrival, cause)
 
     def _check_size(self, msg: PointCloud2) -> None:
         """_Oversize for more data than the rig's views of people_msg.MAX_PEOPLE people take (a camera
@@ -283,19 +219,13 @@ class BpSolverNode(Node):
                             f'take ({limit})')
 
     def _on_timer(self) -> None:
-        # while a frame is solved there is nothing to flush: do not hold up the input callback
-        if not self._lock.acquire(blocking=False):
-            return
-        try:
-            if not self._cameras_sent:
-                self._publish_cameras()
-            if self._stamps and not len(self._waiting) and time.monotonic() - self._last_input >= self._idle:
-                results = self._inference.flush()
-                self.get_logger().info(f'no input for {self._idle} s: output the {len(results)} pending frames')
-                for result in results:
-                    self._publish(result, self._stamps.pop(result.frame))
-        finally:
-            self._lock.release()
+        if not self._cameras_sent:
+            self._publish_cameras()
+        if self._stamps and time.monotonic() - self._last_input >= self._idle:
+            results = self._inference.flush()
+            self.get_logger().info(f'no input for {self._idle} s: output the {len(results)} pending frames')
+            for result in results:
+                self._publish(result, self._stamps.pop(result.frame))
 
     def _publish_live(self, result: FrameResult, stamp: Time) -> None:
         header = Header(stamp=stamp, frame_id=self._world_frame)
@@ -336,10 +266,6 @@ class BpSolverNode(Node):
                                                 self._health.thresholds.residual_min_score), stamp_ns(stamp))
 
     def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
-        with self._lock:
-            return self._statuses_locked(now, t)
-
-    def _statuses_locked(self, now: float, t: HealthThresholds) -> list[Status]:
         node = self._health.prefix()
         medians, counts = self._residuals.medians()
         residuals = [
@@ -350,19 +276,13 @@ class BpSolverNode(Node):
                     else str(self._residuals.newest_stamp)}, name)
             for name, value, count, (level, message) in zip(
                 self._names, medians, counts, residual_levels(medians, t.residual_ratio, t.residual_floor))]
-        with self._input_lock:
-            bundles_in = self._bundles_in.stats(now, t.window)
-        return [*input_statuses(node, [bundles_in], t),
-                node_status(node, self._monitor.stats(now, t.window), len(self._stamps) + len(self._waiting), t,
-                            {'frames out': str(self._frames_out),
-                             'bundles dropped unsolved (solving slower than the input)': str(self._waiting.dropped)}),
+        return [*input_statuses(node, [self._bundles_in.stats(now, t.window)], t),
+                node_status(node, self._monitor.stats(now, t.window), len(self._stamps), t,
+                            {'frames out': str(self._frames_out)}),
                 *residuals]
 
     def destroy_node(self) -> None:
-        """Stop the worker, log the totals of the problems logged throttled, then destroy the node."""
-        if hasattr(self, '_worker'):
-            self._waiting.close()
-            self._worker.join(10.0)
+        """Log the totals of the problems logged throttled, then destroy the node."""
         if hasattr(self, '_log') and self._log.counts:
             rclpy.logging.get_logger(f'{self.get_logger().name}.totals').info(f'problems: {self._log.summary()}')
         super().destroy_node()

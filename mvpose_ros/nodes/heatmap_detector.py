@@ -86,7 +86,7 @@ from msg_adapters.people_msg import people_to_msg
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew)
-from mvpose_ros.core.newest_queue import NewestQueue
+from mvpose_ros.core.detection.newest_queue import NewestQueue
 from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root

@@ -1,5 +1,5 @@
-"""A bounded hand-over between a producer and a slower consumer (cameras and the detector, bundles and
-the solver): the `capacity` newest items wait, an older one is dropped whole when a newer one arrives and the
+"""A bounded hand-over between a producer and a slower consumer (the cameras and the detector):
+the `capacity` newest items wait, an older one is dropped whole when a newer one arrives and the
 queue is full, and every drop is counted. Latency stays bounded and no queue grows, whatever
 the input rate; capacity 1 is "only the newest waits" (live cameras), a larger capacity keeps
 every item of a replay that bursts (lockstep) while still bounding memory."""
