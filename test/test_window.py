@@ -410,3 +410,21 @@ def test_live_estimate_is_the_lag_0_output_and_uses_no_future_frame(slide):
 
 def test_live_before_any_frame_is_none():
     assert _window(window=6, lag=3).live() is None
+
+
+def test_a_mode_only_frames_gone_from_the_window_supported_does_not_outlive_them():
+    """Every joint has two places 0.5 m apart. The first 3 frames' evidence says A firmly (0.9),
+    every later frame's says B (0.7). Warm-started, the chain must follow the window: once those
+    3 frames have left it (6 frames), B; their evidence must not linger as a prior that holds A
+    for good (the shelf_rig bag's wrist that stayed 0.49 m off; with the prior, A held for all 20
+    frames even at 0.8 for B)."""
+    places = np.zeros((J, 2, 3))
+    places[:, 1, 0] = 0.5
+    window = _window(window=6, lag=0, slide_iterations=1, terms=('data', 'temp'))
+    decoded = []
+    for t in range(20):
+        data = np.tile([0.9, 0.1] if t < 3 else [0.3, 0.7], (J, 1))
+        out = window.push(FRAME0 + t, [PersonFrame(1, places, data, np.ones(J))])
+        decoded.append(out[0].joints[0, :, 0])  # x of every joint
+    assert np.all(np.array(decoded[:3]) == 0.0)  # A while the evidence says so
+    assert np.all(np.array(decoded[12:]) == 0.5)  # B well after the A frames left the window
