@@ -14,8 +14,8 @@ import pytest
 from mvpose_ros.core.evaluation.datasets import shelf_cameras
 from mvpose_ros.bench.pipelined import run_two_processes
 from mvpose_ros.core.evaluation.plot import Series, line_plot, nice_ticks
-from mvpose_ros.bench.scene import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene, scene_people,
-                                    triangulate)
+from mvpose_ros.core.evaluation.crowd import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene,
+                                              scene_people, triangulate)
 from mvpose_ros.cli import bench
 from mvpose_ros.graph.config import load_params
 from mvpose_ros.core.association.associator import AssociationConfig, Associator

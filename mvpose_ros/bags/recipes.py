@@ -12,7 +12,7 @@
   dropped frames; sensor_msgs/CompressedImage (jpeg) or, for `_raw`, sensor_msgs/Image (rgb8),
   plus CameraInfo with every image. Its rig file (extrinsics only) is written by `rig_file_text`.
 - `shelf_crowd`: the `shelf` bag's camera infos and OpenPose output with the scene multiplied to
-  about CROWD_PEOPLE people per frame (bench.crowd_openpose: shifted copies of its people, the
+  about CROWD_PEOPLE people per frame (core.evaluation.crowd_openpose: shifted copies of its people, the
   crowd `mvpose-bench --people` builds), for the graph under a crowd; no images (they would not
   show the copies).
 - `campus`: a user's CampusSeq1 folder; per test frame with images, `/cam{c}/image_raw`,
@@ -41,8 +41,8 @@ from msg_adapters.image_msg import image_to_compressed_msg, image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
-from mvpose_ros.bench.crowd_openpose import crowd_openpose
 from mvpose_ros.core.detection.image_file import read_image
+from mvpose_ros.core.evaluation.crowd_openpose import crowd_openpose
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
                                                  load_actors_gt)
 from mvpose_ros.core.detection.openpose import read_body25

@@ -6,7 +6,7 @@ the node graph streams it: grouping and per-person heatmaps (the detector nodes'
 network), then core.stage.Stage3D (association, sampling, data term, factor tables, BP and
 decoding over the sliding window). Rows: the graph's settings (config/shelf.yaml) and the
 defaults (the offline evaluator's window); sweeps change one setting of the graph row: the first k
-cameras; people multiplied by shifted copies of the scene (bench.scene); window length (lag =
+cameras; people multiplied by shifted copies of the scene (core.evaluation.crowd); window length (lag =
 window // 2); M, hypotheses per joint.
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_ros.bench.scene import multiply_scene
+from mvpose_ros.core.evaluation.crowd import multiply_scene
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.offline import GROUPING, as_predictions, detect_sequence, shelf_openpose_raw

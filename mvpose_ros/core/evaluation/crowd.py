@@ -1,4 +1,4 @@
-"""More people for a benchmark: copies of a recorded scene's 2D detections, shifted in space.
+"""More people for a benchmark or a bag: copies of a recorded scene's 2D detections, shifted in space.
 
 Each frame's original 2D people are associated (core.association.Associator) into 3D people,
 whose joints are triangulated from their keypoints (camera.closest_point_to_rays). Copy k of the

@@ -1,8 +1,8 @@
 """A recorded scene's OpenPose output with shifted copies of its people: a crowd for the node graph.
 
-bench.scene multiplies a scene at the level of 2D people, what the 3D stage takes; a bag for the
-node graph carries what its detectors take, OpenPose candidates and part affinities. Here the same
-copies (bench.scene.choose_offsets on the same associated people) are made of those: copy k of a
+core.evaluation.crowd multiplies a scene at the level of 2D people, what the 3D stage takes; a
+bag for the node graph carries what its detectors take, OpenPose candidates and part affinities.
+Here the same copies (crowd.choose_offsets on the same associated people) are made of those: copy k of a
 person moves each of the person's BODY25 candidates in a view by the pixel displacement of a 3D
 joint of the person moved by offset d_k, project(X + d_k) - project(X): the candidate's own
 inference joint, or for the BODY25 joints the 3D stage does not infer the nearest one (mid hip:
@@ -19,10 +19,10 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.bench.scene import ScenePerson, choose_offsets, scene_people
 from mvpose_ros.core.association.associator import AssociationConfig
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_grouped
+from mvpose_ros.core.evaluation.crowd import ScenePerson, choose_offsets, scene_people
 from mvpose_ros.core.geometry.body import BODY25_NAMES, INFERENCE_NAMES, SOURCE_INDEX
 from mvpose_ros.core.geometry.camera import Camera
 
@@ -52,7 +52,7 @@ ANCHORS = _anchors()
 class CrowdOpenPose:
     """frames[f][c]: camera c's OpenPose output of frame f with the copies; offsets (K, 3) metres,
     row 0 the original (zeros); expected and original: 3D people per frame with and without the
-    copies (as bench.scene.MultipliedScene)."""
+    copies (as core.evaluation.crowd.MultipliedScene)."""
 
     frames: list[list[OpenPoseFrame]]
     offsets: np.ndarray
