@@ -266,6 +266,43 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     assert 'bundles stamp 12640000000 ns' in text and 'published with no people' in text
 
 
+def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_them(domain, shelf, tmp_path):
+    """A burst of bundles far faster than solving, max_wait 50 ms: a bundle that waited longer
+    since DDS received it is dropped unsolved, so the queue drains; every bundle is either solved
+    (its causal estimate, then its lagged output) or counted in the node's totals, and the first
+    of the burst, which waited for nothing, is solved."""
+    cameras, raw = shelf
+    frames = list(range(300, 312))
+    associator = Associator(cameras, AssociationConfig())
+    wire = []
+    for f in frames:
+        people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
+        wire.append(bundles_to_msg([(o.person_id, o.views) for o in associator.update(f, people)],
+                                   _header(f, 'world')))
+    log = tmp_path / 'bp.log'
+    with probe(domain, 'bp_probe') as (node, executor):
+        live: dict[int, list] = {}
+        skeletons: dict[int, list] = {}
+        _collect(node, '/skeletons/live', PointCloud2, live)
+        _collect(node, '/skeletons', PointCloud2, skeletons)
+        pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+        proc = start_node('bp_solver', domain, log, '-p', 'max_wait:=0.05', '-p', 'idle_flush:=0.3')
+        try:
+            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            for msg in wire:
+                pub.publish(msg)
+            spin_until(executor, lambda: 'dropped unsolved' in log.read_text() and sorted(skeletons) == sorted(live)
+                       and len(live) > 0, 10.0)
+            spin_until(executor, lambda: False, 1.0)  # the rest of the burst, solved or dropped
+        finally:
+            stop(proc)
+    text = log.read_text()
+    dropped = int(text.split('bundles: ')[1].split(' x behind')[0]) if ' x behind' in text else 0
+    assert set(live) <= set(frames) and all(len(v) == 1 for v in live.values()) and sorted(skeletons) == sorted(live)
+    assert frames[0] in live and 1 <= dropped and len(live) + dropped == len(frames), text
+    assert 'solving is slower than the input; dropped unsolved' in text
+
+
 def test_association_of_a_rig_without_intrinsics_waits_for_every_camera_info(domain, shelf, tmp_path):
     """A rig file with extrinsics only, driver-style names: a camera's people before its
     CameraInfo is in are dropped (no intrinsics, logged); after, they are bundled on the rig's own

@@ -17,7 +17,10 @@ yields exactly one skeleton message, but for a late one (a stamp not after the l
 duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
 of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged). With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
-decoded and published. A rig without intrinsics in its file waits for every camera's
+decoded and published. A bundle that has waited more than `max_wait` seconds since DDS received
+it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged and
+counted, so the queue and the latency stay bounded (the node runs rclpy's single-threaded
+executor for that receipt time: nodes.runtime.run). A rig without intrinsics in its file waits for every camera's
 CameraInfo; bundles before that are published with no people (logged).
 
 Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
@@ -38,11 +41,13 @@ import numpy as np
 import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
+from msg_adapters.cdr_header import header_stamp_ns
 from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
@@ -88,6 +93,9 @@ class BpSolverNode(Node):
                   live=True),
             Param('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
                                           'keep it above the time between two frames', 0.0, 3600.0, live=True),
+            Param('max_wait', 5.0, 's a bundle may wait after DDS received it; an older one is dropped unsolved '
+                                   '(logged, counted): bounds the queue when solving is slower than the input '
+                                   '(0: never)', 0.0, 3600.0, live=True),
         ])
         rig = load_rig_parameter(p)
         try:
@@ -106,6 +114,7 @@ class BpSolverNode(Node):
         self._byte_limit: int | None = None  # of a bundles message, once every camera's size is known
         self._idle = p['idle_flush']
         self._marker_lifetime = p['marker_lifetime']
+        self._max_wait = p['max_wait']
         self._cameras_sent = False
         self._stamps: dict[int, Time] = {}  # frames pushed, not yet output
         self._next_frame = 0  # the number of the next frame pushed: arrival order
@@ -119,7 +128,8 @@ class BpSolverNode(Node):
         self._monitor = NodeMonitor()
         self._health = NodeHealth(self, self._statuses, residual=True)
         self._residuals = ResidualMonitor(self._n_cameras, self._health.thresholds.residual_frames)
-        live_names = [s.name for s in parameter_specs(SOLVER_PARAMETERS) if s.live] + ['idle_flush', 'marker_lifetime']
+        live_names = [s.name for s in parameter_specs(SOLVER_PARAMETERS) if s.live] + ['idle_flush', 'marker_lifetime',
+                                                                                       'max_wait']
         live_parameters(self, live_names,
                         self._check, self._retune)
         self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
@@ -127,7 +137,7 @@ class BpSolverNode(Node):
         self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
         self._camera_markers = self.create_publisher(MarkerArray, topics.CAMERA_MARKERS, LATCHED_QOS)
-        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS)
+        self.create_subscription(PointCloud2, topics.BUNDLES, self._on_bundles, DATA_QOS, raw=True)
         self.create_timer(IDLE_CHECK_S, self._on_timer)
         self.get_logger().info(f'window {p["window"]}, lag {p["lag"]}, terms {",".join(p["terms"])}, '
                                f'M={p["hypotheses"]}, {self._n_cameras} cameras, max gap {p["max_gap"]} s'
@@ -150,6 +160,7 @@ class BpSolverNode(Node):
     def _retune(self, changes: dict[str, Any]) -> None:
         self._idle = changes.get('idle_flush', self._idle)
         self._marker_lifetime = changes.get('marker_lifetime', self._marker_lifetime)
+        self._max_wait = changes.get('max_wait', self._max_wait)
         self._inference.window.config = self._retuned(changes)
 
     def _retuned(self, changes: dict[str, Any]) -> Any:
@@ -158,10 +169,35 @@ class BpSolverNode(Node):
         factors = replace(config.factors, **{k: v for k, v in changes.items() if k.startswith('collision_')})
         return replace(config, factors=factors, max_gap=changes.get('max_gap', config.max_gap))
 
-    def _on_bundles(self, msg: PointCloud2) -> None:
+    def _on_bundles(self, cdr: bytes, info: dict[str, int]) -> None:
+        """A bundles message as bytes with its DDS receipt time: dropped unread when it waited longer
+        than max_wait (so a backlog drains at once), else deserialised and solved."""
         self._last_input = arrival = time.monotonic()
-        stamp = stamp_ns(msg.header.stamp)
+        waited = (time.time_ns() - info['received_timestamp']) / 1e9
+        try:
+            stamp = header_stamp_ns(cdr)
+        except ValueError:
+            stamp = None
         self._bundles_in.received(arrival, stamp)
+        if self._max_wait and waited > self._max_wait:
+            self._bundles_in.dropped(arrival, 'behind')
+            self._log.log(('bundles', 'behind'), f'bundles stamp {stamp} ns waited {waited:.2f} s since it was '
+                                                 f'received, more than max_wait {self._max_wait:g} s: solving is '
+                                                 f'slower than the input; dropped unsolved')
+            return
+        try:
+            msg = deserialize_message(cdr, PointCloud2)
+        except RuntimeError as exc:  # rclpy's, for bytes that do not deserialise
+            self._bundles_in.dropped(arrival, 'malformed')
+            self._log.log(('bundles', 'malformed'), f'bundles of {len(cdr)} bytes (stamp {stamp}): {exc}; dropped',
+                          'error')
+            return
+        self._solve(msg, arrival)
+
+    def _solve(self, msg: PointCloud2, arrival: float) -> None:
+        """Solve one bundles message and publish what is due: its causal estimate, and the frame
+        `lag` frames before it (or no people, for a message that cannot be solved: logged)."""
+        stamp = stamp_ns(msg.header.stamp)
         if self._last_ns is not None and stamp <= self._last_ns:
             # its output exists or is pending (a duplicate), or the window has moved past it
             cause = 'duplicate' if stamp == self._last_ns else 'late'
@@ -289,7 +325,7 @@ class BpSolverNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    run(BpSolverNode, args)
+    run(BpSolverNode, args, events=False)
 
 
 if __name__ == '__main__':

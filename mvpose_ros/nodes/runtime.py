@@ -13,7 +13,7 @@ from typing import Any, Callable, Sequence
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 from rclpy.node import Node
@@ -223,7 +223,7 @@ def params_files(args: Sequence[str]) -> list[str]:
     return [args[i + 1] for i, a in enumerate(args[:-1]) if a == '--params-file']
 
 
-def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
+def run(factory: Callable[[], Node], args: list[str] | None = None, events: bool = True) -> None:
     """rclpy main: spin the node until SIGINT (Ctrl-C) or SIGTERM, or, for a node with a `finished`
     future, until it completes (its result is the exit code). A bad parameter, parameter file or
     data file (StartupError, or a parameter file rcl cannot parse) exits with code 2 after one
@@ -233,7 +233,9 @@ def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     one (241 against 495 us for a PointCloud2 at 1000/s), which a flooded node, or a graph near
     its CPU limit, needs (Shelf graph at 25 Hz: 12% less CPU in all). In these rclpy wheels its
     spin() runs no callback and rclpy's signal handlers do not stop its spin_once, so the loop
-    is spin_once, ended by a flag the signals set."""
+    is spin_once, ended by a flag the signals set. It cannot run a callback that takes message
+    info (SystemError in these wheels): a node that needs the DDS receipt time passes
+    events=False and gets rclpy's single-threaded executor."""
     files = params_files(sys.argv if args is None else args)
     where = f'{", ".join(files)}: ' if files else ''
     stop = threading.Event()
@@ -249,7 +251,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     try:
         node = factory()
         finished = getattr(node, 'finished', None)
-        executor = EventsExecutor()
+        executor = EventsExecutor() if events else SingleThreadedExecutor()
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok() and not (finished is not None and finished.done()):
             executor.spin_once(timeout_sec=SPIN_ONCE_S)
