@@ -20,8 +20,8 @@ for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending
 decoded and published. A bundle that has waited more than `max_wait` seconds since DDS received
 it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged and
 counted, so the queue and the latency stay bounded (the node runs rclpy's single-threaded
-executor for that receipt time: nodes.runtime.run). A rig without intrinsics in its file waits for every camera's
-CameraInfo; bundles before that are published with no people (logged).
+executor for that receipt time: nodes.runtime.run). A rig without intrinsics in its file waits
+for every camera's CameraInfo; bundles before that are published with no people (logged).
 
 Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
 node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
@@ -41,8 +41,8 @@ import numpy as np
 import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
