@@ -21,7 +21,7 @@ FRAME, CAMERA = 572, 4
 
 @pytest.fixture(scope='module')
 def detector() -> OnnxPoseDetector:
-    return OnnxPoseDetector(OnnxDetectorConfig(model_dir=MODELS))
+    return OnnxPoseDetector(OnnxDetectorConfig(model_dir=MODELS, heatmaps='efficientpose'))
 
 
 @pytest.fixture(scope='module')
@@ -171,7 +171,7 @@ def _folder(tmp_path: Path, **files: Path | str) -> Path:
 def test_a_missing_model_names_the_file(tmp_path):
     folder = _folder(tmp_path, **{MULTIPOSE.file: MODELS / MULTIPOSE.file})
     with pytest.raises(ModelError, match=rf'^{tmp_path}/efficientpose_rt.onnx: EfficientPose RT model file not found$'):
-        OnnxPoseDetector(OnnxDetectorConfig(model_dir=folder))
+        OnnxPoseDetector(OnnxDetectorConfig(model_dir=folder, heatmaps='efficientpose'))
 
 
 def test_another_models_file_is_a_clear_error(tmp_path):
@@ -190,7 +190,7 @@ def test_efficientpose_of_the_wrong_size_is_a_clear_error(tmp_path):
                                   EFFICIENTPOSE['rt'].file: MODELS / EFFICIENTPOSE['i'].file})
     with pytest.raises(ModelError, match=r'efficientpose_rt.onnx: not the EfficientPose RT model: expected input '
                                          r'input_res1:0 tensor\(float\) \[None, 224, 224, 3\].*\[.*, 256, 256, 3\]'):
-        OnnxPoseDetector(OnnxDetectorConfig(model_dir=folder))
+        OnnxPoseDetector(OnnxDetectorConfig(model_dir=folder, heatmaps='efficientpose'))
 
 
 def test_a_file_that_is_not_onnx_is_a_clear_error(tmp_path):

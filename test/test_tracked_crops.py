@@ -82,7 +82,7 @@ def test_multipose_runs_every_kth_set_and_while_no_skeleton_is_known():
 
 @pytest.fixture(scope='module')
 def shelf() -> tuple[OnnxPoseDetector, np.ndarray, Camera]:
-    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models'))
+    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', heatmaps='efficientpose'))
     image = cv2.imread(str(dataset_dir('shelf') / 'frames' / f'cam{CAMERA}_{FRAME:06d}.png'))
     camera = load_rig(calibration_file('shelf'), image.shape[1], image.shape[0])[CAMERA]
     return detector, image, camera

@@ -5,22 +5,23 @@
                   [--sets N] [--person-detector-every K] [--max-batch B] [--threads T]
                   [--heatmaps efficientpose|multipose|fused] [--keypoint-sigma F] [--multipose-workers W]
 
-Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose + EfficientPose),
-associates them across the cameras, samples the 3D hypotheses and runs BP on this one frame, and
-writes the skeletons as one predictions line (`<output>/skeletons.jsonl`) and one overlay PNG per
-camera (`<output>/cam<c>.png`: the reprojected 3D skeletons in each person's colour over the 2D
-detections in thin white). Prints the time of each stage of the set (MultiPose, EfficientPose,
-heatmaps, association and 3D); with --ground-truth shelf, the per-actor MPJPE and PCP of the
-frame against Shelf's actorsGT.
+Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose, and EfficientPose
+with --heatmaps efficientpose or fused), associates them across the cameras, samples the 3D
+hypotheses and runs BP on this one frame, and writes the skeletons as one predictions line
+(`<output>/skeletons.jsonl`) and one overlay PNG per camera (`<output>/cam<c>.png`: the
+reprojected 3D skeletons in each person's colour over the 2D detections in thin white). Prints
+the time of each stage of the set (MultiPose, EfficientPose, heatmaps, association and 3D); with
+--ground-truth shelf, the per-actor MPJPE and PCP of the frame against Shelf's actorsGT.
 
 --sets N detects the same images N times as a sequence of sets (a still scene) and prints each
 set's stage times and their medians; with --person-detector-every K, MultiPose runs on every K-th
 set only and the sets between take their crops from the previous set's 3D skeletons
 (core.tracked_crops). The files written and the score are those of the last set.
 
---heatmaps multipose renders MultiPose's own keypoints as Gaussians (std --keypoint-sigma times
-the person's box diagonal) instead of running EfficientPose; its keypoints need MultiPose on every
-set, so it refuses --person-detector-every above 1. fused takes both (core.onnx_detector).
+--heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
+--keypoint-sigma times the person's box diagonal) and runs no EfficientPose; its keypoints need
+MultiPose on every set, so --person-detector-every above 1 needs --heatmaps efficientpose (fused
+takes both; core.onnx_detector).
 """
 from __future__ import annotations
 
@@ -150,7 +151,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         raise ValueError(f'--sets {args.sets} must be >= 1')
     if args.heatmaps == 'multipose' and args.person_detector_every != 1:
         raise ValueError(f'--person-detector-every {args.person_detector_every}: --heatmaps multipose takes every '
-                         'keypoint from MultiPose, which must then run on every set')
+                         'keypoint from MultiPose, which must then run on every set (crops between need '
+                         '--heatmaps efficientpose)')
     cameras, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
