@@ -3,8 +3,9 @@
 Backends: 'openpose' turns each camera's raw OpenPose output (`<camera>/openpose`, PointCloud2
 encoding A, reliable keep-last as the recorded data it is) into people; 'onnx' detects them in the
 camera image (MoveNet MultiPose, and EfficientPose when `heatmaps` is efficientpose or fused, on
-onnxruntime, core.onnx_detector). People go out on `<camera>/people2d` (PointCloud2 encoding B) with the input's
-stamp and the rig camera's frame_id, one message per used input, empty when nobody is seen.
+onnxruntime, core.onnx_detector). People go out on `<camera>/people2d` (PointCloud2 encoding B)
+with the input's stamp and the rig camera's frame_id, one message per used input, empty when nobody
+is seen.
 
 Modes, by the parameter `camera`:
 
