@@ -22,6 +22,15 @@ def camera_to_info(camera: Camera, header: Header) -> CameraInfo:
                       p=np.column_stack([camera.K, np.zeros(3)]).ravel())
 
 
+def info_key(msg: CameraInfo) -> tuple | None:
+    """What info_to_intrinsics and check_info read of a CameraInfo, as a hashable value: a driver
+    sends the same CameraInfo with every image, so a node checks it once per content. None when d
+    holds more values than plumb_bob has (such a message is refused anyway, and is not copied)."""
+    if len(msg.d) > 5:
+        return None
+    return msg.distortion_model, int(msg.width), int(msg.height), tuple(msg.k), tuple(msg.d)
+
+
 def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, int]:
     """K (3, 3) pixels, dist (5,) plumb_bob k1, k2, p1, p2, k3, width, height (pixels) of a
     CameraInfo, as RigCamera.with_info takes them. An empty d is no distortion. ValueError of one

@@ -79,7 +79,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
-from msg_adapters.camera_info_msg import check_info, info_to_intrinsics
+from msg_adapters.camera_info_msg import check_info, info_key, info_to_intrinsics
 from msg_adapters.cdr_header import header_frame_id, header_stamp_ns
 from msg_adapters.image_msg import check_camera_image, to_bgr
 from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
@@ -171,6 +171,7 @@ class _Camera:
     typed_by: str = 'backend'  # 'graph', 'name' or 'backend' (openpose)
     subscription: Subscription | None = None
     info_problems: set[str] = field(default_factory=set)
+    checked_info: tuple | None = None  # camera_info_msg.info_key of the last CameraInfo checked
 
 
 def _check_frame_id(cam: _Camera, frame_id: str) -> None:
@@ -370,6 +371,10 @@ class HeatmapDetectorNode(Node):
                     with self._intrinsics_in:
                         self._intrinsics_in.notify_all()
                 return
+            key = info_key(msg)
+            if key is not None and key == cam.checked_info:
+                return  # the same CameraInfo again (with every image): checked, and any problem said
+            cam.checked_info = key
             check_info(msg, cam.camera)
         except ValueError as exc:
             # A CameraInfo that disagrees means a wrong file or a re-calibrated camera: said once
