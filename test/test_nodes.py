@@ -318,7 +318,7 @@ def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_the
 def test_association_of_a_rig_without_intrinsics_waits_for_every_camera_info(domain, shelf, tmp_path):
     """A rig file with extrinsics only, driver-style names: a camera's people before its
     CameraInfo is in are dropped (no intrinsics, logged); after, they are bundled on the rig's own
-    topics and frame ids, in the rig's world frame."""
+    topics and frame ids, in the rig's world frame, and the node no longer listens to CameraInfo."""
     import yaml
     from rclpy.qos import qos_profile_sensor_data
 
@@ -352,6 +352,7 @@ def test_association_of_a_rig_without_intrinsics_waits_for_every_camera_info(dom
                     infos[c].publish(camera_to_info(cameras[c], _header(300, f'{names[c]}_optical')))
                 return spin_until(executor, lambda: log.read_text().count(': intrinsics from /') == 5, 0.2)
             assert spin_until(executor, intrinsics_in), log.read_text()
+            assert spin_until(executor, lambda: not any(i.get_subscription_count() for i in infos)), log.read_text()
             for c in range(5):
                 pubs[c].publish(people_to_msg(people[301][c], _header(301, f'{names[c]}_optical')))
             assert spin_until(executor, lambda: 301 in out), log.read_text()

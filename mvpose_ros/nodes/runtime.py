@@ -175,17 +175,20 @@ class RigIntrinsics:
     """The rig's Cameras, completing the intrinsics the rig file leaves out from each camera's
     CameraInfo (its own topic from the rig file; sensor-data QoS, which reliable publishers reach
     too). `cameras` is None until every camera is known; a CameraInfo that cannot be used is
-    logged once per camera and cause."""
+    logged once per camera and cause. A camera's subscription ends with its first usable
+    CameraInfo: a driver sends one with every image, and each would wake the node for nothing (in
+    bp_solver's executor 10% of a core for 5 cameras at 25 Hz)."""
 
     def __init__(self, node: Node, rig: Rig) -> None:
         self._node = node
         self._rig = rig
         self._cameras: list[Camera | None] = [c.camera for c in rig.cameras]
         self._problems: set[tuple[str, str]] = set()
+        self._subscriptions: dict[int, Subscription] = {}
         for index, rig_camera in enumerate(rig.cameras):
             if rig_camera.camera is None:
-                node.create_subscription(CameraInfo, rig_camera.camera_info, partial(self._on_info, index),
-                                         qos_profile_sensor_data)
+                self._subscriptions[index] = node.create_subscription(
+                    CameraInfo, rig_camera.camera_info, partial(self._on_info, index), qos_profile_sensor_data)
 
     @property
     def cameras(self) -> list[Camera] | None:
@@ -216,6 +219,7 @@ class RigIntrinsics:
             return
         topic = self._node.resolve_topic_name(rig_camera.camera_info)
         self._node.get_logger().info(f'{rig_camera.name}: intrinsics from {topic}')
+        self._node.destroy_subscription(self._subscriptions.pop(index))
 
 
 def params_files(args: Sequence[str]) -> list[str]:
