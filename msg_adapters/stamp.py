@@ -31,6 +31,11 @@ def stamp_ns(stamp: Time) -> int:
     return stamp.sec * NS_PER_S + stamp.nanosec
 
 
+def stamp_of_ns(ns: int) -> Time:
+    """The stamp of integer nanoseconds (>= 0): the inverse of stamp_ns."""
+    return Time(sec=int(ns) // NS_PER_S, nanosec=int(ns) % NS_PER_S)
+
+
 def frame_of_stamp(stamp: Time, rate: float = 25.0) -> int:
     """The frame nearest to stamp at rate frames per second."""
     return round(stamp_ns(stamp) * _check_rate(rate) / NS_PER_S)

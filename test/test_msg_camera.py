@@ -12,7 +12,7 @@ from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import camera_to_info, check_info, info_key, info_to_intrinsics
 from msg_adapters.image_msg import image_to_msg, msg_to_image
-from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
+from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame, stamp_of_ns
 from mvpose_ros.core.geometry.rig import RigCamera
 
 
@@ -175,6 +175,9 @@ def test_stamps():
     assert frame_of_stamp(Time(sec=12, nanosec=19_000_000)) == 300  # nearest frame
     assert frame_of_stamp(Time(sec=12, nanosec=21_000_000)) == 301
     assert frame_of_stamp(stamp_of_frame(90, rate=30.0), rate=30.0) == 90
+    for ns in (0, 999_999_999, 1_700_000_000_123_456_789):
+        t = stamp_of_ns(ns)
+        assert stamp_ns(t) == ns and 0 <= t.nanosec < 1_000_000_000
     with pytest.raises(ValueError, match='frame'):
         stamp_of_frame(-1)
     with pytest.raises(ValueError, match='frame rate'):

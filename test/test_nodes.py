@@ -269,8 +269,9 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
 def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_them(domain, shelf, tmp_path):
     """A burst of bundles far faster than solving, max_wait 50 ms: a bundle that waited longer
     since DDS received it is dropped unsolved, so the queue drains; every bundle is either solved
-    (its causal estimate, then its lagged output) or counted in the node's totals, and the first
-    of the burst, which waited for nothing, is solved. Bundles are handled in order, so a later one
+    (its causal estimate, then its lagged output) or dropped, counted in the node's totals and its
+    stamp published on skeletons/dropped, and the first of the burst, which waited for nothing, is
+    solved. Bundles are handled in order, so a later one
     solved says the burst is done (a sentinel that itself waited too long is dropped: the next goes)."""
     cameras, raw = shelf
     frames = list(range(300, 312))
@@ -287,6 +288,9 @@ def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_the
         skeletons: dict[int, list] = {}
         _collect(node, '/skeletons/live', PointCloud2, live)
         _collect(node, '/skeletons', PointCloud2, skeletons)
+        gone: dict[int, list[Header]] = {}
+        node.create_subscription(Header, '/skeletons/dropped',
+                                 lambda m: gone.setdefault(frame_of_stamp(m.stamp), []).append(m), DATA_QOS)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
         proc = start_node('bp_solver', domain, log, '-p', 'max_wait:=0.05', '-p', 'idle_flush:=0.3')
         try:
@@ -304,10 +308,13 @@ def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_the
             assert sent[-1] in live, log.read_text()
             # the lagged outputs come with the idle flush
             assert spin_until(executor, lambda: sorted(skeletons) == sorted(live)), log.read_text()
+            assert spin_until(executor, lambda: set(live) | set(gone) == set(frames + sent)), log.read_text()
         finally:
             stop(proc)
     text = log.read_text()
     dropped = int(text.split('bundles: ')[1].split(' x behind')[0]) if ' x behind' in text else 0
+    assert not set(live) & set(gone) and len(gone) == dropped and all(len(v) == 1 for v in gone.values())
+    assert all(m.frame_id == 'world' for [m] in gone.values())
     dropped_in_burst = dropped - (len(sent) - 1)  # every sentinel but the last one solved was dropped
     solved = [f for f in live if f in frames]
     assert set(live) <= set(frames + sent) and all(len(v) == 1 for v in live.values())

@@ -96,7 +96,7 @@ def _run(frames: int, gone: set[int], died_ns: int, ids_of=lambda f: [0, 1]):
         info_at={s: t0 + s for s in stamps},
         outputs={s: (np.array(ids_of(f)), np.zeros((len(ids_of(f)), 14, 3))) for f, s in enumerate(stamps)
                  if f not in gone},
-        received=Counter(), bad=[], first_after={}, live_at={})
+        received=Counter(), bad=[], first_after={}, live_at={}, dropped=set())
     node.output_at = {s: t0 + s + 100 * MS for s in node.outputs}
     node.received.update(node.outputs.keys())
     return stamps, node, t0 + died_ns

@@ -188,7 +188,7 @@ def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
     confidence = np.full((2, 14), 0.5)
     node = SimpleNamespace(outputs={stamps[0]: Skeletons(np.array([3, 7]), joints, confidence),
                                     stamps[2]: Skeletons(np.array([3]), joints[:1], confidence[:1])},
-                           output_at={stamps[0]: 1_000 * MS, stamps[2]: 1_500 * MS}, live_at={},
+                           output_at={stamps[0]: 1_000 * MS, stamps[2]: 1_500 * MS}, live_at={}, dropped=set(),
                            info_at={stamps[0]: 900 * MS, stamps[2]: 1_300 * MS}, received={stamps[0]: 1, stamps[2]: 1},
                            bad=[])
     people = {'a/people2d': [stamps[0], stamps[2]], 'b/people2d': [stamps[0] + 6 * MS, stamps[2] + 12 * MS]}

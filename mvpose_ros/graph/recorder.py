@@ -1,13 +1,14 @@
 """The skeleton recorder: the node that keeps the graph's output, for the runner and on its own.
 
 `SkeletonRecorder` keeps the first skeletons message of every stamp, counts every message per
-stamp (duplicates), and records when (middleware receipt time, ns of the system clock, so queueing
-in its executor does not count) each stamp's camera 0 camera_info (for a rig: the first
-camera_info of any camera with that stamp, i.e. the first member of a set) and skeletons arrived,
-for a rig every camera's people2d stamps (the achieved synchronisation skew), and, for a node
-that was restarted, when its output topic was heard again (`arm`, `first_after`); it can
-also append every skeletons message to a predictions file as it comes and record the serialized
-size of every message the nodes publish. `mvpose-graph` runs one inside its own process.
+stamp (duplicates), keeps the stamps bp_solver dropped unsolved (skeletons/dropped), and records
+when (middleware receipt time, ns of the system clock, so queueing in its executor does not count)
+each stamp's camera 0 camera_info (for a rig: the first camera_info of any camera with that
+stamp, i.e. the first member of a set) and skeletons arrived, for a rig every camera's people2d
+stamps (the achieved synchronisation skew), and, for a node that was restarted, when its output
+topic was heard again (`arm`, `first_after`); it can also append every skeletons message to a
+predictions file as it comes and record the serialized size of every message the nodes publish.
+`mvpose-graph` runs one inside its own process.
 
 On its own (e.g. on the compute host of a split graph, or inside a network namespace):
 
@@ -19,10 +20,11 @@ expected_connections) and its own readers have matched their writers, then creat
 the --ready file (and, with --start-topic, lets a bag_player started with that start_topic play
 once its camera_info reader has matched the player's writer). Every skeletons message is appended
 to --predictions as it arrives, as a predictions line, duplicates included. It exits 0 once every
-input stamp of --bag has its output and --drain s have passed (to catch duplicates), 1 after
---timeout s without a new output; --stats is written either way:
+input stamp of --bag has its output and --drain s have passed (to catch duplicates), 1 once every
+stamp has its output or was dropped unsolved by bp_solver (skeletons/dropped) but some were, or
+after --timeout s without a new output; --stats is written either way:
 
-    {"complete": bool, "bad": ["<stamp> ns: <why>", ...],
+    {"complete": bool, "bad": ["<stamp> ns: <why>", ...], "dropped": [<stamp ns>, ...],
      "topics": {"/cam0/people2d": [[<stamp ns>, <bytes>], ...], ...}}
 """
 from __future__ import annotations
@@ -43,7 +45,7 @@ from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, PointCloud2
-from std_msgs.msg import Empty
+from std_msgs.msg import Empty, Header
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.cdr_header import header_stamp_ns
@@ -56,8 +58,8 @@ from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
 from mvpose_ros.nodes.bag_player import START_QOS
 from mvpose_ros.nodes.runtime import DATA_QOS
-from mvpose_ros.topics import (BUNDLES, CAMERA_INFO, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS, SKELETONS_LIVE,
-                               camera_topic)
+from mvpose_ros.topics import (BUNDLES, CAMERA_INFO, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS, SKELETONS_DROPPED,
+                               SKELETONS_LIVE, camera_topic)
 
 TIMING_TOPIC = camera_topic(0, CAMERA_INFO)  # a frame's latency is timed from its arrival here
 OUTPUT_TOPIC = SKELETONS
@@ -73,7 +75,8 @@ def graph_topics(cameras: int) -> dict[str, Any]:
 
 
 class SkeletonRecorder(Node):
-    """Skeletons per stamp, their receipt times and camera 0's camera_info receipt times.
+    """Skeletons per stamp, their receipt times, camera 0's camera_info receipt times and the
+    stamps dropped unsolved.
 
     stream: a text file every skeletons message goes to as a predictions line (None: kept only);
     measure_cameras: > 0 also records the size of every message the nodes of a graph with that
@@ -96,6 +99,7 @@ class SkeletonRecorder(Node):
         self.outputs: dict[int, Skeletons] = {}
         self.output_at: dict[int, int] = {}
         self.live_at: dict[int, int] = {}  # stamp -> receipt (ns) of its skeletons/live
+        self.dropped: set[int] = set()  # stamps bp_solver dropped unsolved (skeletons/dropped)
         self.received: Counter[int] = Counter()
         self.bad: list[str] = []
         self.last_activity = 0.0  # monotonic s of the last message, for stall timeouts
@@ -111,6 +115,7 @@ class SkeletonRecorder(Node):
                                                   raw=True)]
         # timed when there, not waited for: only bp_solver publishes it
         self.create_subscription(PointCloud2, SKELETONS_LIVE, self._on_live, DATA_QOS, raw=True)
+        self.create_subscription(Header, SKELETONS_DROPPED, self._on_dropped, DATA_QOS)
         # (topic, since ns) -> receipt ns of the topic's first message after `since`, once heard
         self.first_after: dict[tuple[str, int], int] = {}
         self._armed: set[tuple[str, int]] = set()
@@ -141,6 +146,10 @@ class SkeletonRecorder(Node):
 
     def _on_live(self, cdr: bytes, info: Any) -> None:
         self.live_at.setdefault(header_stamp_ns(cdr), info['received_timestamp'])
+
+    def _on_dropped(self, msg: Header) -> None:
+        self.last_activity = time.monotonic()
+        self.dropped.add(stamp_ns(msg.stamp))
 
     def arm(self, topic: str, since_ns: int) -> None:
         """Record in first_after[(topic, since_ns)] when the first message on `topic` (skeletons or
@@ -264,22 +273,26 @@ def record(args: argparse.Namespace) -> bool:
                 return False
             node.open_gate(args.start_topic)
         node.last_output = time.monotonic()
-        while not wanted <= node.outputs.keys():
+        while not wanted <= node.outputs.keys() | node.dropped:
             if time.monotonic() - node.last_output > args.timeout:
-                print(f'no {OUTPUT_TOPIC} for {args.timeout:g} s; {len(wanted - node.outputs.keys())} of '
-                      f'{len(wanted)} stamps missing', file=sys.stderr)
+                print(f'no {OUTPUT_TOPIC} for {args.timeout:g} s; {len(wanted - node.outputs.keys() - node.dropped)} '
+                      f'of {len(wanted)} stamps missing', file=sys.stderr)
                 return False
             executor.spin_once(timeout_sec=SPIN_S)
-        complete = True
+        complete = wanted <= node.outputs.keys()
         drain_until = time.monotonic() + args.drain
         while time.monotonic() < drain_until:
             executor.spin_once(timeout_sec=SPIN_S)
-        return True
+        if not complete:
+            print(f'{len(wanted - node.outputs.keys())} of {len(wanted)} stamps dropped unsolved by bp_solver '
+                  f'(skeletons/dropped)', file=sys.stderr)
+        return complete
     except (KeyboardInterrupt, ExternalShutdownException):
         return False
     finally:
         stream.close()
-        args.stats.write_text(json.dumps({'complete': complete, 'bad': node.bad, 'topics': node.sizes}))
+        args.stats.write_text(json.dumps({'complete': complete, 'bad': node.bad, 'dropped': sorted(node.dropped),
+                                          'topics': node.sizes}))
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()

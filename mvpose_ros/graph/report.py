@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Protocol, Sequence, TextIO
+from typing import AbstractSet, Mapping, Protocol, Sequence, TextIO
 
 import numpy as np
 
@@ -38,6 +38,7 @@ class Recorded(Protocol):
     outputs: Mapping[int, object]
     output_at: Mapping[int, int]
     live_at: Mapping[int, int]
+    dropped: AbstractSet[int]
     received: Mapping[int, int]
     bad: Sequence[str]
     first_after: Mapping[tuple[str, int], int]
@@ -184,11 +185,13 @@ def print_periods(stamps: Sequence[int], node: Recorded, memory: MemoryLog, peri
 def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: TextIO,
            effects: Sequence[RestartEffect] = ()) -> list[str]:
     """Print counts and latency of the input `stamps` (ns, bag order); returns the problems
-    (missing but for the frames lost in restarts (`effects`), output never resumed after a
-    restart, duplicate, unexpected, bad outputs)."""
+    (missing but for the frames lost in restarts (`effects`) and those bp_solver dropped unsolved,
+    which are counted apart: a graph behind its input by design, each logged; output never resumed
+    after a restart, duplicate, unexpected, bad outputs)."""
     wanted = set(stamps)
     lost = {s for e in effects for s in e.lost}
-    missing = [s for s in stamps if s not in node.outputs and s not in lost]
+    dropped = [s for s in stamps if s not in node.outputs and s in node.dropped]
+    missing = [s for s in stamps if s not in node.outputs and s not in lost and s not in node.dropped]
     duplicate = [s for s, n in node.received.items() if n > 1]
     unexpected = [s for s in node.received if s not in wanted]
     fr = settings.frame_rate
@@ -196,6 +199,8 @@ def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: 
           f'frames out {len(wanted & node.outputs.keys())}', file=out)
     print(f'missing {len(missing)}: {frame_ranges([frame_of(s, fr) for s in missing])}; '
           + (f'lost in restarts {len(lost)}; ' if effects else '')
+          + (f'dropped unsolved by bp_solver (behind the input: max_wait) {len(dropped)}: '
+             f'{frame_ranges([frame_of(s, fr) for s in dropped])}; ' if dropped else '')
           + f'duplicate {len(duplicate)}: {frame_ranges([frame_of(s, fr) for s in duplicate])}; '
           f'unexpected {len(unexpected)}: {frame_ranges([frame_of(s, fr) for s in unexpected])}', file=out)
     for output, at in ((OUTPUT_NAME, node.output_at), (LIVE_NAME, node.live_at)):

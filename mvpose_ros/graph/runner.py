@@ -143,7 +143,8 @@ def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, grou
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
           stamps: Sequence[int], memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
-    """Spin until every stamp has an output; True when it stopped because nothing happened for
+    """Spin until every stamp has an output or was dropped unsolved (skeletons/dropped: bp_solver
+    behind the input); True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
     after the player's start while neither happened yet). quiet > 0 (a paced rig run, whose
     graph drops sets): also done, not stalled, once the player has exited and nothing came for
@@ -154,7 +155,7 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     started = time.monotonic()
     player_done: float | None = None
     sampled = 0.0
-    while not wanted <= node.outputs.keys():
+    while not wanted <= node.outputs.keys() | node.dropped:
         executor.spin_once(timeout_sec=SPIN_S)
         if time.monotonic() - sampled > MEMORY_PERIOD_S:
             sampled = time.monotonic()

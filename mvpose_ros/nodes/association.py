@@ -35,13 +35,12 @@ from pathlib import Path
 
 import numpy as np
 import rclpy.logging
-from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_people
-from msg_adapters.stamp import stamp_ns
+from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros import topics
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
                                                           default_max_skew)
@@ -59,7 +58,6 @@ from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, dec
 
 EXPIRE_PERIOD_S = 0.05
 REPORT_EVERY = 100  # sets between two skew reports
-NS_PER_S = 1_000_000_000
 STATE_PERIOD_S = 0.2  # s between two writes of the identity state (a person moves little in it)
 
 
@@ -231,7 +229,7 @@ class AssociationNode(Node):
         self._drop(drop.camera, drop.stamp_ns, drop.reason, detail)
 
     def _publish(self, synced: SyncedSet) -> None:
-        stamp = Time(sec=synced.stamp_ns // NS_PER_S, nanosec=synced.stamp_ns % NS_PER_S)
+        stamp = stamp_of_ns(synced.stamp_ns)
         if synced.missing:
             names = ', '.join(self._names[c] for c in synced.missing)
             self._log.log((names, 'missing from sets'), f'set {synced.index} stamp {synced.stamp_ns} ns: no data from '

@@ -35,7 +35,6 @@ import importlib
 import time
 from typing import Any
 
-from builtin_interfaces.msg import Time
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import NameValidationException, ParameterException
@@ -48,6 +47,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty
 
 from msg_adapters.cdr_header import NS, header_stamp_ns, with_header_stamp
+from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped
 from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
@@ -306,7 +306,7 @@ class BagPlayerNode(Node):
 
     def _publish(self, loop: int, stamp: int, offset: int, frame: Frame) -> None:
         if self._clock_pub is not None:
-            self._clock_pub.publish(ClockMsg(clock=Time(sec=stamp // NS, nanosec=stamp % NS)))
+            self._clock_pub.publish(ClockMsg(clock=stamp_of_ns(stamp)))
         for topic, _, cdr in frame.messages:
             self._pubs[topic].publish(with_header_stamp(cdr, stamp) if offset and self._stamped[topic] else cdr)
         if self._in_flight is not None:

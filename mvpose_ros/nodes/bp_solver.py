@@ -18,10 +18,12 @@ duplicate, or out of order), which is logged and dropped; a message larger than 
 of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged). With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
 decoded and published. A bundle that has waited more than `max_wait` seconds since DDS received
-it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged and
-counted, so the queue and the latency stay bounded (the node runs rclpy's single-threaded
-executor for that receipt time: nodes.runtime.run). A rig without intrinsics in its file waits
-for every camera's CameraInfo; bundles before that are published with no people (logged).
+it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged,
+counted, and its stamp published on skeletons/dropped (std_msgs/Header, the world frame: that
+frame gets no skeletons, so a subscriber need not wait for it), so the queue and the latency stay
+bounded (the node runs rclpy's single-threaded executor for that receipt time: nodes.runtime.run).
+A rig without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
+published with no people (logged).
 
 Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
 node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
@@ -51,7 +53,7 @@ from msg_adapters.cdr_header import header_stamp_ns
 from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
-from msg_adapters.stamp import stamp_ns
+from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros import topics
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
@@ -134,6 +136,7 @@ class BpSolverNode(Node):
                         self._check, self._retune)
         self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
         self._live_skeletons = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
+        self._dropped = self.create_publisher(Header, topics.SKELETONS_DROPPED, DATA_QOS)
         self._lag = config.solver.inference.lag
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, DATA_QOS)
         self._camera_markers = self.create_publisher(MarkerArray, topics.CAMERA_MARKERS, LATCHED_QOS)
@@ -184,6 +187,8 @@ class BpSolverNode(Node):
             self._log.log(('bundles', 'behind'), f'bundles stamp {stamp} ns waited {waited:.2f} s since it was '
                                                  f'received, more than max_wait {self._max_wait:g} s: solving is '
                                                  f'slower than the input; dropped unsolved')
+            if stamp is not None:
+                self._dropped.publish(Header(stamp=stamp_of_ns(stamp), frame_id=self._world_frame))
             return
         try:
             msg = deserialize_message(cdr, PointCloud2)
