@@ -35,7 +35,7 @@ from mvpose_ros.graph.respawn import Restart, Respawner
 
 PLAYER = 'bag_player'
 SPIN_S = 0.05
-DRAIN_S = 0.25  # at most this long for camera infos still queued once every output has come
+DRAIN_S = 0.25  # at most this long for camera infos and live estimates still queued once every output has come
 # Node start-up (imports, calibration, models, DDS discovery, the player's wait for readers).
 STARTUP_TIMEOUT_S = 60.0
 LOG_TAIL = 15
@@ -172,9 +172,10 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
             return False
         if idle > limit:
             return True
-    # Camera infos of the last frames may still be queued behind their outputs.
+    # Camera infos and live estimates of the last frames may still be queued behind their outputs.
     deadline = time.monotonic() + DRAIN_S
-    while not wanted <= node.info_at.keys() and time.monotonic() < deadline:
+    solved = wanted - node.dropped
+    while not (wanted <= node.info_at.keys() and solved <= node.live_at.keys()) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=SPIN_S)
     return False
 
