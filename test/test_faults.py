@@ -6,6 +6,7 @@ one output or a logged reason."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 
 import numpy as np
@@ -21,6 +22,7 @@ from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.nodes.bp_solver import BUNDLES_CDR_OVERHEAD
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 
@@ -140,15 +142,19 @@ def test_killed_and_restarted_solver_resumes_within_a_window(domain, bundles, tm
 
 
 def test_oversize_bundles_are_refused_undecoded_and_answered_with_no_people(domain, tmp_path):
-    """The byte bound of a rig of two 64 x 48 cameras: a message one byte over it is not decoded,
-    yet answered (no people) and logged; the frames around it go on."""
+    """The byte bound of a rig of two 64 x 48 cameras: a message far over it is not even
+    deserialised (its serialised size said), one a byte over it is not decoded; each is answered (no
+    people), logged (the second within the throttle: counted) and counted; the frames around go on."""
     rig = tmp_path / 'rig.yaml'
     rig.write_text('world_frame: world\ncameras:\n' + ''.join(
         f'  - name: c{c}\n    image: c{c}/image\n    camera_info: c{c}/camera_info\n'
         f'    position: [{c}.0, 0.0, 0.0]\n    orientation: [0.0, 0.0, 0.0, 1.0]\n'
         f'    width: 64\n    height: 48\n    K: [50.0, 0.0, 32.0, 0.0, 50.0, 24.0, 0.0, 0.0, 1.0]\n' for c in range(2)))
     limit = max_bundles_bytes([(64, 48)] * 2)
-    junk = PointCloud2(header=Header(stamp=stamp_of_frame(301), frame_id='world'), height=1, width=limit + 1,
+    big = 10 * limit + BUNDLES_CDR_OVERHEAD
+    bomb = PointCloud2(header=Header(stamp=stamp_of_frame(301), frame_id='world'), height=1, width=big,
+                       point_step=1, row_step=big, data=bytes(big))
+    junk = PointCloud2(header=Header(stamp=stamp_of_frame(303), frame_id='world'), height=1, width=limit + 1,
                        point_step=1, row_step=limit + 1, data=bytes(limit + 1))
     log = tmp_path / 'bp.log'
     with probe(domain, 'oversize_probe') as (node, executor):
@@ -159,13 +165,18 @@ def test_oversize_bundles_are_refused_undecoded_and_answered_with_no_people(doma
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
             _connected(executor, pub, got, range(200, 250))
             pub.publish(bundles_to_msg([], Header(stamp=stamp_of_frame(300), frame_id='world')))
-            pub.publish(junk)
+            pub.publish(bomb)
             pub.publish(bundles_to_msg([], Header(stamp=stamp_of_frame(302), frame_id='world')))
-            assert spin_until(executor, lambda: {300, 301, 302} <= set(got), 20.0), log.read_text()
+            pub.publish(junk)
+            pub.publish(bundles_to_msg([], Header(stamp=stamp_of_frame(304), frame_id='world')))
+            assert spin_until(executor, lambda: {300, 301, 302, 303, 304} <= set(got), 20.0), log.read_text()
         finally:
             stop(proc)
-    assert len(msg_to_skeletons(got[301][0])[0]) == 0
-    assert f'{limit + 1} data bytes, more than the views of 64 people in every camera take ({limit})' in log.read_text()
+    assert len(msg_to_skeletons(got[301][0])[0]) == 0 and len(msg_to_skeletons(got[303][0])[0]) == 0
+    text = log.read_text()
+    assert re.search(rf'bundles stamp 12040000000 ns: \d+ serialised bytes, more than the views of 64 people in '
+                     rf'every camera take \({limit} \+ {BUNDLES_CDR_OVERHEAD}\); published with no people', text), text
+    assert 'bundles: 2 x oversize' in text
 
 
 @pytest.mark.parametrize('content, problem', [

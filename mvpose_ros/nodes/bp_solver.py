@@ -15,7 +15,8 @@ uses the real time between the bundles' stamps, so sets dropped upstream (uneven
 bridged, and a gap longer than `max_gap` seconds breaks the temporal chains. Every bundle message
 yields exactly one skeleton message, but for a late one (a stamp not after the last one taken: a
 duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
-of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged). With no input
+of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged), and not even
+deserialised when its bytes exceed that by more than BUNDLES_CDR_OVERHEAD. With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
 decoded and published. A bundle that has waited more than `max_wait` seconds since DDS received
 it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged,
@@ -81,6 +82,10 @@ class _NotReady(ValueError):
 
 class _Oversize(ValueError):
     """A bundles message larger than any the rig's cameras can honestly produce (not decoded)."""
+
+
+# serialised bytes of a bundles message beyond its data: header, fields and counts
+BUNDLES_CDR_OVERHEAD = 4096
 
 
 class BpSolverNode(Node):
@@ -174,7 +179,8 @@ class BpSolverNode(Node):
 
     def _on_bundles(self, cdr: bytes, info: dict[str, int]) -> None:
         """A bundles message as bytes with its DDS receipt time: dropped unread when it waited longer
-        than max_wait (so a backlog drains at once), else deserialised and solved."""
+        than max_wait (so a backlog drains at once) or came late, answered with no people unread when
+        its bytes exceed what the rig's cameras can send, else deserialised and solved."""
         self._last_input = arrival = time.monotonic()
         waited = (time.time_ns() - info['received_timestamp']) / 1e9
         try:
@@ -190,6 +196,21 @@ class BpSolverNode(Node):
             if stamp is not None:
                 self._dropped.publish(Header(stamp=stamp_of_ns(stamp), frame_id=self._world_frame))
             return
+        if stamp is not None and self._last_ns is not None and stamp <= self._last_ns:
+            # its output exists or is pending (a duplicate), or the window has moved past it
+            cause = 'duplicate' if stamp == self._last_ns else 'late'
+            self._bundles_in.dropped(arrival, cause)
+            self._log.log(('bundles', cause), f'bundles stamp {stamp} ns came after stamp {self._last_ns} ns: late or '
+                                              f'duplicate, dropped', 'error')
+            return
+        try:
+            if stamp is not None:  # before deserialising: the message's data would be copied
+                self._check_size(len(cdr), BUNDLES_CDR_OVERHEAD, 'serialised bytes')
+        except _Oversize as exc:
+            self._answer_nobody(stamp, arrival, 'oversize', exc)
+            return
+        except _NotReady:
+            pass  # said once the message is read
         try:
             msg = deserialize_message(cdr, PointCloud2)
         except RuntimeError as exc:  # rclpy's, for bytes that do not deserialise
@@ -199,19 +220,21 @@ class BpSolverNode(Node):
             return
         self._solve(msg, arrival)
 
+    def _answer_nobody(self, stamp: int, arrival: float, cause: str, exc: Exception) -> None:
+        """A bundle that cannot be solved: counted, logged, and answered with no people."""
+        self._bundles_in.dropped(arrival, cause)
+        self._log.log(('bundles', cause), f'bundles stamp {stamp} ns: {exc}; published with no people', 'error')
+        nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
+        self._publish_live(nobody, stamp_of_ns(stamp))
+        self._publish(nobody, stamp_of_ns(stamp))
+
     def _solve(self, msg: PointCloud2, arrival: float) -> None:
-        """Solve one bundles message and publish what is due: its causal estimate, and the frame
-        `lag` frames before it (or no people, for a message that cannot be solved: logged)."""
+        """Solve one bundles message (not late: _on_bundles) and publish what is due: its causal
+        estimate, and the frame `lag` frames before it (or no people, for a message that cannot be
+        solved: logged)."""
         stamp = stamp_ns(msg.header.stamp)
-        if self._last_ns is not None and stamp <= self._last_ns:
-            # its output exists or is pending (a duplicate), or the window has moved past it
-            cause = 'duplicate' if stamp == self._last_ns else 'late'
-            self._bundles_in.dropped(arrival, cause)
-            self._log.log(('bundles', cause), f'bundles stamp {stamp} ns came after stamp {self._last_ns} ns: late or '
-                                              f'duplicate, dropped', 'error')
-            return
         try:
-            self._check_size(msg)
+            self._check_size(len(msg.data))
             bundles = msg_to_bundles(msg)
             for pid, views in bundles:
                 bad = [c for c in views if c >= self._n_cameras]
@@ -227,11 +250,7 @@ class BpSolverNode(Node):
             self._next_frame += 1
         except ValueError as exc:
             cause = {_NotReady: 'no intrinsics', _Oversize: 'oversize'}.get(type(exc), 'malformed')
-            self._bundles_in.dropped(arrival, cause)
-            self._log.log(('bundles', cause), f'bundles stamp {stamp} ns: {exc}; published with no people', 'error')
-            nobody = FrameResult(-1, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
-            self._publish_live(nobody, msg.header.stamp)
-            self._publish(nobody, msg.header.stamp)
+            self._answer_nobody(stamp, arrival, cause, exc)
             return
         # with no lag the output is the causal estimate itself
         self._publish_live(results[0] if self._lag == 0 else self._inference.live(), msg.header.stamp)
@@ -241,10 +260,11 @@ class BpSolverNode(Node):
         for result in results:
             self._publish(result, self._stamps.pop(result.frame))
 
-    def _check_size(self, msg: PointCloud2) -> None:
-        """_Oversize for more data than the rig's views of people_msg.MAX_PEOPLE people take (a camera
-        whose size is not known yet counts as the largest known one); _NotReady before any is known.
-        The bound is computed once every camera is known, not per message."""
+    def _check_size(self, size: int, slack: int = 0, what: str = 'data bytes') -> None:
+        """_Oversize for more than `slack` bytes over the data the rig's views of
+        people_msg.MAX_PEOPLE people take (a camera whose size is not known yet counts as the largest
+        known one); _NotReady before any is known. The bound is computed once every camera is known,
+        not per message."""
         limit = self._byte_limit
         if limit is None:
             cameras = self._inference.cameras if self._intrinsics is None else self._intrinsics.known
@@ -255,9 +275,9 @@ class BpSolverNode(Node):
             limit = max_bundles_bytes(sizes + [max(sizes, key=lambda s: s[0] * s[1])] * missing)
             if not missing:
                 self._byte_limit = limit
-        if len(msg.data) > limit:
-            raise _Oversize(f'{len(msg.data)} data bytes, more than the views of {MAX_PEOPLE} people in every camera '
-                            f'take ({limit})')
+        if size > limit + slack:
+            raise _Oversize(f'{size} {what}, more than the views of {MAX_PEOPLE} people in every camera take '
+                            f'({limit}{f" + {slack}" if slack else ""})')
 
     def _on_timer(self) -> None:
         if not self._cameras_sent:
