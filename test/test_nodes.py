@@ -4,6 +4,7 @@ logged with a reason while the node keeps going."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.openpose_msg import max_openpose_bytes, openpose_to_msg
-from msg_adapters.people_msg import bundles_to_msg, msg_to_bundles, msg_to_people, people_to_msg
+from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_bundles, msg_to_people, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
@@ -163,12 +164,15 @@ def test_association_syncs_offset_jittered_cameras_into_one_bundle_per_set(domai
 
 
 def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_counts_them(domain, shelf, tmp_path):
-    """A message whose frame_id is not its rig camera's is dropped (frame_id); a set that only one
-    camera reaches (camera 0 stamping 20 ms late once, max_skew 5 ms) is dropped as unmatched
-    (min_cameras 2); the others are bundled as usual."""
+    """A message whose frame_id is not its rig camera's is dropped (frame_id); one far larger than
+    a people2d of its camera can be is dropped from its bytes, not deserialised (oversize), and the
+    camera's real message of that stamp is still used; a set that only one camera reaches (camera 0
+    stamping 20 ms late once, max_skew 5 ms) is dropped as unmatched (min_cameras 2); the others are
+    bundled as usual."""
     cameras, raw = shelf
     frames = range(300, 306)
     people = {f: [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)] for f in frames}
+    limit = max_people_bytes(1032, 776)
     log = tmp_path / 'association.log'
     with probe(domain, 'association_drops') as (node, executor):
         out: dict[int, list] = {}
@@ -184,6 +188,10 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
                     if (f, c) == (303, 0):
                         stamp = Time(sec=12, nanosec=140_000_000)  # 20 ms late: alone between two sets
                     frame_id = 'cam9' if (f, c) == (304, 2) else f'cam{c}'
+                    if (f, c) == (305, 3):
+                        pubs[c].publish(PointCloud2(header=Header(stamp=stamp, frame_id=frame_id), height=1,
+                                                    width=2 * limit, point_step=1, row_step=2 * limit,
+                                                    data=bytes(2 * limit)))
                     pubs[c].publish(people_to_msg(people[f][c], Header(stamp=stamp, frame_id=frame_id)))
             assert spin_until(executor, lambda: len(out) == len(frames)), log.read_text()
             spin_until(executor, lambda: False, 0.5)
@@ -192,8 +200,10 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
     assert sorted(out) == [stamp_ns(stamp_of_frame(f)) for f in frames] and all(len(v) == 1 for v in out.values())
     bundles = {f: msg_to_bundles(out[stamp_ns(stamp_of_frame(f))][0]) for f in frames}
     assert all(0 not in views for _, views in bundles[303]) and all(2 not in views for _, views in bundles[304])
-    assert all(len(bundles[f]) >= 2 for f in frames)
+    assert all(len(bundles[f]) >= 2 for f in frames) and any(3 in views for _, views in bundles[305])
     text = log.read_text()
+    assert re.search(rf'cam3 people2d stamp 12200000000 ns dropped \(oversize\): \d+ serialised bytes, more than a '
+                     rf'people2d of a 1032x776 camera carries \({limit} \+ 4096\)', text), text
     assert "cam2 people2d stamp 12160000000 ns dropped (frame_id): frame_id 'cam9', the rig says 'cam2'" in text
     assert 'cam0 people2d stamp 12140000000 ns dropped (unmatched)' in text and 'max skew 5.0 ms' in text
 

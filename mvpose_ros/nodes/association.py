@@ -11,9 +11,11 @@ set goes on without it (logged). A set needs `min_cameras` members (default 2: a
 seen twice to be triangulated, so a smaller set could only give an empty bundle); the messages of
 a smaller one are dropped. Every set yields exactly one bundle message, empty when nobody is
 seen twice, stamped with the set's stamp (its earliest member stamp) in the rig's world frame.
-Frames are numbered by set order, not by stamp x rate. A message larger than a people2d of its
-camera can be (people_msg.max_people_bytes of the camera's image size) is dropped before it is
-decoded. Every dropped message is counted by
+Frames are numbered by set order, not by stamp x rate. Inputs are read as bytes: the stamp,
+frame_id and size are checked before the message is deserialised. A message larger than a
+people2d of its camera can be (people_msg.max_people_bytes of the camera's image size) is dropped
+before it is deserialised when its bytes exceed that by more than PEOPLE_CDR_OVERHEAD, else before
+it is decoded. Every dropped message is counted by
 reason (late, duplicate, unmatched, overflow, frame_id, oversize, malformed, no intrinsics) and logged,
 at most every few seconds per camera and reason; every REPORT_EVERY sets the achieved skew
 (median, max) and the drops so far are logged. A rig without intrinsics in its file takes them
@@ -36,11 +38,13 @@ from pathlib import Path
 import numpy as np
 import rclpy.logging
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
+from msg_adapters.cdr_header import header_frame_id, header_stamp_ns
 from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_people
-from msg_adapters.stamp import stamp_ns, stamp_of_ns
+from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros import topics
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
                                                           default_max_skew)
@@ -59,6 +63,8 @@ from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, dec
 EXPIRE_PERIOD_S = 0.05
 REPORT_EVERY = 100  # sets between two skew reports
 STATE_PERIOD_S = 0.2  # s between two writes of the identity state (a person moves little in it)
+# serialised bytes of a people2d message beyond its data: header, fields and counts
+PEOPLE_CDR_OVERHEAD = 4096
 
 
 class AssociationNode(Node):
@@ -115,7 +121,7 @@ class AssociationNode(Node):
         self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
         for c, camera in enumerate(rig.cameras):
             self.create_subscription(PointCloud2, topics.camera_topic(camera.name, topics.PEOPLE2D),
-                                     partial(self._on_people, c), DATA_QOS)
+                                     partial(self._on_people, c), DATA_QOS, raw=True)
         self.create_timer(EXPIRE_PERIOD_S, self._on_timer)
         self.get_logger().info(f'{n} cameras ({", ".join(self._names)}), max skew {1e3 * max_skew:.1f} ms, '
                                f'sync timeout {p["sync_timeout"]} s, sets of >= {p["min_cameras"]} cameras'
@@ -169,7 +175,7 @@ class AssociationNode(Node):
         except OSError as exc:
             self._log.log(('state', 'not written'), f'identity state not written to {self._state}: {exc}')
 
-    def _drop(self, camera: int, stamp: int, reason: str, detail: str) -> None:
+    def _drop(self, camera: int, stamp: int | None, reason: str, detail: str) -> None:
         self.dropped[reason] += 1
         self._inputs[camera].dropped(time.monotonic(), reason)
         self._arrivals.pop((camera, stamp), None)
@@ -182,19 +188,37 @@ class AssociationNode(Node):
             self._associator.cameras[camera] = self._intrinsics.known[camera]
         return self._associator.cameras[camera] is not None
 
-    def _on_people(self, camera: int, msg: PointCloud2) -> None:
-        stamp = stamp_ns(msg.header.stamp)
+    def _on_people(self, camera: int, cdr: bytes) -> None:
+        """A people2d message as bytes: its stamp, frame_id and size are checked on them, so junk
+        (a flood, an oversized message) is refused before its message objects are made."""
         arrival = time.monotonic()
+        try:
+            stamp = header_stamp_ns(cdr)
+            frame_id = header_frame_id(cdr)
+        except ValueError as exc:
+            self._inputs[camera].received(arrival, None)
+            self._drop(camera, None, 'malformed', str(exc))
+            return
         self._inputs[camera].received(arrival, stamp)
         if not self._ready(camera):
             self._drop(camera, stamp, 'no intrinsics', 'no CameraInfo from this camera yet')
             return
         expected = self._rig.cameras[camera].frame_id
-        if msg.header.frame_id != expected:
-            self._drop(camera, stamp, 'frame_id', f'frame_id {msg.header.frame_id!r}, the rig says {expected!r}')
+        if frame_id != expected:
+            self._drop(camera, stamp, 'frame_id', f'frame_id {frame_id!r}, the rig says {expected!r}')
             return
         seen_by = self._associator.cameras[camera]
         limit = max_people_bytes(seen_by.width, seen_by.height)
+        if len(cdr) > limit + PEOPLE_CDR_OVERHEAD:
+            self._drop(camera, stamp, 'oversize', f'{len(cdr)} serialised bytes, more than a people2d of a '
+                                                  f'{seen_by.width}x{seen_by.height} camera carries ({limit} + '
+                                                  f'{PEOPLE_CDR_OVERHEAD})')
+            return
+        try:
+            msg = deserialize_message(cdr, PointCloud2)
+        except RuntimeError as exc:  # rclpy's, for bytes that do not deserialise
+            self._drop(camera, stamp, 'malformed', ' '.join(str(exc).split()))
+            return
         if len(msg.data) > limit:
             self._drop(camera, stamp, 'oversize', f'{len(msg.data)} data bytes, more than a people2d of a '
                                                   f'{seen_by.width}x{seen_by.height} camera carries ({limit})')
