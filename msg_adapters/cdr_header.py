@@ -1,12 +1,18 @@
 """The std_msgs/Header at the front of a serialised (CDR) message, read and rewritten in the
 bytes without deserialising the message: the player moves stamps on for later loops, the
 recorder times raw messages, and a node checks an input's stamp, frame and size before paying
-for its message objects."""
+for its message objects (then deserialise_cloud)."""
 from __future__ import annotations
 
 import struct
 
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import PointCloud2
+
 NS = 1_000_000_000
+# serialised bytes of a PointCloud2 beyond its data: header, fields and counts (205 for an OpenPose
+# cloud on Shelf): a node's bound on an input's bytes is its bound on the data plus this
+CLOUD_OVERHEAD = 4096
 
 # CDR encapsulation identifiers (first two bytes, big-endian) and the struct order they imply.
 _BYTE_ORDER = {b'\x00\x00': '>', b'\x00\x01': '<'}
@@ -52,3 +58,12 @@ def with_header_stamp(cdr: bytes, stamp_ns: int) -> bytes:
     out = bytearray(cdr)
     struct.pack_into(_byte_order(cdr) + 'iI', out, _ENCAPSULATION, sec, nanosec)
     return bytes(out)
+
+
+def deserialise_cloud(cdr: bytes) -> PointCloud2:
+    """The PointCloud2 of serialised bytes; ValueError of one line for bytes that do not
+    deserialise (rclpy raises RuntimeError with the C error)."""
+    try:
+        return deserialize_message(cdr, PointCloud2)
+    except RuntimeError as exc:
+        raise ValueError(f'{" ".join(str(exc).split())} ({len(cdr)} bytes as a PointCloud2)') from None

@@ -1,11 +1,13 @@
-"""The header of serialised messages, read and rewritten in the bytes: stamp, frame_id."""
+"""The header of serialised messages, read and rewritten in the bytes: stamp, frame_id; and a
+PointCloud2 deserialised with a one-line error."""
 from __future__ import annotations
 
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from msg_adapters.cdr_header import header_frame_id, header_stamp_ns, with_header_stamp
+from msg_adapters.cdr_header import (CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns,
+                                     with_header_stamp)
 
 S = 1_000_000_000
 
@@ -50,3 +52,15 @@ def test_header_frame_id_read_from_the_cdr_bytes(frame_id):
 def test_header_frame_id_of_bytes_that_cannot_hold_one_is_a_value_error(cdr):
     with pytest.raises(ValueError, match='frame_id'):
         header_frame_id(cdr)
+
+
+def test_a_cloud_deserialises_or_is_a_one_line_value_error():
+    cloud = PointCloud2(width=3, point_step=4, row_step=12, data=bytes(range(12)))
+    cloud.header.frame_id = 'cam1'
+    cdr = serialize_message(cloud)
+    assert deserialise_cloud(cdr) == cloud
+    assert len(cdr) - len(cloud.data) < CLOUD_OVERHEAD  # the bound the nodes add to a data bound
+    half = len(cdr) // 2
+    with pytest.raises(ValueError, match=rf'^failed to deserialize .* \({half} bytes as a PointCloud2\)$') as err:
+        deserialise_cloud(cdr[:half])
+    assert '\n' not in str(err.value)

@@ -14,6 +14,7 @@ import pytest
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
+from msg_adapters.cdr_header import CLOUD_OVERHEAD
 from msg_adapters.people_msg import bundles_to_msg, max_bundles_bytes, msg_to_bundles, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
@@ -22,7 +23,6 @@ from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.nodes.bp_solver import BUNDLES_CDR_OVERHEAD
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 
@@ -151,7 +151,7 @@ def test_oversize_bundles_are_refused_undecoded_and_answered_with_no_people(doma
         f'    position: [{c}.0, 0.0, 0.0]\n    orientation: [0.0, 0.0, 0.0, 1.0]\n'
         f'    width: 64\n    height: 48\n    K: [50.0, 0.0, 32.0, 0.0, 50.0, 24.0, 0.0, 0.0, 1.0]\n' for c in range(2)))
     limit = max_bundles_bytes([(64, 48)] * 2)
-    big = 10 * limit + BUNDLES_CDR_OVERHEAD
+    big = 10 * limit + CLOUD_OVERHEAD
     bomb = PointCloud2(header=Header(stamp=stamp_of_frame(301), frame_id='world'), height=1, width=big,
                        point_step=1, row_step=big, data=bytes(big))
     junk = PointCloud2(header=Header(stamp=stamp_of_frame(303), frame_id='world'), height=1, width=limit + 1,
@@ -175,7 +175,7 @@ def test_oversize_bundles_are_refused_undecoded_and_answered_with_no_people(doma
     assert len(msg_to_skeletons(got[301][0])[0]) == 0 and len(msg_to_skeletons(got[303][0])[0]) == 0
     text = log.read_text()
     assert re.search(rf'bundles stamp 12040000000 ns: \d+ serialised bytes, more than the views of 64 people in '
-                     rf'every camera take \({limit} \+ {BUNDLES_CDR_OVERHEAD}\); published with no people', text), text
+                     rf'every camera take \({limit} \+ {CLOUD_OVERHEAD}\); published with no people', text), text
     assert 'bundles: 2 x oversize' in text
 
 

@@ -15,6 +15,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.camera_info_msg import camera_to_info
+from msg_adapters.cdr_header import CLOUD_OVERHEAD
 from msg_adapters.openpose_msg import max_openpose_bytes, openpose_to_msg
 from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_bundles, msg_to_people, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
@@ -23,7 +24,6 @@ from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.stage import StageConfig
-from mvpose_ros.nodes.heatmap_detector import OPENPOSE_CDR_OVERHEAD
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 
@@ -75,7 +75,7 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(dom
             # serialised junk, refused before it is deserialised: cut short, and over the size bound
             real = serialize_message(openpose_to_msg(raw[1][304 - FIRST], _header(304, 'cam1')))
             pub.publish(real[:-7])
-            big = PointCloud2(header=_header(304, 'cam1'), data=bytes(max_openpose_bytes() + OPENPOSE_CDR_OVERHEAD))
+            big = PointCloud2(header=_header(304, 'cam1'), data=bytes(max_openpose_bytes() + CLOUD_OVERHEAD))
             pub.publish(serialize_message(big))
             pub.publish(b'\x07\x07' + real[2:])  # no CDR header
             pub.publish(openpose_to_msg(raw[1][305 - FIRST], _header(305, 'cam1')))
@@ -203,7 +203,7 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
     assert all(len(bundles[f]) >= 2 for f in frames) and any(3 in views for _, views in bundles[305])
     text = log.read_text()
     assert re.search(rf'cam3 people2d stamp 12200000000 ns dropped \(oversize\): \d+ serialised bytes, more than a '
-                     rf'people2d of a 1032x776 camera carries \({limit} \+ 4096\)', text), text
+                     rf'people2d of a 1032x776 camera carries \({limit} \+ {CLOUD_OVERHEAD}\)', text), text
     assert "cam2 people2d stamp 12160000000 ns dropped (frame_id): frame_id 'cam9', the rig says 'cam2'" in text
     assert 'cam0 people2d stamp 12140000000 ns dropped (unmatched)' in text and 'max skew 5.0 ms' in text
 

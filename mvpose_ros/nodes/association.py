@@ -14,8 +14,8 @@ seen twice, stamped with the set's stamp (its earliest member stamp) in the rig'
 Frames are numbered by set order, not by stamp x rate. Inputs are read as bytes: the stamp,
 frame_id and size are checked before the message is deserialised. A message larger than a
 people2d of its camera can be (people_msg.max_people_bytes of the camera's image size) is dropped
-before it is deserialised when its bytes exceed that by more than PEOPLE_CDR_OVERHEAD, else before
-it is decoded. Every dropped message is counted by
+before it is deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD, else
+before it is decoded. Every dropped message is counted by
 reason (late, duplicate, unmatched, overflow, frame_id, oversize, malformed, no intrinsics) and logged,
 at most every few seconds per camera and reason; every REPORT_EVERY sets the achieved skew
 (median, max) and the drops so far are logged. A rig without intrinsics in its file takes them
@@ -38,11 +38,10 @@ from pathlib import Path
 import numpy as np
 import rclpy.logging
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.cdr_header import header_frame_id, header_stamp_ns
+from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns
 from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_people
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros import topics
@@ -63,8 +62,6 @@ from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, dec
 EXPIRE_PERIOD_S = 0.05
 REPORT_EVERY = 100  # sets between two skew reports
 STATE_PERIOD_S = 0.2  # s between two writes of the identity state (a person moves little in it)
-# serialised bytes of a people2d message beyond its data: header, fields and counts
-PEOPLE_CDR_OVERHEAD = 4096
 
 
 class AssociationNode(Node):
@@ -209,15 +206,15 @@ class AssociationNode(Node):
             return
         seen_by = self._associator.cameras[camera]
         limit = max_people_bytes(seen_by.width, seen_by.height)
-        if len(cdr) > limit + PEOPLE_CDR_OVERHEAD:
+        if len(cdr) > limit + CLOUD_OVERHEAD:
             self._drop(camera, stamp, 'oversize', f'{len(cdr)} serialised bytes, more than a people2d of a '
                                                   f'{seen_by.width}x{seen_by.height} camera carries ({limit} + '
-                                                  f'{PEOPLE_CDR_OVERHEAD})')
+                                                  f'{CLOUD_OVERHEAD})')
             return
         try:
-            msg = deserialize_message(cdr, PointCloud2)
-        except RuntimeError as exc:  # rclpy's, for bytes that do not deserialise
-            self._drop(camera, stamp, 'malformed', ' '.join(str(exc).split()))
+            msg = deserialise_cloud(cdr)
+        except ValueError as exc:
+            self._drop(camera, stamp, 'malformed', str(exc))
             return
         if len(msg.data) > limit:
             self._drop(camera, stamp, 'oversize', f'{len(msg.data)} data bytes, more than a people2d of a '

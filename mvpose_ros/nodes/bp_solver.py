@@ -16,7 +16,7 @@ bridged, and a gap longer than `max_gap` seconds breaks the temporal chains. Eve
 yields exactly one skeleton message, but for a late one (a stamp not after the last one taken: a
 duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
 of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged), and not even
-deserialised when its bytes exceed that by more than BUNDLES_CDR_OVERHEAD. With no input
+deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD. With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
 decoded and published. A bundle that has waited more than `max_wait` seconds since DDS received
 it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged,
@@ -45,12 +45,11 @@ import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters.cdr_header import header_stamp_ns
+from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_stamp_ns
 from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
@@ -82,10 +81,6 @@ class _NotReady(ValueError):
 
 class _Oversize(ValueError):
     """A bundles message larger than any the rig's cameras can honestly produce (not decoded)."""
-
-
-# serialised bytes of a bundles message beyond its data: header, fields and counts
-BUNDLES_CDR_OVERHEAD = 4096
 
 
 class BpSolverNode(Node):
@@ -185,40 +180,43 @@ class BpSolverNode(Node):
         waited = (time.time_ns() - info['received_timestamp']) / 1e9
         try:
             stamp = header_stamp_ns(cdr)
-        except ValueError:
-            stamp = None
+        except ValueError as exc:
+            self._bundles_in.received(arrival, None)
+            self._drop_malformed(arrival, cdr, None, exc)
+            return
         self._bundles_in.received(arrival, stamp)
         if self._max_wait and waited > self._max_wait:
             self._bundles_in.dropped(arrival, 'behind')
             self._log.log(('bundles', 'behind'), f'bundles stamp {stamp} ns waited {waited:.2f} s since it was '
                                                  f'received, more than max_wait {self._max_wait:g} s: solving is '
                                                  f'slower than the input; dropped unsolved')
-            if stamp is not None:
-                self._dropped.publish(Header(stamp=stamp_of_ns(stamp), frame_id=self._world_frame))
+            self._dropped.publish(Header(stamp=stamp_of_ns(stamp), frame_id=self._world_frame))
             return
-        if stamp is not None and self._last_ns is not None and stamp <= self._last_ns:
+        if self._last_ns is not None and stamp <= self._last_ns:
             # its output exists or is pending (a duplicate), or the window has moved past it
             cause = 'duplicate' if stamp == self._last_ns else 'late'
             self._bundles_in.dropped(arrival, cause)
             self._log.log(('bundles', cause), f'bundles stamp {stamp} ns came after stamp {self._last_ns} ns: late or '
                                               f'duplicate, dropped', 'error')
             return
-        try:
-            if stamp is not None:  # before deserialising: the message's data would be copied
-                self._check_size(len(cdr), BUNDLES_CDR_OVERHEAD, 'serialised bytes')
+        try:  # before deserialising: the message's data would be copied
+            self._check_size(len(cdr), CLOUD_OVERHEAD, 'serialised bytes')
         except _Oversize as exc:
             self._answer_nobody(stamp, arrival, 'oversize', exc)
             return
         except _NotReady:
             pass  # said once the message is read
         try:
-            msg = deserialize_message(cdr, PointCloud2)
-        except RuntimeError as exc:  # rclpy's, for bytes that do not deserialise
-            self._bundles_in.dropped(arrival, 'malformed')
-            self._log.log(('bundles', 'malformed'), f'bundles of {len(cdr)} bytes (stamp {stamp}): {exc}; dropped',
-                          'error')
+            msg = deserialise_cloud(cdr)
+        except ValueError as exc:
+            self._drop_malformed(arrival, cdr, stamp, exc)
             return
         self._solve(msg, arrival)
+
+    def _drop_malformed(self, arrival: float, cdr: bytes, stamp: int | None, exc: Exception) -> None:
+        self._bundles_in.dropped(arrival, 'malformed')
+        self._log.log(('bundles', 'malformed'), f'bundles of {len(cdr)} bytes (stamp {stamp}): {exc}; dropped',
+                      'error')
 
     def _answer_nobody(self, stamp: int, arrival: float, cause: str, exc: Exception) -> None:
         """A bundle that cannot be solved: counted, logged, and answered with no people."""

@@ -75,12 +75,11 @@ import rclpy.logging
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
 from msg_adapters.camera_info_msg import check_info, info_key, info_to_intrinsics
-from msg_adapters.cdr_header import header_frame_id, header_stamp_ns
+from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns
 from msg_adapters.image_msg import check_camera_image, to_bgr
 from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
@@ -106,8 +105,6 @@ from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
-# serialised bytes of an OpenPose cloud beyond its data: header, fields and counts (205 on Shelf)
-OPENPOSE_CDR_OVERHEAD = 4096
 BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
 IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
@@ -428,11 +425,11 @@ class HeatmapDetectorNode(Node):
         try:
             stamp = header_stamp_ns(cdr)
             _check_frame_id(cam, header_frame_id(cdr))
-            if len(cdr) > max_openpose_bytes() + OPENPOSE_CDR_OVERHEAD:
+            if len(cdr) > max_openpose_bytes() + CLOUD_OVERHEAD:
                 raise ValueError(f'OpenPose output of {len(cdr)} serialised bytes, more than one image can have '
                                  f'({max_openpose_bytes()} data bytes)')
-            msg = deserialize_message(cdr, PointCloud2)
-        except (ValueError, RuntimeError) as exc:  # RuntimeError: rclpy's, for bytes that do not deserialise
+            msg = deserialise_cloud(cdr)
+        except ValueError as exc:
             self._inputs[cam.index].received(time.monotonic(), stamp)
             self._drop(cam, stamp, str(exc))
             return
