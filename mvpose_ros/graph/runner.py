@@ -155,7 +155,7 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     started = time.monotonic()
     player_done: float | None = None
     sampled = 0.0
-    while not wanted <= node.outputs.keys() | node.dropped:
+    while not node.accounted(wanted):
         executor.spin_once(timeout_sec=SPIN_S)
         if time.monotonic() - sampled > MEMORY_PERIOD_S:
             sampled = time.monotonic()
