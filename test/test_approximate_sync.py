@@ -292,6 +292,21 @@ def test_min_cameras_drops_smaller_sets_as_unmatched():
     assert [(s.index, s.items) for s in released] == [(0, ['b0', 'b1', 'b2'])]
     assert sync.take_drops() == [Drop(0, 100 * MS, 'unmatched')] and sync.take_drops() == []
     assert sync.dropped == {'unmatched': 1}
+    assert sync.take_lost() == [100 * MS] and sync.take_lost() == []
+
+
+def test_a_set_short_of_min_cameras_is_one_lost_stamp_however_many_members_it_drops():
+    """Two cameras of four reach a set (min_cameras 3): both messages are dropped, the set is
+    lost once, at its pivot's (earliest) stamp; a camera's own partnerless drop elsewhere is a
+    set of its own."""
+    sync = ApproximateSync(4, timeout=0.5, max_skew=0.010, min_cameras=3)
+    released = sync.add(104 * MS, 1, 'a1', now=0.0) + sync.add(100 * MS, 0, 'a0', now=0.0)
+    for c in range(4):
+        released += sync.add(200 * MS + c * MS, c, f'b{c}', now=0.1)
+    released += sync.add(300 * MS, 2, 'c2', now=0.2) + sync.expire(now=1.0)
+    assert [s.stamp_ns for s in released] == [200 * MS]
+    assert sorted(d.stamp_ns for d in sync.take_drops()) == [100 * MS, 104 * MS, 300 * MS]
+    assert sync.take_lost() == [100 * MS, 300 * MS]
 
 
 def test_queue_overflow_drops_the_oldest_and_counts_it():

@@ -180,10 +180,10 @@ def test_report_counts_missing_duplicate_unexpected_and_bad_outputs():
     assert problems == ['2 of 6 input stamps got no /skeletons', '1 stamps got more than one /skeletons',
                         '1 /skeletons stamps are not in the bag',
                         '1 undecodable /skeletons messages, first: 12040000000 ns: person 0 has 13 joints']
-    # a frame bp_solver dropped unsolved (skeletons/dropped) is counted apart, not as missing
+    # a frame the graph dropped (skeletons/dropped) is counted apart, not as missing
     node.dropped = {ns[3]}
     out = io.StringIO()
     problems = report(ns, node, RUNNER_DEFAULTS, out)
-    assert out.getvalue().splitlines()[1] == ('missing 1: 302; dropped unsolved by bp_solver (behind the input: '
-                                              'max_wait) 1: 303; duplicate 1: 301; unexpected 1: 400')
+    assert out.getvalue().splitlines()[1] == ('missing 1: 302; dropped (skeletons/dropped: too few cameras in a set, '
+                                              'or behind the input) 1: 303; duplicate 1: 301; unexpected 1: 400')
     assert problems[0] == '1 of 6 input stamps got no /skeletons'

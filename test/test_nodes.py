@@ -167,8 +167,8 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
     """A message whose frame_id is not its rig camera's is dropped (frame_id); one far larger than
     a people2d of its camera can be is dropped from its bytes, not deserialised (oversize), and the
     camera's real message of that stamp is still used; a set that only one camera reaches (camera 0
-    stamping 20 ms late once, max_skew 5 ms) is dropped as unmatched (min_cameras 2); the others are
-    bundled as usual."""
+    stamping 20 ms late once, max_skew 5 ms) is dropped as unmatched (min_cameras 2) and its stamp
+    published on skeletons/dropped, once; the others are bundled as usual."""
     cameras, raw = shelf
     frames = range(300, 306)
     people = {f: [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)] for f in frames}
@@ -178,6 +178,8 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
         out: dict[int, list] = {}
         node.create_subscription(PointCloud2, '/people/bundles',
                                  lambda m: out.setdefault(stamp_ns(m.header.stamp), []).append(m), DATA_QOS)
+        lost: list[Header] = []
+        node.create_subscription(Header, '/skeletons/dropped', lost.append, DATA_QOS)
         pubs = [node.create_publisher(PointCloud2, f'/cam{c}/people2d', DATA_QOS) for c in range(5)]
         proc = start_node('association', domain, log, '-p', 'sync_timeout:=5.0', '-p', 'max_skew:=0.005')
         try:
@@ -198,6 +200,7 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
         finally:
             stop(proc)
     assert sorted(out) == [stamp_ns(stamp_of_frame(f)) for f in frames] and all(len(v) == 1 for v in out.values())
+    assert [(stamp_ns(m.stamp), m.frame_id) for m in lost] == [(12_140_000_000, 'world')]
     bundles = {f: msg_to_bundles(out[stamp_ns(stamp_of_frame(f))][0]) for f in frames}
     assert all(0 not in views for _, views in bundles[303]) and all(2 not in views for _, views in bundles[304])
     assert all(len(bundles[f]) >= 2 for f in frames) and any(3 in views for _, views in bundles[305])

@@ -1,7 +1,7 @@
 """The skeleton recorder: the node that keeps the graph's output, for the runner and on its own.
 
 `SkeletonRecorder` keeps the first skeletons message of every stamp, counts every message per
-stamp (duplicates), keeps the stamps bp_solver dropped unsolved (skeletons/dropped), and records
+stamp (duplicates), keeps the stamps the graph dropped (skeletons/dropped), and records
 when (middleware receipt time, ns of the system clock, so queueing in its executor does not count)
 each stamp's camera 0 camera_info (for a rig: the first camera_info of any camera with that
 stamp, i.e. the first member of a set) and skeletons arrived, for a rig every camera's people2d
@@ -21,7 +21,7 @@ the --ready file (and, with --start-topic, lets a bag_player started with that s
 once its camera_info reader has matched the player's writer). Every skeletons message is appended
 to --predictions as it arrives, as a predictions line, duplicates included. It exits 0 once every
 input stamp of --bag has its output and --drain s have passed (to catch duplicates), 1 once every
-stamp has its output or was dropped unsolved by bp_solver (skeletons/dropped) but some were, or
+stamp has its output or was dropped (skeletons/dropped) but some were, or
 after --timeout s without a new output; --stats is written either way:
 
     {"complete": bool, "bad": ["<stamp> ns: <why>", ...], "dropped": [<stamp ns>, ...],
@@ -76,7 +76,7 @@ def graph_topics(cameras: int) -> dict[str, Any]:
 
 class SkeletonRecorder(Node):
     """Skeletons per stamp, their receipt times, camera 0's camera_info receipt times and the
-    stamps dropped unsolved.
+    stamps the graph dropped.
 
     stream: a text file every skeletons message goes to as a predictions line (None: kept only);
     measure_cameras: > 0 also records the size of every message the nodes of a graph with that
@@ -99,7 +99,7 @@ class SkeletonRecorder(Node):
         self.outputs: dict[int, Skeletons] = {}
         self.output_at: dict[int, int] = {}
         self.live_at: dict[int, int] = {}  # stamp -> receipt (ns) of its skeletons/live
-        self.dropped: set[int] = set()  # stamps bp_solver dropped unsolved (skeletons/dropped)
+        self.dropped: set[int] = set()  # stamps the graph dropped (skeletons/dropped)
         self.received: Counter[int] = Counter()
         self.bad: list[str] = []
         self.last_activity = 0.0  # monotonic s of the last message, for stall timeouts
@@ -193,7 +193,7 @@ class SkeletonRecorder(Node):
             self.stream.flush()
 
     def accounted(self, wanted: AbstractSet[int]) -> bool:
-        """Whether every stamp of `wanted` has its output or was dropped unsolved. The plain subset
+        """Whether every stamp of `wanted` has its output or was dropped. The plain subset
         test goes first: it stops at the first stamp missing, where a union would copy every output
         at each call (callers ask at every spin, tens of thousands of stamps in a long run)."""
         return wanted <= self.outputs.keys() or (bool(self.dropped) and wanted - self.dropped <= self.outputs.keys())
@@ -290,7 +290,7 @@ def record(args: argparse.Namespace) -> bool:
         while time.monotonic() < drain_until:
             executor.spin_once(timeout_sec=SPIN_S)
         if not complete:
-            print(f'{len(wanted - node.outputs.keys())} of {len(wanted)} stamps dropped unsolved by bp_solver '
+            print(f'{len(wanted - node.outputs.keys())} of {len(wanted)} stamps dropped by the graph '
                   f'(skeletons/dropped)', file=sys.stderr)
         return complete
     except (KeyboardInterrupt, ExternalShutdownException):

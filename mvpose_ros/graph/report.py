@@ -185,8 +185,9 @@ def print_periods(stamps: Sequence[int], node: Recorded, memory: MemoryLog, peri
 def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: TextIO,
            effects: Sequence[RestartEffect] = ()) -> list[str]:
     """Print counts and latency of the input `stamps` (ns, bag order); returns the problems
-    (missing but for the frames lost in restarts (`effects`) and those bp_solver dropped unsolved,
-    which are counted apart: a graph behind its input by design, each logged; output never resumed
+    (missing but for the frames lost in restarts (`effects`) and those the graph dropped
+    (skeletons/dropped: a set short of min_cameras, or solved too late), which are counted apart:
+    a graph behind its input by design, each logged; output never resumed
     after a restart, duplicate, unexpected, bad outputs)."""
     wanted = set(stamps)
     lost = {s for e in effects for s in e.lost}
@@ -199,7 +200,7 @@ def report(stamps: Sequence[int], node: Recorded, settings: GraphSettings, out: 
           f'frames out {len(wanted & node.outputs.keys())}', file=out)
     print(f'missing {len(missing)}: {frame_ranges([frame_of(s, fr) for s in missing])}; '
           + (f'lost in restarts {len(lost)}; ' if effects else '')
-          + (f'dropped unsolved by bp_solver (behind the input: max_wait) {len(dropped)}: '
+          + (f'dropped (skeletons/dropped: too few cameras in a set, or behind the input) {len(dropped)}: '
              f'{frame_ranges([frame_of(s, fr) for s in dropped])}; ' if dropped else '')
           + f'duplicate {len(duplicate)}: {frame_ranges([frame_of(s, fr) for s in duplicate])}; '
           f'unexpected {len(unexpected)}: {frame_ranges([frame_of(s, fr) for s in unexpected])}', file=out)

@@ -143,8 +143,8 @@ def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, grou
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
           stamps: Sequence[int], memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
-    """Spin until every stamp has an output or was dropped unsolved (skeletons/dropped: bp_solver
-    behind the input); True when it stopped because nothing happened for
+    """Spin until every stamp has an output or was dropped (skeletons/dropped: a set short of
+    min_cameras, or bp_solver behind the input); True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
     after the player's start while neither happened yet). quiet > 0 (a paced rig run, whose
     graph drops sets): also done, not stalled, once the player has exited and nothing came for

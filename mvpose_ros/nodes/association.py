@@ -9,8 +9,10 @@ most one message per camera, their stamps within `max_skew` seconds (0: half a f
 `frame_rate`); a camera missing from a set is waited for at most `sync_timeout` seconds, then the
 set goes on without it (logged). A set needs `min_cameras` members (default 2: a person must be
 seen twice to be triangulated, so a smaller set could only give an empty bundle); the messages of
-a smaller one are dropped. Every set yields exactly one bundle message, empty when nobody is
-seen twice, stamped with the set's stamp (its earliest member stamp) in the rig's world frame.
+a smaller one are dropped, and that set's stamp is published on skeletons/dropped (std_msgs/Header,
+the world frame: that frame gets no skeletons, so a subscriber need not wait for it). Every set
+yields exactly one bundle message, empty when nobody is seen twice, stamped with the set's stamp
+(its earliest member stamp) in the rig's world frame.
 Frames are numbered by set order, not by stamp x rate. Inputs are read as bytes: the stamp,
 frame_id and size are checked before the message is deserialised. A message larger than a
 people2d of its camera can be (people_msg.max_people_bytes of the camera's image size) is dropped
@@ -116,6 +118,7 @@ class AssociationNode(Node):
         if self._state is not None:
             self._restore_ids(p['state_max_age'])
         self._publisher = self.create_publisher(PointCloud2, topics.BUNDLES, DATA_QOS)
+        self._lost = self.create_publisher(Header, topics.SKELETONS_DROPPED, DATA_QOS)
         for c, camera in enumerate(rig.cameras):
             self.create_subscription(PointCloud2, topics.camera_topic(camera.name, topics.PEOPLE2D),
                                      partial(self._on_people, c), DATA_QOS, raw=True)
@@ -241,6 +244,8 @@ class AssociationNode(Node):
     def _release(self, sets: list[SyncedSet]) -> None:
         for drop in self._sync.take_drops():
             self._sync_drop(drop)
+        for stamp in self._sync.take_lost():
+            self._lost.publish(Header(stamp=stamp_of_ns(stamp), frame_id=self._rig.world_frame))
         for synced in sets:
             self._publish(synced)
 

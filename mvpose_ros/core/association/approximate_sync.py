@@ -31,9 +31,10 @@ Semantics (stamps are integer nanoseconds, times monotonic seconds passed in by 
   'duplicate': the camera's stamp is already pending; both raise ValueError from add() (as
   StampSync does) so the caller can log it.
   'unmatched': a set with fewer than `min_cameras` members is not released: its members are
-  dropped (and do not take a set index); 'overflow': more than `queue_size` messages pending from
-  one camera (e.g. a camera stamping far in the future): its oldest is dropped. These two happen
-  inside the release and are listed by take_drops().
+  dropped (and do not take a set index), and its stamp is listed by take_lost() (a frame that
+  gets no set, which a subscriber waiting for every frame needs to know); 'overflow': more than
+  `queue_size` messages pending from one camera (e.g. a camera stamping far in the future): its
+  oldest is dropped. These two happen inside the release and are listed by take_drops().
 
 max_skew must cover the rig's stamp offsets plus their jitter (typically half a frame period, at
 most; the caller gives it): cameras offset by more than max_skew form separate sets.
@@ -111,6 +112,7 @@ class ApproximateSync:
         self._floor: list[int | None] = [None] * cameras  # stamps <= this are late
         self._absent: set[int] = set()  # cameras a set waited the timeout for, silent since
         self._drops: list[Drop] = []
+        self._lost: list[int] = []  # stamps (ns) of the sets not released for want of min_cameras
 
     def retune(self, timeout: float, max_skew: float) -> None:
         """A new timeout and max_skew (seconds, as in the constructor) for what is released from now on."""
@@ -164,6 +166,11 @@ class ApproximateSync:
         drops, self._drops = self._drops, []
         return drops
 
+    def take_lost(self) -> list[int]:
+        """The stamps (ns) of the sets dropped as 'unmatched' since the last call, in stamp order."""
+        lost, self._lost = self._lost, []
+        return lost
+
     @property
     def absent(self) -> list[int]:
         """Cameras not waited for: a set went without them after the timeout, nothing since."""
@@ -197,6 +204,7 @@ class ApproximateSync:
                 for c, m in messages.items():
                     self._count(c, 'unmatched')
                     self._drops.append(Drop(c, m.stamp, 'unmatched'))
+                self._lost.append(pivot)
                 continue
             stamps = [messages[c].stamp if c in messages else None for c in range(self.cameras)]
             items = [messages[c].item if c in messages else None for c in range(self.cameras)]
