@@ -156,6 +156,11 @@ def test_paper_head_is_neck_and_nose_shifted_up():
     np.testing.assert_allclose(out, expected, atol=1e-12)
     assert body.HEAD_SHIFT_M == pytest.approx(0.10)
     np.testing.assert_array_equal(body.UP, [0, 0, 1])
+    # a rig whose world has y up: the shift goes along y
+    sideways = body.finalize_head(joints, 'paper', up=np.array([0.0, 1.0, 0.0]))
+    expected = joints[:, :14].copy()
+    expected[:, [12, 13], 1] += body.HEAD_SHIFT_M
+    np.testing.assert_allclose(sideways, expected, atol=1e-12)
 
 
 def test_anatomical_head_from_3d_ears_and_neck():

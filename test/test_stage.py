@@ -2,10 +2,14 @@
 from flat parameters (StageConfig.from_params)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
 import pytest
 
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
+from mvpose_ros.core.geometry.body import UP
 from mvpose_ros.core.heatmap import HeatmapStack
 from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig, parameter_specs
 
@@ -61,3 +65,26 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
 def test_invalid_parameters_name_the_problem(params, problem):
     with pytest.raises(ValueError, match=problem):
         StageConfig.from_params(params)
+
+
+@pytest.mark.parametrize('head_model', ['paper', 'anatomical'])
+def test_a_world_turned_so_that_y_is_up_gives_the_same_skeletons_turned(head_model):
+    """The Shelf rig with its world turned 90 degrees (z up becomes y up, as a rig file's `up:
+    [0, 1, 0]` says): the same frames give the same skeletons turned, the head model's gravity
+    included ('paper' shifts the head along the rig's up, not along z)."""
+    cameras, raw = shelf_openpose_raw(None)
+    turn = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # world -> turned world
+    turned = [replace(cam, R=cam.R @ turn.T) for cam in cameras]
+    config = StageConfig.from_params({'window': 4, 'lag': 1, 'head_model': head_model})
+    stages = Stage3D(cameras, config), Stage3D(turned, config, up=turn @ UP)
+    results: tuple[list, list] = ([], [])
+    for k in range(6):
+        people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(cameras))]
+        for stage, out in zip(stages, results):
+            out += stage.push(300 + k, people)
+    for stage, out in zip(stages, results):
+        out += stage.flush()
+    assert [r.frame for r in results[1]] == list(range(300, 306))
+    for plain, other in zip(*results):
+        assert other.person_ids == plain.person_ids
+        np.testing.assert_allclose(other.joints, plain.joints @ turn.T, atol=1e-6)

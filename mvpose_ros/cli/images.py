@@ -35,7 +35,7 @@ from typing import Sequence, TextIO
 import cv2
 import numpy as np
 
-from mvpose_ros.core.geometry.body import HEAD_MODELS, NUM_JOINTS
+from mvpose_ros.core.geometry.body import HEAD_MODELS, NUM_JOINTS, UP
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
@@ -99,18 +99,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _rig_and_images(args: argparse.Namespace) -> tuple[list[Camera], list[np.ndarray]]:
-    """The rig's cameras and their images: checked against the sizes a rig file gives, or giving a
-    calibration json (which records none) each camera's size."""
+def _rig_and_images(args: argparse.Namespace) -> tuple[list[Camera], np.ndarray, list[np.ndarray]]:
+    """The rig's cameras, its up (3,) and the images: checked against the sizes a rig file gives,
+    or giving a calibration json (which records neither: +z up) each camera's size."""
     if args.rig is not None:
-        cameras = load_rig_file(args.rig, data_root=data_root(args.data_root)).calibrated_cameras()
+        rig = load_rig_file(args.rig, data_root=data_root(args.data_root))
+        cameras = rig.calibrated_cameras()
         _same_count(args.images, cameras)
-        return cameras, [read_image(path, cam) for path, cam in zip(args.images, cameras)]
+        return cameras, rig.up, [read_image(path, cam) for path, cam in zip(args.images, cameras)]
     images = [read_image(path) for path in args.images]
     height, width = images[0].shape[:2]
     cameras = load_rig(args.calibration, width, height)
     _same_count(args.images, cameras)
-    return [replace(cam, width=im.shape[1], height=im.shape[0]) for cam, im in zip(cameras, images)], images
+    return [replace(cam, width=im.shape[1], height=im.shape[0]) for cam, im in zip(cameras, images)], UP, images
 
 
 def _same_count(paths: Sequence[Path], cameras: Sequence[Camera]) -> None:
@@ -153,7 +154,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         raise ValueError(f'--person-detector-every {args.person_detector_every}: --heatmaps multipose takes every '
                          'keypoint from MultiPose, which must then run on every set (crops between need '
                          '--heatmaps efficientpose)')
-    cameras, images = _rig_and_images(args)
+    cameras, up, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
                                                    threads=args.threads, input_size=args.input_size,
@@ -165,7 +166,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     source = 'MultiPose keypoints' if args.heatmaps == 'multipose' else f'{args.heatmaps} {args.model.upper()}'
     print(f'{PROG}: {len(cameras)} cameras, heatmaps {source}, MultiPose input '
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
-    stage = Stage3D(cameras, StageConfig.from_params({'window': 0, 'head_model': args.head_model}))
+    stage = Stage3D(cameras, StageConfig.from_params({'window': 0, 'head_model': args.head_model}), up)
     nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
     times = []
     for n in range(args.sets):

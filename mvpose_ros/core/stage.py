@@ -17,9 +17,11 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
+import numpy as np
+
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.association.matching import MatchingConfig
-from mvpose_ros.core.geometry.body import HEAD_MODELS
+from mvpose_ros.core.geometry.body import HEAD_MODELS, UP
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.factors import FactorConfig
 from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, SamplingConfig
@@ -125,11 +127,12 @@ class Stage3D:
     decoded frames that are due. `timer` holds the time of every step ('association', then the
     solver's)."""
 
-    def __init__(self, cameras: Sequence[Camera], config: StageConfig) -> None:
+    def __init__(self, cameras: Sequence[Camera], config: StageConfig, up: np.ndarray = UP) -> None:
+        """up (3,): the world's up, a unit vector (Inference3D)."""
         self.cameras = list(cameras)
         self.config = config
         self.associator = Associator(self.cameras, config.association)
-        self.solver = Inference3D(self.cameras, config.solver)
+        self.solver = Inference3D(self.cameras, config.solver, up)
         self.timer: StageTimer = self.solver.timer
 
     def associate(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[Bundle]:

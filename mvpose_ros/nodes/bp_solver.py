@@ -112,7 +112,7 @@ class BpSolverNode(Node):
         self._names = rig.names
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
         self._inference = Inference3D(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
-                                      config.solver)
+                                      config.solver, rig.up)
         self._byte_limit: int | None = None  # of a bundles message, once every camera's size is known
         self._idle = p['idle_flush']
         self._marker_lifetime = p['marker_lifetime']

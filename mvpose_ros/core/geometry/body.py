@@ -99,14 +99,15 @@ INFERENCE_PARENT = np.array([INFERENCE_NAMES.index(_PARENTS[n][0]) if n in _PARE
                              for n in INFERENCE_NAMES])  # (16,)
 PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n in INFERENCE_NAMES])  # (16,) m
 
-# 'paper': bottom/top head = neck/nose + 10 cm up (Schwarcz & Pollard's scoring).
+# 'paper': bottom/top head = neck/nose + 10 cm up (Schwarcz & Pollard's scoring), up being the
+#   world's (a rig file's `up`; +z in Shelf and Campus).
 # 'anatomical': from the 3D ears and neck, as VoxelPose and mvpose derive it for COCO: head
 #   centre = ear midpoint, bottom = midway between neck and head centre, top = as far above the
 #   centre as the bottom is below it.
 # 'direct': the detector already gives bottom/top head (MPII upper_neck / head_top).
 HEAD_MODELS = ('paper', 'anatomical', 'direct')
 HEAD_SHIFT_M = 0.10
-UP = np.array([0.0, 0.0, 1.0])  # the Shelf and Campus worlds have z up
+UP = np.array([0.0, 0.0, 1.0])  # the Shelf and Campus worlds have z up; a rig file's default
 
 
 def to_inference(keypoints: np.ndarray, fmt: str) -> np.ndarray:
@@ -132,14 +133,15 @@ def to_inference(keypoints: np.ndarray, fmt: str) -> np.ndarray:
     return out
 
 
-def finalize_head(joints: np.ndarray, head_model: str) -> np.ndarray:
-    """The dataset's 14 joints (..., 14, 3) from the 16 inferred 3D joints (..., 16, 3), metres."""
+def finalize_head(joints: np.ndarray, head_model: str, up: np.ndarray = UP) -> np.ndarray:
+    """The dataset's 14 joints (..., 14, 3) from the 16 inferred 3D joints (..., 16, 3), metres;
+    up (3,): the world's up, a unit vector."""
     if head_model not in HEAD_MODELS:
         raise ValueError(f'unknown head model {head_model!r}; expected one of {HEAD_MODELS}')
     joints = np.asarray(joints, dtype=np.float64)
     out = joints[..., :NUM_JOINTS, :].copy()
     if head_model == 'paper':
-        out[..., [BOTTOM_HEAD, TOP_HEAD], :] += HEAD_SHIFT_M * UP
+        out[..., [BOTTOM_HEAD, TOP_HEAD], :] += HEAD_SHIFT_M * np.asarray(up, dtype=np.float64)
     elif head_model == 'anatomical':
         centre = 0.5 * (joints[..., R_EAR, :] + joints[..., L_EAR, :])
         out[..., BOTTOM_HEAD, :] = 0.5 * (joints[..., NECK, :] + centre)

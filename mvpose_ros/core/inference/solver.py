@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import BONES, HEAD_MODELS, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
+from mvpose_ros.core.geometry.body import BONES, HEAD_MODELS, SYMMETRIC_PAIRS, UP, finalize_confidence, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.confidence import joint_support
 from mvpose_ros.core.inference.factors import data_terms
@@ -65,9 +65,11 @@ class Inference3D:
     """From associated people (id and views) of each frame to decoded 3D skeletons: sampling,
     data term, sliding-window BP and the head model. The bp_solver node runs this."""
 
-    def __init__(self, cameras: Sequence[Camera], config: SolverConfig) -> None:
+    def __init__(self, cameras: Sequence[Camera], config: SolverConfig, up: np.ndarray = UP) -> None:
+        """up (3,): the world's up, a unit vector (the rig's; the head model's gravity)."""
         self.cameras = list(cameras)
         self.config = config
+        self.up = np.asarray(up, dtype=np.float64)
         self.timer = StageTimer()
         self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), self.timer)
 
@@ -90,7 +92,7 @@ class Inference3D:
     def _finish(self, result: FrameResult) -> FrameResult:
         t0 = time.perf_counter()
         head = self.config.head_model
-        out = FrameResult(result.frame, result.person_ids, finalize_head(result.joints, head),
+        out = FrameResult(result.frame, result.person_ids, finalize_head(result.joints, head, self.up),
                           finalize_confidence(result.confidence, head))
         self.timer.add('decoding', t0)
         return out
