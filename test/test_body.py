@@ -178,6 +178,24 @@ def test_anatomical_head_from_3d_ears_and_neck():
     np.testing.assert_allclose(out2[1], out + (1.0, -2.0, 0.0))
 
 
+def test_facing_head_puts_the_top_forward_and_up_from_the_anatomical_bottom():
+    joints = _skeleton_3d()
+    joints[[2, 3]] = (0.1, 0.0, 1.0), (-0.1, 0.0, 1.0)  # hips: right at +x
+    joints[[8, 9]] = (0.2, 0.0, 1.45), (-0.2, 0.0, 1.45)  # shoulders: facing +y (z up, right at +x)
+    anatomical = body.finalize_head(joints, 'anatomical')
+    out = body.finalize_head(joints, 'facing')
+    np.testing.assert_array_equal(out[:13], anatomical[:13])
+    forward, rise = body.FACING_TOP_M
+    np.testing.assert_allclose(out[13], anatomical[12] + (0.0, forward, rise), atol=1e-12)
+    # the rise goes along the world's up; the confidence of the top is that of every joint it uses
+    np.testing.assert_allclose(body.finalize_head(joints, 'facing', up=np.array([0.0, 0.0, -1.0]))[13],
+                               anatomical[12] + (0.0, forward, -rise), atol=1e-12)
+    confidence = np.linspace(0.2, 0.9, 16)
+    confidence[3] = 0.05
+    head = body.finalize_confidence(confidence, 'facing')[[12, 13]]
+    np.testing.assert_allclose(head, [confidence[[12, 14, 15]].min(), 0.05])
+
+
 def test_direct_head_keeps_neck_and_head():
     joints = _skeleton_3d()
     out = body.finalize_head(joints, 'direct')

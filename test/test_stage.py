@@ -67,11 +67,11 @@ def test_invalid_parameters_name_the_problem(params, problem):
         StageConfig.from_params(params)
 
 
-@pytest.mark.parametrize('head_model', ['paper', 'anatomical'])
+@pytest.mark.parametrize('head_model', ['paper', 'anatomical', 'facing'])
 def test_a_world_turned_so_that_y_is_up_gives_the_same_skeletons_turned(head_model):
     """The Shelf rig with its world turned 90 degrees (z up becomes y up, as a rig file's `up:
     [0, 1, 0]` says): the same frames give the same skeletons turned, the head model's gravity
-    included ('paper' shifts the head along the rig's up, not along z)."""
+    included ('paper' and 'facing' move the head along the rig's up, not along z)."""
     cameras, raw = shelf_openpose_raw(None)
     turn = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # world -> turned world
     turned = [replace(cam, R=cam.R @ turn.T) for cam in cameras]

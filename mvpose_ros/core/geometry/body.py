@@ -3,9 +3,11 @@ MPII-16).
 
 The limb joints (ankles ... wrists) map one-to-one; the two head joints are derived by a head
 model: 'paper' (neck and nose, shifted up 10 cm in 3D afterwards, as Schwarcz & Pollard score
-it), 'anatomical' (a head centre from the ears and the neck, as VoxelPose/mvpose derive it) or
-'direct' (detectors that give the head top, like MPII-16). Head models work in 3D, on the 16
-inference joints, so every view contributes the same physical points.
+it), 'anatomical' (a head centre from the ears and the neck, as VoxelPose/mvpose derive it),
+'facing' (the top a fixed offset forward and up from the bottom, the convention of 4D
+Association's Shelf evaluation) or 'direct' (detectors that give the head top, like MPII-16).
+Head models work in 3D, on the 16 inference joints, so every view contributes the same physical
+points.
 """
 from __future__ import annotations
 
@@ -104,9 +106,14 @@ PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n 
 # 'anatomical': from the 3D ears and neck, as VoxelPose and mvpose derive it for COCO: head
 #   centre = ear midpoint, bottom = midway between neck and head centre, top = as far above the
 #   centre as the bottom is below it.
+# 'facing': bottom as 'anatomical'; top = bottom + FACING_TOP_M along (the body's facing direction,
+#   up): facing is the spine (hip midpoint to neck) x the shoulder line (left to right). The
+#   offsets are those of 4D Association's Shelf evaluation (Zhang et al., CVPR 2020), to score
+#   with the head convention a peer is scored with.
 # 'direct': the detector already gives bottom/top head (MPII upper_neck / head_top).
-HEAD_MODELS = ('paper', 'anatomical', 'direct')
+HEAD_MODELS = ('paper', 'anatomical', 'facing', 'direct')
 HEAD_SHIFT_M = 0.10
+FACING_TOP_M = (0.125, 0.145)  # forward, up
 UP = np.array([0.0, 0.0, 1.0])  # the Shelf and Campus worlds have z up; a rig file's default
 
 
@@ -142,10 +149,16 @@ def finalize_head(joints: np.ndarray, head_model: str, up: np.ndarray = UP) -> n
     out = joints[..., :NUM_JOINTS, :].copy()
     if head_model == 'paper':
         out[..., [BOTTOM_HEAD, TOP_HEAD], :] += HEAD_SHIFT_M * np.asarray(up, dtype=np.float64)
-    elif head_model == 'anatomical':
+    elif head_model in ('anatomical', 'facing'):
         centre = 0.5 * (joints[..., R_EAR, :] + joints[..., L_EAR, :])
         out[..., BOTTOM_HEAD, :] = 0.5 * (joints[..., NECK, :] + centre)
         out[..., TOP_HEAD, :] = 2.0 * centre - out[..., BOTTOM_HEAD, :]
+    if head_model == 'facing':
+        hips = 0.5 * (joints[..., 2, :] + joints[..., 3, :])
+        facing = np.cross(joints[..., NECK, :] - hips, joints[..., 8, :] - joints[..., 9, :])
+        facing /= np.maximum(np.linalg.norm(facing, axis=-1, keepdims=True), np.finfo(np.float64).tiny)
+        forward, rise = FACING_TOP_M
+        out[..., TOP_HEAD, :] = out[..., BOTTOM_HEAD, :] + forward * facing + rise * np.asarray(up, dtype=np.float64)
     return out
 
 
@@ -158,4 +171,7 @@ def finalize_confidence(confidence: np.ndarray, head_model: str) -> np.ndarray:
     out = confidence[..., :NUM_JOINTS].copy()
     if head_model == 'anatomical':
         out[..., [BOTTOM_HEAD, TOP_HEAD]] = confidence[..., [NECK, R_EAR, L_EAR]].min(axis=-1, keepdims=True)
+    elif head_model == 'facing':
+        out[..., BOTTOM_HEAD] = confidence[..., [NECK, R_EAR, L_EAR]].min(axis=-1)
+        out[..., TOP_HEAD] = confidence[..., [NECK, R_EAR, L_EAR, 2, 3, 8, 9]].min(axis=-1)
     return out
