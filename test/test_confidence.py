@@ -8,8 +8,8 @@ import scipy.stats
 
 from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
 from mvpose_ros.core.evaluation.datasets import GroundTruth
-from mvpose_ros.core.geometry.body import (BONES, L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR, SYMMETRIC_PAIRS,
-                                           finalize_confidence)
+from mvpose_ros.core.geometry.body import (L_EAR, LIMB_BONES, LIMB_LENGTHS, NECK, NUM_INFERENCE_JOINTS, R_EAR,
+                                           SYMMETRIC_PAIRS, finalize_confidence)
 from mvpose_ros.core.inference.confidence import SPREAD_SCALE_M, joint_confidence, joint_support
 from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
 from mvpose_ros.core.types import FrameResult, PersonFrame
@@ -91,7 +91,7 @@ def test_sure_joints_are_nearer_the_truth_through_the_window(window):
     for seed in range(6):
         frames, truth = _ambiguous_clip(seed)
         config = InferenceConfig(terms=('data', 'temp'), window=window, lag=3 if window else 7)
-        win = SlidingWindow(config, np.array(SYMMETRIC_PAIRS), np.array(BONES))
+        win = SlidingWindow(config, np.array(SYMMETRIC_PAIRS), LIMB_BONES, LIMB_LENGTHS)
         results = []
         for f, people in enumerate(frames):
             results += win.push(f, people)

@@ -143,8 +143,8 @@ def test_collision_repels_coinciding_pairs():
     assert table[0, 0, 0] < table[0, 1, 0] < table[0, 0, 1]
 
 
-def test_limb_table_peaks_at_the_bone_length():
-    config = FactorConfig(limb_sigma=0.05)
+def test_limb_table_is_flat_over_plausible_lengths_and_falls_off_beyond():
+    config = FactorConfig(limb_sigma=0.05, limb_range=(0.7, 1.3))
     lengths = np.array([0.30, 0.44])
     start = np.zeros((2, 1, 3))  # one state for each bone's first joint, at the origin
     end = np.zeros((2, 31, 3))
@@ -153,12 +153,12 @@ def test_limb_table_peaks_at_the_bone_length():
     table = limb_table(d, lengths, config)
     assert table.shape == (2, 1, 31) and table.dtype == np.float32
     np.testing.assert_allclose(table.sum(axis=(-2, -1)), 1.0, rtol=1e-5)
-    assert np.argmax(table[0, 0]) == 15 and np.argmax(table[1, 0]) == 22  # 0.30 m, 0.44 m
-    # Gaussian in the length error: 0.40 m is two sigmas beyond 0.30 m
-    assert table[0, 0, 20] / table[0, 0, 15] == pytest.approx(np.exp(-2.0), rel=1e-4)
-    expected = np.exp(-0.5 * ((d - lengths[:, None, None]) / config.limb_sigma) ** 2)
-    np.testing.assert_allclose(table, expected / expected.sum(axis=(-2, -1), keepdims=True),
-                               rtol=1e-5)
+    # 0.30 m: flat from 0.21 to 0.39 m (steps 11-19), a Gaussian of the excess outside
+    row = table[0, 0]
+    np.testing.assert_allclose(row[11:20], row[15], rtol=1e-6)
+    assert row[20] / row[15] == pytest.approx(np.exp(-0.5 * (0.01 / 0.05) ** 2), rel=1e-4)  # 0.40 m
+    assert row[27] / row[15] == pytest.approx(np.exp(-0.5 * (0.15 / 0.05) ** 2), rel=1e-3)  # 0.54 m
+    assert row[5] / row[15] == pytest.approx(np.exp(-0.5 * (0.11 / 0.05) ** 2), rel=1e-3)  # 0.10 m
     # batched over leading axes (e.g. people)
     batched = limb_table(np.stack([d, d]), lengths, config)
     np.testing.assert_allclose(batched[1], table)
@@ -171,6 +171,8 @@ def test_limb_table_peaks_at_the_bone_length():
     {'collision_width': 0.0},
     {'limb_sigma': -0.05},
     {'limb_sigma': float('nan')},
+    {'limb_range': (1.3, 0.7)},
+    {'limb_range': (-0.1, 1.0)},
 ])
 def test_factor_config_rejects_bad_values(kwargs):
     with pytest.raises(ValueError):

@@ -18,7 +18,7 @@ from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
-from mvpose_ros.core.geometry.body import BONES, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
+from mvpose_ros.core.geometry.body import LIMB_BONES, LIMB_LENGTHS, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.solver import person_frames
 from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
@@ -87,7 +87,7 @@ def infer(prepared: Prepared, inference: InferenceConfig, head_model: str,
     k / FRAME_RATE s instead (evenly spaced whatever was dropped: what a solver blind to the real
     times would assume)."""
     timer = timer or StageTimer()
-    window = SlidingWindow(inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), timer)
+    window = SlidingWindow(inference, np.array(SYMMETRIC_PAIRS), LIMB_BONES, LIMB_LENGTHS, timer)
     results = []
     for k, (frame, people) in enumerate(zip(prepared.frames, prepared.person_frames)):
         results += window.push(frame, people, (frame if real_time else k) / FRAME_RATE)

@@ -100,6 +100,9 @@ _PARENTS: dict[str, tuple[str, float]] = {
 INFERENCE_PARENT = np.array([INFERENCE_NAMES.index(_PARENTS[n][0]) if n in _PARENTS else -1
                              for n in INFERENCE_NAMES])  # (16,)
 PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n in INFERENCE_NAMES])  # (16,) m
+# The bones above as (joint, parent) pairs of inference joints (10, 2), and their typical lengths (10,) m
+LIMB_BONES = np.array([(j, p) for j, p in enumerate(INFERENCE_PARENT) if p >= 0])
+LIMB_LENGTHS = PRIOR_BONE_LENGTH[LIMB_BONES[:, 0]]
 
 # 'paper': bottom/top head = neck/nose + 10 cm up (Schwarcz & Pollard's scoring), up being the
 #   world's (a rig file's `up`; +z in Shelf and Campus).

@@ -25,7 +25,9 @@ class FactorConfig:
     `temporal_form='laplace', temporal_scale=0.08` is that reading; 'gauss' uses
     exp(-||d||^2 / (2 scale^2)). temporal_scale holds for frames one nominal period apart
     (window.InferenceConfig.frame_rate) and grows with the real step (temporal_table). The
-    collision sigmoid is 1 / (1 + exp((centre - d) / width)).
+    collision sigmoid is 1 / (1 + exp((centre - d) / width)). A limb is plausible between
+    limb_range times its typical length (adults of 1.2 to 2.3 m, and the spread of where detectors
+    put joints), and falls off as a Gaussian of std limb_sigma beyond (limb_table).
     """
 
     temporal_form: str = 'laplace'
@@ -33,10 +35,14 @@ class FactorConfig:
     collision_centre: float = 0.15
     collision_width: float = 0.10
     limb_sigma: float = 0.05
+    limb_range: tuple[float, float] = (0.7, 1.3)
 
     def __post_init__(self) -> None:
         if self.temporal_form not in TEMPORAL_FORMS:
             raise ValueError(f'temporal_form must be one of {TEMPORAL_FORMS}, got {self.temporal_form!r}')
+        low, high = self.limb_range
+        if not 0 <= low <= high:
+            raise ValueError(f'limb_range must be (low, high) with 0 <= low <= high, got {self.limb_range}')
         for name in ('temporal_scale', 'collision_width', 'limb_sigma'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
@@ -130,10 +136,14 @@ def collision_table(right: np.ndarray, left: np.ndarray, config: FactorConfig) -
 
 
 def limb_table(d: np.ndarray, length: np.ndarray, config: FactorConfig) -> np.ndarray:
-    """Gaussian limb-length constancy between two connected joints.
+    """Plausible bone lengths between two connected joints: flat within config.limb_range times
+    the bone's typical length, a Gaussian of std limb_sigma in the excess beyond. It does not pull
+    a limb to a length, it rules out impossible ones (a wrist 0.5 m from its elbow: two views
+    agreeing on a wrong keypoint).
 
     d: (..., E, M, M) distances between the hypotheses of each bone's endpoints (pair_distances);
-    length: (E,) expected bone lengths in metres. Returns (..., E, M, M).
+    length: (E,) typical bone lengths in metres (body.LIMB_LENGTHS). Returns (..., E, M, M).
     """
-    table = np.exp(-0.5 * ((d - length[:, None, None]) / config.limb_sigma) ** 2)
-    return _normalised(table, axes=(-2, -1))
+    low, high = config.limb_range
+    excess = np.maximum(np.maximum(d - high * length[:, None, None], low * length[:, None, None] - d), 0.0)
+    return _normalised(np.exp(-0.5 * (excess / config.limb_sigma) ** 2), axes=(-2, -1))

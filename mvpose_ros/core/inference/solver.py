@@ -11,7 +11,8 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.body import BONES, HEAD_MODELS, SYMMETRIC_PAIRS, UP, finalize_confidence, finalize_head
+from mvpose_ros.core.geometry.body import (HEAD_MODELS, LIMB_BONES, LIMB_LENGTHS, SYMMETRIC_PAIRS, UP,
+                                           finalize_confidence, finalize_head)
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.confidence import joint_support
 from mvpose_ros.core.inference.factors import data_terms
@@ -71,7 +72,7 @@ class Inference3D:
         self.config = config
         self.up = np.asarray(up, dtype=np.float64)
         self.timer = StageTimer()
-        self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), np.array(BONES), self.timer)
+        self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), LIMB_BONES, LIMB_LENGTHS, self.timer)
 
     def push(self, frame: int, people: Sequence[Bundle], time_s: float | None = None) -> list[FrameResult]:
         """people: (person id, camera index -> 2D person) of this frame, taken at time_s seconds

@@ -44,7 +44,7 @@ class InferenceConfig:
     (frame / frame_rate s); max_gap: seconds between two successive frames beyond which every
     chain breaks (no temporal link across it)."""
 
-    terms: tuple[str, ...] = ('data', 'temp', 'col')
+    terms: tuple[str, ...] = ('data', 'temp', 'col', 'limb')
     window: int | None = 15
     lag: int = 7
     iterations: int = 5
@@ -83,18 +83,17 @@ class _Slot:
     people: dict[int, PersonFrame]
     temporal: dict[int, np.ndarray] = field(default_factory=dict)
     collision: dict[int, np.ndarray] = field(default_factory=dict)
-    bone_distances: dict[int, np.ndarray] = field(default_factory=dict)
+    limb: dict[int, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass
 class _Chain:
-    """Warm-started BP of one person over the linked frames `frames` (one per BP row); best:
-    each frame's best-data joints (J, 3), for the limb lengths; support: each frame's (J,)."""
+    """Warm-started BP of one person over the linked frames `frames` (one per BP row); support:
+    each frame's (J,)."""
 
     frames: deque[int] = field(default_factory=deque)
     bp: ChainBP | None = None
     hypotheses: deque[np.ndarray] = field(default_factory=deque)
-    best: deque[np.ndarray] = field(default_factory=deque)
     support: deque[np.ndarray] = field(default_factory=deque)
 
     @property
@@ -106,12 +105,15 @@ class SlidingWindow:
     """Sliding-window sum-product BP over the CRF of each person."""
 
     def __init__(self, config: InferenceConfig, symmetric_pairs: np.ndarray, bones: np.ndarray,
-                 timer: StageTimer | None = None) -> None:
-        """timer: where the time of 'factors' (tables), 'bp' (messages) and 'decoding' goes."""
+                 lengths: np.ndarray, timer: StageTimer | None = None) -> None:
+        """symmetric_pairs (S, 2): the joints of the collision factors; bones (E, 2) and their
+        typical lengths (E,) m: the limb factors; timer: where the time of 'factors' (tables), 'bp'
+        (messages) and 'decoding' goes."""
         self.config = config
         self.timer = timer or StageTimer()
         self.symmetric_pairs = np.asarray(symmetric_pairs)
         self.bones = np.asarray(bones)
+        self.lengths = np.asarray(lengths, dtype=np.float64)
         self._slots: deque[_Slot] = deque()
         self._unsent = 0
         self._chains: dict[int, _Chain] = {}  # warm-started mode: each present person's chain
@@ -185,9 +187,8 @@ class SlidingWindow:
             chain.frames.append(slot.frame)
             chain.hypotheses.append(p.hypotheses)
             chain.support.append(p.support)
-            chain.best.append(np.take_along_axis(p.hypotheses, p.data.argmax(-1)[:, None, None], axis=1)[:, 0])
             t0 = time.perf_counter()
-            groups = self._groups(pid, i, chain.best)
+            groups = self._groups(pid, i)
             t0 = self.timer.add('factors', t0)
             if chain.bp is None:
                 chain.bp = ChainBP.build(p.data[None], [None], groups)
@@ -200,24 +201,19 @@ class SlidingWindow:
                     chain.frames.popleft()
                     chain.hypotheses.popleft()
                     chain.support.popleft()
-                    chain.best.popleft()
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
         # in id order, as _add_temporal makes the tables: stacked chains then share them uncopied
         run_chains([self._chains[pid].bp for pid in sorted(slot.people)], self.config.slide_iterations)
         self.timer.add('bp', t0)
 
-    def _groups(self, pid: int, i: int, best: deque[np.ndarray]) -> list[PairwiseGroup]:
-        """The pairwise groups of person pid at buffer position i, as one-frame tables; limb
-        lengths from the median over its chain's best-data joints `best`."""
+    def _groups(self, pid: int, i: int) -> list[PairwiseGroup]:
+        """The pairwise groups of person pid at buffer position i, as one-frame tables."""
         groups = []
         if 'col' in self.config.terms:
             groups.append(PairwiseGroup('collision', self.symmetric_pairs, self._collision(pid, i)[None]))
         if 'limb' in self.config.terms:
-            best = np.stack(best)
-            lengths = np.median(np.linalg.norm(best[:, self.bones[:, 0]] - best[:, self.bones[:, 1]], axis=-1), axis=0)
-            groups.append(PairwiseGroup('limb', self.bones,
-                                        limb_table(self._bone_distances(pid, i)[None], lengths, self.config.factors)))
+            groups.append(PairwiseGroup('limb', self.bones, self._limb(pid, i)[None]))
         return groups
 
     def _add_temporal(self, i: int) -> None:
@@ -306,9 +302,7 @@ class SlidingWindow:
             groups.append(PairwiseGroup('collision', self.symmetric_pairs,
                                         np.stack([self._collision(pid, i) for i in run])))
         if 'limb' in terms:
-            dist = np.stack([self._bone_distances(pid, i) for i in run])  # (T, E, M, M)
-            groups.append(PairwiseGroup('limb', self.bones, limb_table_from(dist, hyp, data, self.bones,
-                                                                            self.config.factors)))
+            groups.append(PairwiseGroup('limb', self.bones, np.stack([self._limb(pid, i) for i in run])))
         t0 = self.timer.add('factors', t0)
         if not groups and not any(t is not None for t in temporal):
             marginals = data
@@ -329,21 +323,13 @@ class SlidingWindow:
                                                   self.config.factors)
         return slot.collision[pid]
 
-    def _bone_distances(self, pid: int, i: int) -> np.ndarray:
+    def _limb(self, pid: int, i: int) -> np.ndarray:
         slot = self._slots[i]
-        if pid not in slot.bone_distances:
+        if pid not in slot.limb:
             h = slot.people[pid].hypotheses
-            slot.bone_distances[pid] = pair_distances(h[self.bones[:, 0]], h[self.bones[:, 1]])
-        return slot.bone_distances[pid]
-
-
-def limb_table_from(dist: np.ndarray, hyp: np.ndarray, data: np.ndarray, bones: np.ndarray,
-                    config: FactorConfig) -> np.ndarray:
-    """Limb tables (T, E, M, M) around each bone's length, estimated as the median over the chain
-    of the bone length between the best-data hypotheses of its endpoints."""
-    best = np.take_along_axis(hyp, data.argmax(-1)[..., None, None], axis=2)[:, :, 0]  # (T, J, 3)
-    lengths = np.median(np.linalg.norm(best[:, bones[:, 0]] - best[:, bones[:, 1]], axis=-1), axis=0)
-    return limb_table(dist, lengths, config)
+            slot.limb[pid] = limb_table(pair_distances(h[self.bones[:, 0]], h[self.bones[:, 1]]), self.lengths,
+                                        self.config.factors)
+        return slot.limb[pid]
 
 
 def _steps(dt_prev: float, dt_next: float, rate: float) -> tuple[float, float]:
