@@ -259,8 +259,9 @@ def _update_pairwise(group: PairwiseGroup, total: np.ndarray, pm: np.ndarray) ->
     n_k = _softmax(total[:, k] - pm[:, :, 1]).astype(group.tables.dtype)
     to_i = _log_message((group.tables @ n_k[..., None])[..., 0])
     to_k = _log_message((n_i[..., None, :] @ group.tables)[..., 0, :])
-    for e, (a, b) in enumerate(group.edges):
-        total[:, a] += to_i[:, e] - pm[:, e, 0]
-        total[:, b] += to_k[:, e] - pm[:, e, 1]
+    # one unbuffered scatter, edge after edge and each edge's first joint before its second: the
+    # additions to a joint come in the order of a loop over the edges, so the sums are the same
+    change = np.stack([to_i - pm[:, :, 0], to_k - pm[:, :, 1]], axis=2)  # (T, E, 2, M)
+    np.add.at(total, (slice(None), group.edges.ravel()), change.reshape(len(total), -1, total.shape[-1]))
     pm[:, :, 0] = to_i
     pm[:, :, 1] = to_k
