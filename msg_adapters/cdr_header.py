@@ -14,6 +14,11 @@ NS = 1_000_000_000
 # cloud on Shelf): a node's bound on an input's bytes is its bound on the data plus this
 CLOUD_OVERHEAD = 4096
 
+
+class Oversize(ValueError):
+    """An input larger than any its source can honestly produce: refused, not decoded."""
+
+
 # CDR encapsulation identifiers (first two bytes, big-endian) and the struct order they imply.
 _BYTE_ORDER = {b'\x00\x00': '>', b'\x00\x01': '<'}
 _ENCAPSULATION = 4  # bytes before the payload; a leading std_msgs/Header puts its stamp right after

@@ -21,8 +21,8 @@ the --ready file (and, with --start-topic, lets a bag_player started with that s
 once its camera_info reader has matched the player's writer). Every skeletons message is appended
 to --predictions as it arrives, as a predictions line, duplicates included. It exits 0 once every
 input stamp of --bag has its output and --drain s have passed (to catch duplicates), 1 once every
-stamp has its output or was dropped (skeletons/dropped) but some were, or
-after --timeout s without a new output; --stats is written either way:
+stamp has its output or was dropped (skeletons/dropped) but some were, or after --timeout s
+without a new output; --stats is written either way:
 
     {"complete": bool, "bad": ["<stamp> ns: <why>", ...], "dropped": [<stamp ns>, ...],
      "topics": {"/cam0/people2d": [[<stamp ns>, <bytes>], ...], ...}}

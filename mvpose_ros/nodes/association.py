@@ -43,7 +43,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns
+from msg_adapters.cdr_header import CLOUD_OVERHEAD, Oversize, deserialise_cloud, header_frame_id, header_stamp_ns
 from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_people
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros import topics
@@ -216,17 +216,12 @@ class AssociationNode(Node):
             return
         try:
             msg = deserialise_cloud(cdr)
-        except ValueError as exc:
-            self._drop(camera, stamp, 'malformed', str(exc))
-            return
-        if len(msg.data) > limit:
-            self._drop(camera, stamp, 'oversize', f'{len(msg.data)} data bytes, more than a people2d of a '
-                                                  f'{seen_by.width}x{seen_by.height} camera carries ({limit})')
-            return
-        try:
+            if len(msg.data) > limit:
+                raise Oversize(f'{len(msg.data)} data bytes, more than a people2d of a {seen_by.width}x'
+                               f'{seen_by.height} camera carries ({limit})')
             people = msg_to_people(msg)
         except ValueError as exc:
-            self._drop(camera, stamp, 'malformed', str(exc))
+            self._drop(camera, stamp, 'oversize' if isinstance(exc, Oversize) else 'malformed', str(exc))
             return
         before = Counter(self._sync.dropped)
         try:

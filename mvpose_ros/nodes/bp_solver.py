@@ -49,7 +49,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
-from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_stamp_ns
+from msg_adapters.cdr_header import CLOUD_OVERHEAD, Oversize, deserialise_cloud, header_stamp_ns
 from msg_adapters.markers import camera_markers, skeleton_markers
 from msg_adapters.people_msg import MAX_PEOPLE, max_bundles_bytes, msg_to_bundles
 from msg_adapters.skeleton_msg import skeletons_to_msg
@@ -77,10 +77,6 @@ LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durabi
 
 class _NotReady(ValueError):
     """A bundle with a camera whose CameraInfo has not come yet (logged throttled)."""
-
-
-class _Oversize(ValueError):
-    """A bundles message larger than any the rig's cameras can honestly produce (not decoded)."""
 
 
 class BpSolverNode(Node):
@@ -201,7 +197,7 @@ class BpSolverNode(Node):
             return
         try:  # before deserialising: the message's data would be copied
             self._check_size(len(cdr), CLOUD_OVERHEAD, 'serialised bytes')
-        except _Oversize as exc:
+        except Oversize as exc:
             self._answer_nobody(stamp, arrival, 'oversize', exc)
             return
         except _NotReady:
@@ -247,7 +243,7 @@ class BpSolverNode(Node):
             self._first_ns, self._last_ns = first, stamp
             self._next_frame += 1
         except ValueError as exc:
-            cause = {_NotReady: 'no intrinsics', _Oversize: 'oversize'}.get(type(exc), 'malformed')
+            cause = {_NotReady: 'no intrinsics', Oversize: 'oversize'}.get(type(exc), 'malformed')
             self._answer_nobody(stamp, arrival, cause, exc)
             return
         # with no lag the output is the causal estimate itself
@@ -259,7 +255,7 @@ class BpSolverNode(Node):
             self._publish(result, self._stamps.pop(result.frame))
 
     def _check_size(self, size: int, slack: int = 0, what: str = 'data bytes') -> None:
-        """_Oversize for more than `slack` bytes over the data the rig's views of
+        """Oversize for more than `slack` bytes over the data the rig's views of
         people_msg.MAX_PEOPLE people take (a camera whose size is not known yet counts as the largest
         known one); _NotReady before any is known. The bound is computed once every camera is known,
         not per message."""
@@ -274,8 +270,8 @@ class BpSolverNode(Node):
             if not missing:
                 self._byte_limit = limit
         if size > limit + slack:
-            raise _Oversize(f'{size} {what}, more than the views of {MAX_PEOPLE} people in every camera take '
-                            f'({limit}{f" + {slack}" if slack else ""})')
+            raise Oversize(f'{size} {what}, more than the views of {MAX_PEOPLE} people in every camera take '
+                           f'({limit}{f" + {slack}" if slack else ""})')
 
     def _on_timer(self) -> None:
         if not self._cameras_sent:
