@@ -121,8 +121,17 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
 
 
 def pair_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N)."""
-    return np.linalg.norm(a[..., :, None, :] - b[..., None, :, :], axis=-1)
+    """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N).
+    Coordinate by coordinate, each step on whole (..., M, N) arrays: a norm over a last axis of 3
+    took 3.5 times as long (the same sums, in the same order)."""
+    a, b = np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)
+    d = a[0][..., :, None] - b[0][..., None, :]
+    sq = d * d
+    for k in (1, 2):
+        np.subtract(a[k][..., :, None], b[k][..., None, :], out=d)
+        d *= d
+        sq += d
+    return np.sqrt(sq, out=sq)
 
 
 def collision_table(right: np.ndarray, left: np.ndarray, config: FactorConfig) -> np.ndarray:

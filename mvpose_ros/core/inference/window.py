@@ -180,6 +180,9 @@ class SlidingWindow:
         for pid in list(self._chains):
             if pid not in slot.people or self._chains[pid].last != before:
                 self._ended.append((pid, self._chains.pop(pid)))
+        t0 = time.perf_counter()
+        self._frame_tables(i)
+        self.timer.add('factors', t0)
         for pid, p in slot.people.items():
             chain = self._chains.get(pid)
             if chain is None:
@@ -314,6 +317,24 @@ class SlidingWindow:
         confidence = joint_confidence(marginals, hyp, best, np.stack([f.support for f in frames]))
         self.timer.add('decoding', t0)
         return out, confidence
+
+    def _frame_tables(self, i: int) -> None:
+        """The collision and limb tables of every person at buffer position i not yet made, each
+        kind in one call for all of them (a person's tables depend on their own hypotheses only, and
+        the calls' fixed cost was most of a person's)."""
+        slot = self._slots[i]
+        terms = self.config.terms
+        pids = [pid for pid in sorted(slot.people)
+                if ('col' in terms and pid not in slot.collision) or ('limb' in terms and pid not in slot.limb)]
+        if not pids:
+            return
+        h = np.stack([slot.people[pid].hypotheses for pid in pids])  # (P, J, M, 3)
+        if 'col' in terms:
+            pairs = self.symmetric_pairs
+            slot.collision.update(zip(pids, collision_table(h[:, pairs[:, 0]], h[:, pairs[:, 1]], self.config.factors)))
+        if 'limb' in terms:
+            slot.limb.update(zip(pids, limb_table(pair_distances(h[:, self.bones[:, 0]], h[:, self.bones[:, 1]]),
+                                                  self.lengths, self.config.factors)))
 
     def _collision(self, pid: int, i: int) -> np.ndarray:
         slot = self._slots[i]
