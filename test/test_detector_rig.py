@@ -3,7 +3,8 @@ in-test probe: driver-style topic and frame names from a rig file, JPEG Compress
 real Shelf frame 572, a best-effort and a reliable publisher both reaching it, unusable images
 logged once per camera and cause while the node goes on; and the whole-rig mode, fed synchronised
 sets faster than it detects them: whole sets dropped and counted, the newest detected, every
-published set complete with each camera's own stamp."""
+published set complete with each camera's own stamp, every dropped set announced on
+skeletons/dropped."""
 from __future__ import annotations
 
 import re
@@ -161,6 +162,8 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
         out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
         for name, into in zip(names, out):
             _collect(node, f'/rig/{name}/people2d', into)
+        dropped: list[Header] = []
+        node.create_subscription(Header, '/rig/skeletons/dropped', dropped.append, DATA_QOS)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         info = node.create_publisher(CameraInfo, '/rig/right/camera_info', qos_profile_sensor_data)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
@@ -181,6 +184,7 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
                 assert all(pub.wait_for_all_acked(Duration(seconds=10)) for pub in pubs), log.read_text()
             last = [stamps[c][-1] for c in range(3)]
             assert spin_until(executor, lambda: all(s in o for s, o in zip(last, out)), 60.0), log.read_text()
+            assert spin_until(executor, lambda: len(out[0]) + len(dropped) >= sets, 10.0), log.read_text()
             spin_until(executor, lambda: False, 0.5)
         finally:
             stop(proc)
@@ -196,6 +200,10 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
     assert detected[0] == detected[1] == detected[2], 'every published set has all cameras'
     assert detected[0][-1] == sets - 1, 'the newest set is detected'
     assert 1 <= len(detected[0]) < sets, 'sets came faster than detection: some were dropped'
+    # each set dropped whole is announced once, stamped as its set (the earliest camera stamp)
+    assert sorted(stamp_ns(h.stamp) for h in dropped) == [min(stamps[c][k] for c in range(3)) for k in range(sets)
+                                                          if k not in detected[0]]
+    assert {h.frame_id for h in dropped} == {'world'}
     summary = re.search(r'sets: (\d+) released, (\d+) detected, (\d+) dropped whole while detecting', text)
     assert summary, text
     assert [int(g) for g in summary.groups()] == [sets, len(detected[0]), sets - len(detected[0])]

@@ -18,7 +18,10 @@ Modes, by the parameter `camera`:
   released set waits: an older waiting set is dropped whole and counted (a throttled warning, and
   the totals when the node stops), so latency stays bounded by about two sets' detection time and
   no queue grows (camera subscriptions keep the last `queue_depth` messages; the synchroniser
-  keeps at most a sync_timeout's worth of frames per camera).
+  keeps at most a sync_timeout's worth of frames per camera). The stamp of a set that reaches
+  the association from no camera (dropped whole, short of `min_cameras`, or none of its images
+  usable) goes out on `skeletons/dropped` (std_msgs/Header, the rig's world frame), as association
+  and bp_solver announce the frames they drop.
 
 Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace)
 and frame_id. The rig's namespace is the node's own, except that a one-camera node whose
@@ -78,13 +81,14 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import check_info, info_key, info_to_intrinsics
 from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns
 from msg_adapters.image_msg import check_camera_image, to_bgr
 from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
-from msg_adapters.stamp import stamp_ns
+from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
@@ -102,7 +106,7 @@ from mvpose_ros.nodes.health import NodeHealth
 from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, StartupError,
                                       camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
-from mvpose_ros.topics import OPENPOSE, PEOPLE2D, camera_topic
+from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
@@ -273,7 +277,7 @@ class HeatmapDetectorNode(Node):
                 cam.input_topic = in_namespace(namespace, camera_topic(rc.name, OPENPOSE))
             self._cameras.append(cam)
         if self._whole_rig:
-            self._start_sets(p)
+            self._start_sets(p, rig.world_frame)
         for cam in self._cameras:
             self._subscribe(cam)
             camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam), self._depth)
@@ -289,7 +293,7 @@ class HeatmapDetectorNode(Node):
 
     # --- set-up -------------------------------------------------------------------------------
 
-    def _start_sets(self, p: dict[str, Any]) -> None:
+    def _start_sets(self, p: dict[str, Any], world_frame: str) -> None:
         if not (p['sync_timeout'] > 0 and p['max_skew'] >= 0 and 1 <= p['min_cameras'] <= len(self._cameras)
                 and p['waiting_sets'] >= 1):
             raise StartupError(f'parameters sync_timeout, max_skew, min_cameras, waiting_sets: need sync_timeout > 0, '
@@ -300,6 +304,10 @@ class HeatmapDetectorNode(Node):
         queue = math.ceil(2 * p['sync_timeout'] * p['frame_rate']) + 2
         self._sync = ApproximateSync(len(self._cameras), p['sync_timeout'], p['max_skew'], p['min_cameras'], queue)
         self._waiting: NewestQueue[SyncedSet] = NewestQueue(p['waiting_sets'])
+        # a set none of whose cameras reaches the association: its stamp goes here, as association
+        # and bp_solver announce theirs, so that a subscriber waiting for every frame stops waiting
+        self._dropped_sets = self.create_publisher(Header, SKELETONS_DROPPED, DATA_QOS)
+        self._world_frame = world_frame
         self._intrinsics_in = threading.Condition()  # notified when a camera's first CameraInfo is taken
         self._stopping = False
         self._processed = 0
@@ -544,6 +552,8 @@ class HeatmapDetectorNode(Node):
             cause = {'unmatched': 'its set had fewer than min_cameras cameras',
                      'overflow': 'too many frames pending synchronisation (a camera stamping far ahead?)'}
             self._drop(cam, drop.stamp_ns, f'not synchronised ({drop.reason}): {cause.get(drop.reason, drop.reason)}')
+        for stamp in self._sync.take_lost():
+            self._announce_dropped(stamp)
         now = time.monotonic()
         for synced in released:
             for c, s in enumerate(synced.stamps):
@@ -553,9 +563,14 @@ class HeatmapDetectorNode(Node):
             self._released[synced.index] = now
             for old in self._waiting.put(synced):
                 self._released.pop(old.index, None)
+                self._announce_dropped(old.stamp_ns)
                 self._log.log(('sets', 'dropped whole while detecting'),
                               f'detection is slower than the cameras: {self._waiting.dropped} of '
                               f'{self._waiting.put_count} sets dropped whole so far (the newest wait)')
+
+    def _announce_dropped(self, stamp: int) -> None:
+        """Publish the stamp (ns) of a set that will get no skeletons on skeletons/dropped."""
+        self._dropped_sets.publish(Header(stamp=stamp_of_ns(stamp), frame_id=self._world_frame))
 
     def _work(self) -> None:
         while (synced := self._waiting.take()) is not None:
@@ -598,6 +613,8 @@ class HeatmapDetectorNode(Node):
                     self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
         for cam, out in outputs:
             cam.output.publish(out)
+        if not outputs:
+            self._announce_dropped(synced.stamp_ns)
         self._delivered([s for s in synced.stamps if s is not None], self._released.pop(synced.index, time.monotonic()),
                         time.perf_counter() - t0)
         self._processed += 1
