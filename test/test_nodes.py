@@ -102,6 +102,37 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(dom
     assert 'camera_info stamp 12040000000 ns' in text and 'camera_info stamp 12000000000' not in text
 
 
+def test_whole_rig_detector_announces_a_set_short_of_min_cameras_on_skeletons_dropped(domain, shelf, tmp_path):
+    """One heatmap_detector for the whole Shelf rig (camera all, min_cameras 2): frame 302 comes
+    from camera 0 alone, so its set is dropped as unmatched and its stamp published on
+    skeletons/dropped, once, in the world frame; the other sets go out from every camera (all wait
+    their turn: waiting_sets 8)."""
+    cameras, raw = shelf
+    frames = (300, 301, 302, 303)
+    log = tmp_path / 'detector.log'
+    with probe(domain, 'rig_detector_probe') as (node, executor):
+        out: list[dict[int, list]] = [{} for _ in range(5)]
+        for c in range(5):
+            _collect(node, f'/cam{c}/people2d', PointCloud2, out[c])
+        lost: list[Header] = []
+        node.create_subscription(Header, '/skeletons/dropped', lost.append, DATA_QOS)
+        pubs = [node.create_publisher(PointCloud2, f'/cam{c}/openpose', DATA_QOS) for c in range(5)]
+        proc = start_node('heatmap_detector', domain, log, '-p', 'camera:=all', '-p', 'min_cameras:=2',
+                          '-p', 'max_skew:=0.005', '-p', 'sync_timeout:=5.0', '-p', 'waiting_sets:=8')
+        try:
+            assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)), log.read_text()
+            for f in frames:
+                for c in range(5):
+                    if f != 302 or c == 0:
+                        pubs[c].publish(openpose_to_msg(raw[c][f - FIRST], _header(f, f'cam{c}')))
+            assert spin_until(executor, lambda: all(303 in o for o in out) and lost), log.read_text()
+            spin_until(executor, lambda: False, 0.5)
+        finally:
+            stop(proc)
+    assert all(sorted(o) == [300, 301, 303] for o in out), [sorted(o) for o in out]
+    assert [(stamp_ns(m.stamp), m.frame_id) for m in lost] == [(stamp_ns(stamp_of_frame(302)), 'world')]
+
+
 def test_heatmap_detector_with_a_bad_parameter_exits_2_with_one_line(domain, tmp_path):
     log = tmp_path / 'bad.log'
     proc = start_node('heatmap_detector', domain, log, '-p', 'camera:=9')
