@@ -180,9 +180,6 @@ class SlidingWindow:
         for pid in list(self._chains):
             if pid not in slot.people or self._chains[pid].last != before:
                 self._ended.append((pid, self._chains.pop(pid)))
-        t0 = time.perf_counter()
-        self._frame_tables(i)
-        self.timer.add('factors', t0)
         for pid, p in slot.people.items():
             chain = self._chains.get(pid)
             if chain is None:
@@ -337,20 +334,12 @@ class SlidingWindow:
                                                   self.lengths, self.config.factors)))
 
     def _collision(self, pid: int, i: int) -> np.ndarray:
-        slot = self._slots[i]
-        if pid not in slot.collision:
-            h = slot.people[pid].hypotheses
-            slot.collision[pid] = collision_table(h[self.symmetric_pairs[:, 0]], h[self.symmetric_pairs[:, 1]],
-                                                  self.config.factors)
-        return slot.collision[pid]
+        self._frame_tables(i)
+        return self._slots[i].collision[pid]
 
     def _limb(self, pid: int, i: int) -> np.ndarray:
-        slot = self._slots[i]
-        if pid not in slot.limb:
-            h = slot.people[pid].hypotheses
-            slot.limb[pid] = limb_table(pair_distances(h[self.bones[:, 0]], h[self.bones[:, 1]]), self.lengths,
-                                        self.config.factors)
-        return slot.limb[pid]
+        self._frame_tables(i)
+        return self._slots[i].limb[pid]
 
 
 def _steps(dt_prev: float, dt_next: float, rate: float) -> tuple[float, float]:
