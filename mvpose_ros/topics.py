@@ -17,8 +17,8 @@ PEOPLE2D = 'people2d'  # 2D people with heatmaps (encoding B)
 BUNDLES = 'people/bundles'  # associated people, every view (encoding C)
 SKELETONS = 'skeletons'  # 3D skeletons (encoding D), `lag` frames late
 SKELETONS_LIVE = 'skeletons/live'  # the same with no lag: each frame's causal estimate
-# std_msgs/Header of a frame that gets no skeletons: a set short of min_cameras (association), or
-# one dropped unsolved (bp_solver, max_wait)
+# std_msgs/Header of a frame that gets no skeletons: a set a whole-rig detector dropped, one short of
+# min_cameras (association), or one dropped unsolved (bp_solver, max_wait)
 SKELETONS_DROPPED = 'skeletons/dropped'
 MARKERS = 'skeletons/markers'  # visualization_msgs/MarkerArray for RViz
 CAMERA_MARKERS = 'cameras/markers'  # the rig's camera frusta (MarkerArray), published once, transient local
