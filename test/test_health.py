@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from builtin_interfaces.msg import Time
 
 from msg_adapters.diagnostics_msg import msg_to_statuses, statuses_to_msg
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES
 from mvpose_ros.core.geometry.bump import axis_rotation, bumped_camera, bumped_pixels
+from mvpose_ros.core.health.links import links_status, unmatched_links
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
 from mvpose_ros.core.health.residual import ResidualMonitor, frame_residuals, residual_levels
 from mvpose_ros.core.health.status import Level, Status
@@ -191,3 +193,27 @@ def test_thresholds_are_parameters_with_ranges_and_the_message_round_trips():
     msg.status[1].level = b'\x07'
     with pytest.raises(ValueError, match='level 7'):
         msg_to_statuses(msg)
+
+
+def test_links_statuses_tell_which_link_between_two_nodes_is_not_matched_yet():
+    """The runner plays once every link it sees is matched at both ends: a writer that has not
+    matched every reader, a reader not every writer, or a node not heard from holds it back."""
+    seen = {'/cam0/people2d': (1, 1), '/bundles': (1, 2)}  # topic -> (writers, readers) in the graph
+
+    def statuses(people_readers: int, people_writers: int, bundles_readers: int) -> list[Status]:
+        return [links_status('cam0/heatmap_detector', {'/cam0/people2d': people_readers}, {'/cam0/openpose': 1}),
+                links_status('association', {'/bundles': bundles_readers}, {'/cam0/people2d': people_writers}),
+                links_status('bp_solver', {'/skeletons': 0}, {'/bundles': 1}),
+                links_status('lockstep', {}, {'/bundles': 1})]
+
+    assert unmatched_links(statuses(1, 1, 2), seen) == []
+    assert unmatched_links(statuses(0, 1, 2), seen) == ['/cam0/people2d: a writer has matched 0 of 1 readers']
+    assert unmatched_links(statuses(1, 0, 2), seen) == ['/cam0/people2d: a reader has matched 0 of 1 writers']
+    assert unmatched_links(statuses(1, 1, 1), seen) == ['/bundles: a writer has matched 1 of 2 readers']
+    assert unmatched_links(statuses(1, 1, 2)[:1], seen) == ['/cam0/people2d: no reader has reported its links yet',
+                                                            '/bundles: no writer has reported its links yet',
+                                                            '/bundles: no reader has reported its links yet']
+    # through the diagnostics message, as the runner reads it, with the other statuses beside
+    other = Status('association: node', Level.OK, '25 items/s', {'queue depth': '0'})
+    msg = statuses_to_msg([other, *statuses(0, 1, 2)], Time())
+    assert unmatched_links(msg_to_statuses(msg), seen) == ['/cam0/people2d: a writer has matched 0 of 1 readers']

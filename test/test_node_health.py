@@ -6,11 +6,13 @@ from __future__ import annotations
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
+from sensor_msgs.msg import PointCloud2
 
 from msg_adapters.diagnostics_msg import msg_to_statuses
 from mvpose_ros.core.health.status import Level
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
-from ros_harness import probe, spin_until, start_node, stop
+from mvpose_ros.nodes.runtime import DATA_QOS
+from ros_harness import matched, probe, spin_until, start_node, stop
 
 
 def _set(node, executor, client, name: str, value: ParameterValue):
@@ -52,3 +54,30 @@ def test_bp_solver_publishes_diagnostics_and_takes_live_parameters(domain, tmp_p
         finally:
             stop(proc)
     assert 'parameters changed: diagnostics.stale_error = 1000.0' in log.read_text()
+
+
+def test_a_node_reports_on_diagnostics_the_endpoints_its_writers_and_readers_have_matched(domain, tmp_path):
+    """bp_solver's links: none matched while nobody reads or writes its topics, then the probe's
+    skeletons reader and bundles writer, as each end sees the other."""
+    log = tmp_path / 'bp.log'
+    with probe(domain, 'links_probe') as (node, executor):
+        arrays: list[DiagnosticArray] = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, DIAGNOSTICS_QOS)
+        proc = start_node('bp_solver', domain, log, '-p', 'diagnostics.period:=0.2')
+        try:
+            def links() -> dict[str, str]:
+                found = [s for a in arrays[-1:] for s in msg_to_statuses(a) if s.name == 'bp_solver: links']
+                return found[0].values if found else {}
+
+            assert spin_until(executor, lambda: bool(links()), 20.0), log.read_text()
+            counts = (links()['matched readers of /skeletons'], links()['matched writers of /people/bundles'])
+            assert counts == ('0', '0')
+            reader = node.create_subscription(PointCloud2, '/skeletons', lambda _: None, DATA_QOS)
+            writer = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+            assert spin_until(executor, lambda: matched([reader, writer]), 20.0)
+            assert spin_until(executor, lambda: (links().get('matched readers of /skeletons'),
+                                                 links().get('matched writers of /people/bundles')) == ('1', '1'),
+                              20.0), links()
+            assert not any('/diagnostics' in key or '/parameter_events' in key for key in links())
+        finally:
+            stop(proc)

@@ -1,6 +1,7 @@
 """A node's /diagnostics: its `diagnostics.*` parameters (core.health.thresholds), live, and a
 timer that publishes, every `diagnostics.period` s, the statuses the node's collect function
-returns (core.health: inputs, node, residuals) as one DiagnosticArray."""
+returns (core.health: inputs, node, residuals) and its links (core.health.links: the endpoints
+its writers and readers have matched) as one DiagnosticArray."""
 from __future__ import annotations
 
 import time
@@ -13,11 +14,13 @@ from rclpy.qos import QoSProfile
 
 from msg_adapters.diagnostics_msg import statuses_to_msg
 from mvpose_ros import topics
+from mvpose_ros.core.health.links import links_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import PREFIX, HealthThresholds, health_parameters
 from mvpose_ros.nodes.runtime import declare, live_parameters
 
 DIAGNOSTICS_QOS = QoSProfile(depth=10)  # reliable, volatile: as diagnostic_updater publishes
+NOT_LINKS = (topics.DIAGNOSTICS, '/parameter_events')  # rclpy's and this class's own endpoints
 
 
 class NodeHealth:
@@ -36,7 +39,7 @@ class NodeHealth:
 
     def prefix(self) -> str:
         """The node's name in its statuses: fully qualified, so namespaced rigs stay apart."""
-        return self._node.get_fully_qualified_name().lstrip('/')
+        return _prefix(self._node)
 
     def _check(self, changes: dict[str, Any]) -> str | None:
         t = self._updated(changes)
@@ -52,5 +55,19 @@ class NodeHealth:
         return replace(self.thresholds, **{k[len(PREFIX):]: v for k, v in changes.items()})
 
     def _publish(self) -> None:
-        statuses = self._collect(time.monotonic(), self.thresholds)
+        statuses = [*self._collect(time.monotonic(), self.thresholds), node_links(self._node)]
         self._publisher.publish(statuses_to_msg(statuses, self._node.get_clock().now().to_msg()))
+
+
+def node_links(node: Node) -> Status:
+    """The node's links status (core.health.links): the readers each of its writers has matched
+    and the writers each of its readers has matched, now."""
+    return links_status(_prefix(node),
+                        {p.topic_name: p.get_subscription_count() for p in node.publishers
+                         if p.topic_name not in NOT_LINKS},
+                        {s.topic_name: s.get_publisher_count() for s in node.subscriptions
+                         if s.topic_name not in NOT_LINKS})
+
+
+def _prefix(node: Node) -> str:
+    return node.get_fully_qualified_name().lstrip('/')
