@@ -1,6 +1,7 @@
 """The skeleton recorder as a program of its own (`python -m mvpose_ros.graph.recorder`), on the
-fake graph of test_processes: ready once the graph is visible and its output reader matched, the
-player let go once its camera_info reader matched, every frame exactly once, sizes measured."""
+fake graph of test_processes: ready once the graph is visible, its output reader matched and the
+nodes report their links matched on /diagnostics (without those reports it never is), the player
+let go once its camera_info reader matched, every frame exactly once, sizes measured."""
 from __future__ import annotations
 
 import json

@@ -16,7 +16,8 @@ On its own (e.g. on the compute host of a split graph, or inside a network names
         --stats /tmp/stats.json [--cameras 5] [--measure] [--start-topic bag_player/start]
 
 It waits until every endpoint the graph needs before playback is visible (graph.config
-expected_connections) and its own readers have matched their writers, then creates
+expected_connections), its own readers have matched their writers and the nodes report on
+/diagnostics every link between them matched (core.health.links), then creates
 the --ready file (and, with --start-topic, lets a bag_player started with that start_topic play
 once its camera_info reader has matched the player's writer). Every skeletons message is appended
 to --predictions as it arrives, as a predictions line, duplicates included. It exits 0 once every
@@ -38,6 +39,7 @@ from pathlib import Path
 from typing import AbstractSet, Any, Mapping, Sequence, TextIO
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -49,17 +51,21 @@ from std_msgs.msg import Empty, Header
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.cdr_header import header_stamp_ns
+from msg_adapters.diagnostics_msg import msg_to_statuses
 from msg_adapters.skeleton_msg import Skeletons, msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.evaluation.predictions import frame_line
+from mvpose_ros.core.health.links import unmatched_links
+from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
 from mvpose_ros.nodes.bag_player import START_QOS
+from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.runtime import DATA_QOS
-from mvpose_ros.topics import (BUNDLES, CAMERA_INFO, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS, SKELETONS_DROPPED,
-                               SKELETONS_LIVE, camera_topic)
+from mvpose_ros.topics import (BUNDLES, CAMERA_INFO, DIAGNOSTICS, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS,
+                               SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic)
 
 TIMING_TOPIC = camera_topic(0, CAMERA_INFO)  # a frame's latency is timed from its arrival here
 OUTPUT_TOPIC = SKELETONS
@@ -128,10 +134,19 @@ class SkeletonRecorder(Node):
                 self._outputs.append(self.create_subscription(
                     msg_type, topic, lambda cdr, t=name, m=msg_type: self._measure(t, m, cdr), DATA_QOS, raw=True))
         self._output_name = self.resolve_topic_name(OUTPUT_TOPIC)
+        self._statuses: dict[str, Status] = {}  # name -> the latest status of that name on /diagnostics
+        self.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, DIAGNOSTICS_QOS)
 
     def _on_info(self, msg: CameraInfo, info: Any) -> None:
         self.last_activity = time.monotonic()
         self.info_at.setdefault(stamp_ns(msg.header.stamp), info['received_timestamp'])
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        try:
+            statuses = msg_to_statuses(msg)
+        except ValueError:  # not a status of ours (a level no node here sends)
+            return
+        self._statuses.update((s.name, s) for s in statuses)
 
     def _on_people(self, topic: str, cdr: bytes) -> None:
         self.people_stamps[topic].append(header_stamp_ns(cdr))
@@ -205,15 +220,24 @@ class SkeletonRecorder(Node):
         return [f'{word[end]} of {self.resolve_topic_name(topic)}' for topic, ends in expected.items()
                 for end in ends if count[end](topic) == 0]
 
+    def not_connected(self, expected: Mapping[str, Sequence[str]]) -> list[str]:
+        """What keeps the graph from playing without loss, in words (empty once connected): an
+        expected endpoint not yet visible, a reader of this node not yet matched, a link between
+        two of the graph's nodes (a topic of `expected` with both ends) whose writer has not yet
+        matched every reader, or a reader every writer, by the nodes' links on /diagnostics."""
+        missing = [f'no {m}' for m in self.missing_links(expected)]
+        missing += [f'no matched writer of {t}' for t in self.unmatched_outputs()]
+        if missing:
+            return missing
+        links = [self.resolve_topic_name(t) for t, ends in expected.items() if {'pub', 'sub'} <= set(ends)]
+        seen = {t: (self.count_publishers(t), self.count_subscribers(t)) for t in links}
+        return unmatched_links(self._statuses.values(), seen)
+
     def unmatched_outputs(self) -> list[str]:
         """This node's readers of skeletons (and of every measured topic) that have not matched a
         writer yet (bp_solver's, ...), by fully qualified name: once matched, a reader drops
         nothing that writer sends."""
         return [sub.topic_name for sub in self._outputs if sub.get_publisher_count() == 0]
-
-    def output_matched(self) -> bool:
-        """Whether every reader of `unmatched_outputs` has matched."""
-        return not self.unmatched_outputs()
 
     def timing_matched(self) -> bool:
         """Whether every camera_info reader of this node has matched a writer (the player's)."""
@@ -233,7 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='the bag to be played: its camera 0 openpose stamps are the input')
     p.add_argument('--predictions', required=True, type=Path, help='predictions file, written as outputs come')
     p.add_argument('--ready', required=True, type=Path,
-                   help='created once every endpoint of the graph is visible and the output reader matched')
+                   help='created once the graph is connected: every endpoint visible, every link matched')
     p.add_argument('--stats', required=True, type=Path, help='JSON summary written at the end')
     p.add_argument('--cameras', type=int, default=5)
     p.add_argument('--frame-rate', type=float, default=FRAME_RATE)
@@ -268,9 +292,9 @@ def record(args: argparse.Namespace) -> bool:
     executor.add_node(node)
     complete = False
     try:
-        if not _spin_until(executor, lambda: not node.missing_links(expected) and node.output_matched(), args.timeout):
-            missing = node.missing_links(expected) or [f'matched writer of {t}' for t in node.unmatched_outputs()]
-            print(f'graph not all visible after {args.timeout:g} s: no {", no ".join(missing)}', file=sys.stderr)
+        if not _spin_until(executor, lambda: not node.not_connected(expected), args.timeout):
+            print(f'graph not connected after {args.timeout:g} s: {"; ".join(node.not_connected(expected))}',
+                  file=sys.stderr)
             return False
         args.ready.touch()
         if args.start_topic:

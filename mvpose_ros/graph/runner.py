@@ -1,11 +1,14 @@
 """Running the node graph on a bag: start the node processes, wait until the graph is connected
 and the recorder's readers have matched, play, collect every output, stop everything.
 
-The order makes start-up lossless for what the runner sees: the player is started only once every
-endpoint the graph needs is visible and the recorder's skeletons reader has matched bp_solver's
-writer; the player then waits until its writers have matched their readers (the detectors', the
-recorder's) and for the recorder's start signal, which the recorder sends once its camera_info
-reader has matched the player's writer. So the first frame's camera_info and skeletons arrive.
+The order makes start-up lossless: the player is started only once every endpoint the graph needs
+is visible, the recorder's skeletons reader has matched bp_solver's writer, and the nodes report
+on /diagnostics that each writer between them (the detectors' people2d, association's bundles)
+has matched its readers and each reader its writers (core.health.links: a volatile message sent
+before its writer and reader have matched each other is lost); the player then waits until its
+writers have matched their readers (the detectors', the recorder's) and for the recorder's start
+signal, which the recorder sends once its camera_info reader has matched the player's writer. So
+the first frame reaches every node, and its camera_info and skeletons reach the recorder.
 
 With a Respawner, a node that dies is started again after its delay instead of ending the run
 (not the player: a new one would play the bag from its start again); the recorder is armed to
@@ -119,13 +122,10 @@ def _spin_until(node: SkeletonRecorder, executor: SingleThreadedExecutor, group:
 
 def _wait_connected(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
                     expected: Mapping[str, Sequence[str]], watch: Supervision) -> None:
-    """Until every expected endpoint exists and the recorder's skeletons reader has matched."""
-
-    def why_not() -> str:
-        missing = node.missing_links(expected) or [f'matched publisher of {t}' for t in node.unmatched_outputs()]
-        return f'graph not connected after {STARTUP_TIMEOUT_S:g} s: no {", no ".join(missing)}'
-
-    _spin_until(node, executor, group, lambda: not node.missing_links(expected) and node.output_matched(), why_not,
+    """Until every expected endpoint exists, the recorder's skeletons reader has matched, and the
+    nodes report every link between them matched (SkeletonRecorder.not_connected)."""
+    _spin_until(node, executor, group, lambda: not node.not_connected(expected),
+                lambda: f'graph not connected after {STARTUP_TIMEOUT_S:g} s: {"; ".join(node.not_connected(expected))}',
                 watch)
 
 
