@@ -17,6 +17,7 @@ import pytest
 
 from mvpose_ros.cli import images
 from mvpose_ros.core.evaluation.datasets import calibration_file, dataset_dir
+from mvpose_ros.graph.config import load_params
 
 SHELF = dataset_dir('shelf')
 REPO = Path(__file__).resolve().parents[1]
@@ -158,3 +159,14 @@ def test_an_image_file_declaring_a_huge_size_is_refused_before_decoding(tmp_path
                          check=True).stdout.splitlines()
     assert 'more than 33554432 pixels' in out[0]
     assert int(out[1]) < 400 * 1024, out  # KiB: the imports alone; decoding would take 2.7 GB
+
+
+def test_a_sequence_is_solved_as_the_rig_graph_solves_it_and_one_set_from_scratch():
+    """--sets above 1 takes the rig template's bp_solver parameters (a set's cost bounded by its
+    window, as in the graph); one set is the whole clip of one frame."""
+    template = load_params(REPO / 'config' / 'rig_template.yaml')['/**/bp_solver']
+    sequence = images.stage_config(5, 'anatomical').solver.inference
+    assert (sequence.window, sequence.lag, sequence.slide_iterations) == \
+        (template['window'], template['lag'], template['slide_iterations'])
+    assert images.stage_config(1, 'anatomical').solver.inference.window is None
+    assert images.stage_config(5, 'direct').solver.head_model == 'direct'
