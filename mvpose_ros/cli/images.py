@@ -152,8 +152,8 @@ def _mpjpe(result: FrameResult, root: str | None) -> str:
 
 def stage_config(sets: int, head_model: str) -> StageConfig:
     """One set: the clip of one frame, BP from scratch. A sequence: the rig graph's bp_solver
-    parameters (a frame solved with at most `window` - 1 before it; solving the whole clip so far
-    again at every set made a set's 3D stage grow from 23 to 85-131 ms over 20 sets)."""
+    parameters (a set solved with at most `window` - 1 before it; solving the whole clip so far
+    again at every set made a set's 3D stage grow from about 25 ms to 100-175 ms over 20 sets)."""
     if sets == 1:
         return StageConfig.from_params({'window': 0, 'head_model': head_model})
     solver = load_params(package_path(RIG_TEMPLATE))['/**/bp_solver']
