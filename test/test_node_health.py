@@ -81,3 +81,24 @@ def test_a_node_reports_on_diagnostics_the_endpoints_its_writers_and_readers_hav
             assert not any('/diagnostics' in key or '/parameter_events' in key for key in links())
         finally:
             stop(proc)
+
+
+def test_a_change_of_a_nodes_links_is_published_at_once_not_after_the_period(domain, tmp_path):
+    """With diagnostics.period 60 s, the probe's skeletons reader matching shows on /diagnostics
+    long before the next periodic message (the wait below is a bound for failures only): a runner
+    waiting for the links does not wait for the period. The probe's diagnostics reader has matched
+    bp_solver's writer first, so nothing published after that can be lost on the way."""
+    log = tmp_path / 'bp.log'
+    with probe(domain, 'links_probe') as (node, executor):
+        arrays: list[DiagnosticArray] = []
+        diagnostics = node.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, DIAGNOSTICS_QOS)
+        proc = start_node('bp_solver', domain, log, '-p', 'diagnostics.period:=60.0')
+        try:
+            assert spin_until(executor, lambda: matched([diagnostics]), 20.0), log.read_text()
+            reader = node.create_subscription(PointCloud2, '/skeletons', lambda _: None, DATA_QOS)
+            assert spin_until(executor, lambda: matched([reader]), 20.0)
+            assert spin_until(executor, lambda: any(
+                s.name == 'bp_solver: links' and s.values.get('matched readers of /skeletons') == '1'
+                for a in arrays for s in msg_to_statuses(a)), 20.0), log.read_text()
+        finally:
+            stop(proc)

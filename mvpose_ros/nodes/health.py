@@ -1,7 +1,9 @@
 """A node's /diagnostics: its `diagnostics.*` parameters (core.health.thresholds), live, and a
 timer that publishes, every `diagnostics.period` s, the statuses the node's collect function
 returns (core.health: inputs, node, residuals) and its links (core.health.links: the endpoints
-its writers and readers have matched) as one DiagnosticArray."""
+its writers and readers have matched) as one DiagnosticArray; also at once when its links change
+or a new reader of /diagnostics matches, so that a runner waiting for the links to match does not
+wait for the period."""
 from __future__ import annotations
 
 import time
@@ -21,6 +23,7 @@ from mvpose_ros.nodes.runtime import declare, live_parameters
 
 DIAGNOSTICS_QOS = QoSProfile(depth=10)  # reliable, volatile: as diagnostic_updater publishes
 NOT_LINKS = (topics.DIAGNOSTICS, '/parameter_events')  # rclpy's and this class's own endpoints
+LINKS_POLL_S = 0.2  # s between two looks at the links (a few C calls: negligible CPU)
 
 
 class NodeHealth:
@@ -34,7 +37,9 @@ class NodeHealth:
         self._node = node
         self._collect = collect
         self._publisher = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, DIAGNOSTICS_QOS)
+        self._shown: tuple[dict[str, str], int] | None = None  # links and diagnostics readers last published
         node.create_timer(self.thresholds.period, self._publish)
+        node.create_timer(LINKS_POLL_S, self._poll_links)
         live_parameters(node, [s.name for s in specs if s.live], self._check, self._apply)
 
     def prefix(self) -> str:
@@ -54,8 +59,14 @@ class NodeHealth:
     def _updated(self, changes: dict[str, Any]) -> HealthThresholds:
         return replace(self.thresholds, **{k[len(PREFIX):]: v for k, v in changes.items()})
 
+    def _poll_links(self) -> None:
+        if (node_links(self._node).values, self._publisher.get_subscription_count()) != self._shown:
+            self._publish()
+
     def _publish(self) -> None:
-        statuses = [*self._collect(time.monotonic(), self.thresholds), node_links(self._node)]
+        links = node_links(self._node)
+        self._shown = links.values, self._publisher.get_subscription_count()
+        statuses = [*self._collect(time.monotonic(), self.thresholds), links]
         self._publisher.publish(statuses_to_msg(statuses, self._node.get_clock().now().to_msg()))
 
 
