@@ -70,7 +70,20 @@ def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
         assert float(s[2]) < 0.1 * float(s[4])  # no MultiPose: a small fraction of EfficientPose's time
         assert int(s[3]) >= 12 and all(float(m) < MPJPE_BOUND_MM for m in s[5:])
     assert re.search(r'median of 3 sets: MultiPose [0-9.]+ ms, EfficientPose [0-9.]+ ms, heatmaps [0-9.]+ ms, '
-                     r'association and 3D [0-9.]+ ms, total [0-9.]+ ms \([0-9.]+ sets/s\)', out), out
+                     r'association and 3D [0-9.]+ ms, total [0-9.]+ ms; [0-9.]+ sets/s', out), out
+
+
+def test_a_sequence_with_multipose_on_every_set_starts_each_set_while_the_last_finishes(tmp_path, capsys):
+    """Frame 572 four times, MultiPose on two workers: the sets overlap (a set's runs start while
+    the one before finishes) and each set still gets all five images' people and the actors."""
+    assert images.main(['--calibration', CALIBRATION, '--images', *FRAMES, '--frame', '572', '--ground-truth', 'shelf',
+                        '--output', str(tmp_path), '--sets', '4', '--multipose-workers', '2', '--threads', '1']) == 0
+    out = capsys.readouterr().out
+    sets = re.findall(r'set (\d): MultiPose on (\d) images .* people (cam0:\d.*cam4:\d); \d in 3D; '
+                      r'MPJPE actor 1 ([0-9.]+) mm, actor 3 ([0-9.]+) mm, actor 4 ([0-9.]+) mm', out)
+    assert [(s[0], s[1]) for s in sets] == [(str(n), '5') for n in range(4)], out
+    assert len({s[2] for s in sets}) == 1 and all(float(m) < MPJPE_BOUND_MM for s in sets for m in s[3:]), out
+    assert re.search(r'median of 4 sets: .* total [0-9.]+ ms; [0-9.]+ sets/s', out), out
 
 
 def test_the_default_heatmaps_multipose_keypoints_score_frame_572_without_efficientpose(tmp_path, capsys):

@@ -132,6 +132,31 @@ def test_multipose_workers_find_the_same_people_in_each_image_of_a_set(shelf_ima
         np.testing.assert_array_equal(a.heatmap.maps, b.heatmap.maps)
 
 
+def test_sets_started_while_the_one_before_finishes_find_what_each_set_alone_finds(shelf_image):
+    """start_set / finish with a second set started before the first is finished (as the whole-rig
+    detector and mvpose-images --sets run a sequence): every set's people are those detect_set
+    gives it alone, in order, and the sets' MultiPose runs all end."""
+    config = OnnxDetectorConfig(model_dir=MODELS, heatmaps='multipose', threads=1)
+    sets = [[shelf_image, shelf_image[:, ::-1].copy(), None], [shelf_image[::-1].copy(), shelf_image, shelf_image],
+            [np.zeros_like(shelf_image), shelf_image, shelf_image[:, ::-1].copy()]]
+    alone = OnnxPoseDetector(config)
+    expected = [alone.detect_set(images) for images in sets]
+    pool = OnnxPoseDetector(replace(config, multipose_workers=2))
+    pending = [pool.start_set(sets[0]), pool.start_set(sets[1])]
+    got = [pool.finish(pending[0])]
+    pending.append(pool.start_set(sets[2]))
+    got += [pool.finish(pending[1]), pool.finish(pending[2])]
+    assert all(f.done() for p in pending for f in p.finds) and [len(p.finds) for p in pending] == [2, 3, 3]
+    assert pool.timing.multipose_runs == 3 and pool.timing.total >= pool.timing.multipose > 0
+    for one, two in zip(expected, got):
+        assert [p is None for p in one] == [p is None for p in two]
+        assert [len(p) for p in one if p is not None] == [len(p) for p in two if p is not None]
+        for a, b in zip(sum([p for p in one if p], []), sum([p for p in two if p], [])):
+            np.testing.assert_array_equal(a.keypoints, b.keypoints)
+            np.testing.assert_array_equal(a.heatmap.maps, b.heatmap.maps)
+    assert sum(len(p) for p in got[1]) >= 6
+
+
 def test_fused_heatmaps_hold_the_efficientpose_evidence_and_multipose_keypoints(detector, shelf_image):
     fused = OnnxPoseDetector(OnnxDetectorConfig(model_dir=MODELS, heatmaps='fused')).detect(shelf_image)
     alone = detector.detect(shelf_image)

@@ -14,11 +14,15 @@ the time of each stage of the set (MultiPose, EfficientPose, heatmaps, associati
 --ground-truth shelf, the per-actor MPJPE and PCP of the frame against Shelf's actorsGT.
 
 --sets N detects the same images N times as a sequence of sets (a still scene) and prints each
-set's stage times and their medians; the sequence is solved as the rig graph's bp_solver solves it
+set's stage times (total: from the set's start to its skeletons), their medians and the sets per
+second of the whole sequence; the sequence is solved as the rig graph's bp_solver solves it
 (config/rig_template.yaml: a sliding window of sets, warm-started, the newest set out), so every
-set costs what it would there; with --person-detector-every K, MultiPose runs on every K-th
-set only and the sets between take their crops from the previous set's 3D skeletons
-(core.tracked_crops). The files written and the score are those of the last set.
+set costs what it would there. MultiPose's runs of a set start while the set before finishes
+(OnnxPoseDetector.start_set: a worker the set's last image leaves idle takes the next set's
+first). With --person-detector-every K, MultiPose runs on every K-th set only
+and the sets between take their crops from the previous set's 3D skeletons (core.tracked_crops;
+a set then starts once the one before is solved). The files written and the score are those of
+the last set.
 
 --heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
 --keypoint-sigma times the person's box diagonal) and runs no EfficientPose; its keypoints need
@@ -28,11 +32,13 @@ takes both; core.onnx_detector).
 from __future__ import annotations
 
 import argparse
+import queue
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import Iterator, Sequence, TextIO
 
 import cv2
 import numpy as np
@@ -43,7 +49,8 @@ from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
 from mvpose_ros.core.detection.image_file import read_image
-from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_detector import (HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector,
+                                                     PendingSet)
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.evaluation.overlay import overlay, person_colour
 from mvpose_ros.core.stage import StageConfig, Stage3D
@@ -182,11 +189,15 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
     stage = Stage3D(cameras, stage_config(args.sets, args.head_model), up)
     nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
+    # With MultiPose on every set, the next set's runs start while this one finishes (its people
+    # and 3D stage): crops from skeletons would need this set's 3D first.
+    ahead = _started_ahead(detector, images, args.sets) if planner.every == 1 else None
     times = []
+    first = time.perf_counter()
     for n in range(args.sets):
-        start = time.perf_counter()
         plan = planner.plan()
-        people = detector.detect_set(images, plan, planner.previous)
+        pending = next(ahead) if ahead is not None else detector.start_set(images, plan, planner.previous)
+        people = detector.finish(pending)
         detected = time.perf_counter()
         results = stage.push(args.frame + n, people) + stage.flush()
         result = replace(results[0], frame=args.frame) if results else nobody
@@ -194,19 +205,18 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         planner.skeletons(result.joints)
         end = time.perf_counter()
         t = detector.timing
-        times.append((t.multipose, t.efficientpose, t.total - t.multipose - t.efficientpose, end - detected,
-                      end - start))
+        times.append((t.multipose, t.efficientpose, t.heatmaps, end - detected, end - pending.started))
         found = ' '.join(f'cam{c}:{len(p)}' for c, p in enumerate(people))
         scored = f'; MPJPE {_mpjpe(result, args.data_root)}' if args.ground_truth == 'shelf' else ''
         print(f'set {n}: MultiPose on {t.multipose_runs} images {1e3 * t.multipose:6.1f} ms, EfficientPose '
-              f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * times[-1][2]:5.1f} ms, '
-              f'association and 3D {1e3 * (end - detected):5.1f} ms, total {1e3 * (end - start):6.1f} ms; people '
+              f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * t.heatmaps:5.1f} ms, '
+              f'association and 3D {1e3 * (end - detected):5.1f} ms, total {1e3 * times[-1][4]:6.1f} ms; people '
               f'{found}; {len(result.person_ids)} in 3D{scored}', file=out)
     if args.sets > 1:
         median = 1e3 * np.median(np.array(times), axis=0)
         print(f'median of {args.sets} sets: MultiPose {median[0]:.1f} ms, EfficientPose {median[1]:.1f} ms, heatmaps '
-              f'{median[2]:.1f} ms, association and 3D {median[3]:.1f} ms, total {median[4]:.1f} ms '
-              f'({1e3 / median[4]:.2f} sets/s)', file=out)
+              f'{median[2]:.1f} ms, association and 3D {median[3]:.1f} ms, total {median[4]:.1f} ms; '
+              f'{args.sets / (time.perf_counter() - first):.2f} sets/s', file=out)
 
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / 'skeletons.jsonl').write_text(frame_line(result) + '\n', encoding='utf-8')
@@ -220,6 +230,26 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.ground_truth == 'shelf':
         _score(result, args.data_root, out)
     return 0
+
+
+def _started_ahead(detector: OnnxPoseDetector, images: list[np.ndarray], sets: int) -> Iterator[PendingSet]:
+    """`sets` sets of the same images, each started (OnnxPoseDetector.start_set) by a feeder thread
+    as soon as MultiPose has a worker free for it, one set at most waiting started."""
+    ready: queue.Queue[PendingSet | Exception] = queue.Queue(maxsize=1)
+
+    def feed() -> None:
+        try:
+            for _ in range(sets):
+                ready.put(detector.start_set(images))
+        except Exception as exc:  # handed to the consumer, which raises it
+            ready.put(exc)
+
+    threading.Thread(target=feed, name='start_sets', daemon=True).start()
+    for _ in range(sets):
+        item = ready.get()
+        if isinstance(item, Exception):
+            raise item
+        yield item
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -34,8 +34,9 @@ cells and each is cut to the cells holding its evidence, which keeps messages sm
 """
 from __future__ import annotations
 
+import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -124,12 +125,15 @@ class OnnxDetectorConfig:
 
 @dataclass
 class DetectionTiming:
-    """Wall seconds of the last detect() or detect_set(): MultiPose (letterbox, runs, decode),
-    EfficientPose (crops and runs), and everything including the heatmaps' resampling; people
-    found, and the images MultiPose ran on (the others' crops were given)."""
+    """Wall seconds of the last set detected (detect, detect_set or finish): MultiPose (from the
+    set's start to its last run's end: letterbox, waiting for a worker, runs, decode), EfficientPose
+    (crops and runs), heatmaps (finish's own work besides EfficientPose: keypoints, Gaussians,
+    resampling), and total, from the start to the people; people found, and the images MultiPose
+    ran on (the others' crops were given)."""
 
     multipose: float = 0.0
     efficientpose: float = 0.0
+    heatmaps: float = 0.0
     total: float = 0.0
     people: int = 0
     multipose_runs: int = 0
@@ -138,10 +142,23 @@ class DetectionTiming:
 @dataclass
 class _Found:
     """MultiPose's people in image pixels: keypoints (P, 17, 3) u, v, score; boxes (P, 4) u0, v0,
-    u1, v1 (edges, pixel-centre coordinates)."""
+    u1, v1 (edges, pixel-centre coordinates); done: time.perf_counter() when the run ended."""
 
     keypoints: np.ndarray
     boxes: np.ndarray
+    done: float
+
+
+@dataclass
+class PendingSet:
+    """A set OnnxPoseDetector.start_set has started: its images, boxes and previous people as
+    given, MultiPose's runs on the images it searches (in camera order), and when it started."""
+
+    images: list[np.ndarray | None]
+    boxes: list[np.ndarray | None]
+    previous: Sequence[np.ndarray] | None
+    finds: list[Future[_Found]]
+    started: float
 
 
 @dataclass
@@ -158,7 +175,8 @@ class _Crop:
 
 class OnnxPoseDetector:
     """The sessions are created (and checked) once, here (EfficientPose's not with heatmaps
-    'multipose'); detect() runs them on one image, detect_set() on a synchronised set."""
+    'multipose'); detect() runs them on one image, detect_set() on a synchronised set, and
+    start_set() / finish() on a sequence of sets, one starting while the one before finishes."""
 
     def __init__(self, config: OnnxDetectorConfig) -> None:
         self.config = config
@@ -172,6 +190,7 @@ class OnnxPoseDetector:
         self.providers = tuple((self._efficientpose or self._multipose).get_providers())
         self.timing = DetectionTiming()
         self._pool = ThreadPoolExecutor(config.multipose_workers) if config.multipose_workers > 1 else None
+        self._free_workers = threading.Semaphore(config.multipose_workers)
 
     def detect(self, bgr: np.ndarray) -> list[Person2D]:
         """The people in bgr (H, W, 3) uint8, each with its 16 inference keypoints and heatmaps;
@@ -186,6 +205,14 @@ class OnnxPoseDetector:
         camera, the inference keypoints (R, 16, 3) of its people in the previous set, whose ears
         given boxes carry. ValueError naming the camera for an image that is not uint8 BGR, and for
         boxes with heatmaps 'multipose' (its keypoints come from MultiPose's run on the image)."""
+        return self.finish(self.start_set(images, boxes, previous))
+
+    def start_set(self, images: Sequence[np.ndarray | None], boxes: Sequence[np.ndarray | None] | None = None,
+                  previous: Sequence[np.ndarray] | None = None) -> PendingSet:
+        """detect_set in two steps: check the set and start MultiPose on its images, returning once
+        the last of them has a worker; finish() completes it. A caller that starts the next set
+        then, while this one finishes, gives its first image the worker this set leaves idle (five
+        images on two workers) instead of queueing it behind this set's images."""
         cfg = self.config
         boxes = boxes if boxes is not None else [None] * len(images)
         if len(boxes) != len(images) or (previous is not None and len(previous) != len(images)):
@@ -198,11 +225,35 @@ class OnnxPoseDetector:
             if bgr is not None and (bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8):
                 raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
                                  f'got {bgr.dtype} {bgr.shape}')
+        started = time.perf_counter()
+        finds = [self._start_find(bgr) for bgr, given in zip(images, boxes) if bgr is not None and given is None]
+        return PendingSet(list(images), list(boxes), previous, finds, started)
+
+    def _start_find(self, bgr: np.ndarray) -> Future[_Found]:
+        """_find_people on a free worker, waiting for one (at once without a pool)."""
+        if self._pool is None:
+            done: Future[_Found] = Future()
+            done.set_result(self._find_people(bgr))
+            return done
+        self._free_workers.acquire()
+        try:
+            future = self._pool.submit(self._find_people, bgr)
+        except BaseException:
+            self._free_workers.release()
+            raise
+        future.add_done_callback(lambda _: self._free_workers.release())
+        return future
+
+    def finish(self, pending: PendingSet) -> list[list[Person2D] | None]:
+        """The people of a set start_set started, as detect_set returns them (waiting for its
+        MultiPose runs); self.timing becomes this set's."""
+        cfg = self.config
+        images, boxes, previous = pending.images, pending.boxes, pending.previous
+        found_all = [f.result() for f in pending.finds]
+        finds = iter(found_all)
         t0 = time.perf_counter()
         crops: list[_Crop] = []
         side = self._spec.input_side
-        searched = [bgr for bgr, given in zip(images, boxes) if bgr is not None and given is None]
-        finds = iter(self._pool.map(self._find_people, searched) if self._pool else map(self._find_people, searched))
         out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
         # heatmaps 'multipose': per camera its people's keypoints (P, 16, 3) and Gaussian stds (P,)
         alone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -233,8 +284,10 @@ class OnnxPoseDetector:
             person = self._person(crop, raw, before)
             if person is not None:
                 out[crop.camera].append(person)
-        self.timing = DetectionTiming(t1 - t0, t2 - t1, time.perf_counter() - t0,
-                                      sum(len(p) for p in out if p is not None), len(searched))
+        end = time.perf_counter()
+        multipose = max((f.done for f in found_all), default=pending.started) - pending.started
+        self.timing = DetectionTiming(multipose, t2 - t1, end - t2 + t1 - t0, end - pending.started,
+                                      sum(len(p) for p in out if p is not None), len(found_all))
         return out
 
     def _find_people(self, bgr: np.ndarray) -> _Found:
@@ -254,7 +307,7 @@ class OnnxPoseDetector:
         boxes = corners.reshape(-1, 4)
         edge = np.array([bgr.shape[1], bgr.shape[0]]) - 0.5
         keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > -0.5) & (boxes[:, :2] < edge)).all(axis=1)
-        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64))
+        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), time.perf_counter())
 
     def _inference_keypoints(self, coco: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
         """MultiPose's COCO keypoints (P, 17, 3) as inference joints (P, 16, 3): those scoring below
