@@ -17,7 +17,7 @@ from sensor_msgs.msg import PointCloud2
 
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.graph.config import (RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections, graph_nodes,
-                                     graph_settings, load_params, node_command, unknown_nodes)
+                                     graph_settings, load_params, node_command, played_connections, unknown_nodes)
 from mvpose_ros.graph.report import frame_ranges, latency_ms, report
 from ros_harness import ros_domain
 
@@ -93,6 +93,7 @@ def test_expected_connections_and_unknown_sections():
                      'cam1/people2d': ('pub', 'sub'), 'people/bundles': ('pub', 'sub'), 'skeletons': ('pub',)}
     assert expected_connections(1, 'image_raw') == {'cam0/image_raw': ('sub',), 'cam0/people2d': ('pub', 'sub'),
                                                     'people/bundles': ('pub', 'sub'), 'skeletons': ('pub',)}
+    assert played_connections(2) == {'cam0/openpose': ('pub', 'sub'), 'cam1/openpose': ('pub', 'sub')}
     nodes = graph_nodes(5, 'b', 1.0)
     params = {'bag_player': {}, '/**/heatmap_detector': {}, '/cam1/heatmap_detector': {}, '/**/heatmap_detectr': {},
               'association': {}, 'bpsolver': {}, RUNNER_SECTION: {}}

@@ -22,6 +22,7 @@ from mvpose_ros.cli import graph
 from mvpose_ros.graph import session
 from mvpose_ros.core.evaluation.predictions import read_predictions
 from mvpose_ros.graph import runner
+from mvpose_ros.graph.config import NodeSpec
 from mvpose_ros.graph.processes import ProcessGroup
 from mvpose_ros.graph.recorder import SkeletonRecorder
 from ros_harness import ros_domain
@@ -259,10 +260,10 @@ elif role == 'bp_solver':
             ready.publish(Empty())
             timer.cancel()
     timer = node.create_timer(0.02, check)
-if role != 'bag_player':  # its links, as every real node reports them, for the runner's start
-    diagnostics = node.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-    node.create_timer(0.1, lambda: diagnostics.publish(statuses_to_msg([node_links(node)],
-                                                                       node.get_clock().now().to_msg())))
+# its links, as every real node reports them, for the runner's start (the player's: while it waits)
+diagnostics = node.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+node.create_timer(0.1, lambda: diagnostics.publish(statuses_to_msg([node_links(node)],
+                                                                   node.get_clock().now().to_msg())))
 if role == 'bag_player':
     openpose = [node.create_publisher(PointCloud2, f'cam{c}/openpose', QOS) for c in CAMERAS]
     info = node.create_publisher(CameraInfo, 'cam0/camera_info', QOS)
@@ -389,6 +390,40 @@ def test_runner_interrupted_stops_everything_and_writes_what_it_has(fake_graph, 
     assert not predictions.with_name(predictions.name + '.partial').exists()
     started = {p.name: int(p.read_text().split('\n')[0]) for p in (tmp_path / 'pids').iterdir()}
     assert 'bag_player' in started and [n for n, pid in started.items() if alive(pid)] == []
+
+
+def test_the_player_is_let_play_once_the_nodes_report_its_links_matched(tmp_path):
+    """The gate opens after the recorder's camera_info readers have matched AND the nodes report
+    every link of the player's topics matched (a volatile first message sent before would be lost)."""
+    calls = []
+
+    class Recorder:
+        def timing_matched(self):
+            calls.append('timing')
+            return True
+
+        def not_connected(self, played):
+            calls.append('links')
+            return [] if calls.count('links') > 3 else [f'{next(iter(played))}: a writer has matched 0 of 1 readers']
+
+        def open_gate(self, topic):
+            calls.append(f'gate {topic}')
+
+    class Group:
+        def start(self, name, command):
+            calls.append(f'start {name}')
+
+        def poll(self):
+            return {}
+
+    class Executor:
+        def spin_once(self, timeout_sec):
+            pass
+
+    spec = NodeSpec('bag_player', '', {'start_topic': 'bag_player/start', 'bag': 'b', 'rate': 1.0, 'loops': 1})
+    runner._start_player(Recorder(), Executor(), Group(), spec, tmp_path / 'p.yaml',
+                         {'/cam0/openpose': ('pub', 'sub')}, runner.Supervision())
+    assert calls == ['start bag_player', 'timing', 'links', 'links', 'links', 'links', 'gate bag_player/start']
 
 
 def test_runner_expects_the_stamps_of_every_loop_as_the_player_sends_them(tmp_path):

@@ -19,7 +19,7 @@ from mvpose_ros.bags.replay import InFlight, group_sets
 from mvpose_ros.cli.graph import main as graph_main
 from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,
-                                     rig_graph_nodes, rig_sync, write_overrides)
+                                     rig_graph_nodes, rig_played_connections, rig_sync, write_overrides)
 from mvpose_ros.graph.report import rig_prediction_lines, rig_report, set_skews_ms
 from mvpose_ros.package_files import package_path
 
@@ -162,6 +162,9 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
     assert rig_connections(rig) == {'/rig/a/image': ('sub',), 'a/people2d': ('pub', 'sub'), '/rig/b/image': ('sub',),
                                     'b/people2d': ('pub', 'sub'), 'people/bundles': ('pub', 'sub'),
                                     'skeletons': ('pub',)}
+    # the player's links, waited for once it is up: both ends of every camera's image and info
+    assert rig_played_connections(rig) == {t: ('pub', 'sub') for c in rig.cameras for t in (c.image, c.camera_info)}
+    assert len(rig_played_connections(rig)) == 4
     # --rig alone: the template's defaults (association max_skew 0 = half a 25 Hz period)
     assert rig_sync([load_params(package_path(RIG_TEMPLATE))]) == (0.02, 0.5)
 

@@ -190,6 +190,12 @@ def expected_connections(cameras: int, input_topic: str = OPENPOSE) -> dict[str,
     return topics
 
 
+def played_connections(cameras: int, input_topic: str = OPENPOSE) -> dict[str, Sequence[str]]:
+    """The Shelf graph's links from the player that must be matched before it plays: each
+    detector's cam<c>/<input_topic>."""
+    return {camera_topic(c, input_topic): ('pub', 'sub') for c in range(cameras)}
+
+
 def unknown_nodes(params: Mapping[str, object], nodes: Sequence[NodeSpec]) -> list[str]:
     """Sections of the parameter file that match none of `nodes` (typos) besides the runner's."""
     known = {RUNNER_SECTION, '/**'}
@@ -280,6 +286,13 @@ def rig_connections(rig: Rig) -> dict[str, Sequence[str]]:
     topics[BUNDLES] = ('pub', 'sub')
     topics[SKELETONS] = ('pub',)
     return topics
+
+
+def rig_played_connections(rig: Rig) -> dict[str, Sequence[str]]:
+    """The links from the player of a rig bag that must be matched before it plays: every camera's
+    image and camera_info topic (the detector, association and bp_solver read the CameraInfo of a
+    rig without intrinsics)."""
+    return {topic: ('pub', 'sub') for camera in rig.cameras for topic in (camera.image, camera.camera_info)}
 
 
 def write_overrides(nodes: Sequence[NodeSpec], path: str | Path) -> Path:

@@ -29,7 +29,8 @@ from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.inference.window import FrameResult
-from mvpose_ros.graph.config import GraphSettings, NodeSpec, expected_connections, node_command
+from mvpose_ros.graph.config import (GraphSettings, NodeSpec, expected_connections, node_command,
+                                     played_connections)
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
@@ -130,14 +131,20 @@ def _wait_connected(node: SkeletonRecorder, executor: SingleThreadedExecutor, gr
 
 
 def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup,
-                  spec: NodeSpec, config: Path | Sequence[Path], watch: Supervision) -> None:
+                  spec: NodeSpec, config: Path | Sequence[Path], played: Mapping[str, Sequence[str]],
+                  watch: Supervision) -> None:
     """Start the player; with a start_topic, let it play once the recorder's camera_info readers
-    have matched its writers."""
+    have matched its writers and the nodes report every link of `played` (the player's topics the
+    nodes read) matched: a volatile message sent before its reader matched is lost (bp_solver
+    without a camera's first CameraInfo answered the first set of a rig bag with no people)."""
     start_topic = str(spec.parameters.get('start_topic', ''))
     group.start(spec.name, node_command(spec, config))
     if start_topic:
         _spin_until(node, executor, group, node.timing_matched,
                     lambda: f'the player did not publish /{TIMING_TOPIC} within {STARTUP_TIMEOUT_S:g} s', watch)
+        _spin_until(node, executor, group, lambda: not node.not_connected(played),
+                    lambda: f'the player not connected after {STARTUP_TIMEOUT_S:g} s: '
+                            f'{"; ".join(node.not_connected(played))}', watch)
         node.open_gate(start_topic)
 
 
@@ -182,16 +189,20 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
 
 def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Sequence[NodeSpec], stamps: list[int],
               log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
-              per_loop: int, expected: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0,
+              per_loop: int, expected: Mapping[str, Sequence[str]] | None = None,
+              played: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0,
               watch: Supervision | None = None) -> Outcome:
     """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
     also after Ctrl-C (outcome.interrupted). config: the parameter file(s) every node gets, in
     order; input_topic: what each detector reads in its camera namespace; per_loop: stamps in one
     pass of the bag (the memory baseline); expected: the endpoints to wait for before playing
-    (default: the Shelf graph's, expected_connections); quiet: see _play; watch: how node exits
-    are handled (default: the first ends the run)."""
+    (default: the Shelf graph's, expected_connections); played: the player's links to wait for
+    before it plays (default: the Shelf graph's, played_connections); quiet: see _play; watch: how
+    node exits are handled (default: the first ends the run)."""
     if expected is None:
         expected = expected_connections(settings.cameras, input_topic)
+    if played is None:
+        played = played_connections(settings.cameras, input_topic)
     watch = watch or Supervision()
     outcome = Outcome(stamps, MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
@@ -201,7 +212,7 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
             for spec in nodes:
                 if spec.executable == PLAYER:
                     _wait_connected(node, executor, group, expected, watch)
-                    _start_player(node, executor, group, spec, config, watch)
+                    _start_player(node, executor, group, spec, config, played, watch)
                 else:
                     group.start(spec.name, node_command(spec, config))
             outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)

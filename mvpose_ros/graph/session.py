@@ -29,8 +29,8 @@ from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, GraphSettings, NodeSpec, RigRun,
                                      detector_backend, graph_nodes, graph_settings, load_params, output_topics,
-                                     rig_connections, rig_graph_nodes, rig_sync, runner_section, unknown_nodes,
-                                     write_overrides)
+                                     rig_connections, rig_graph_nodes, rig_played_connections, rig_sync, runner_section,
+                                     unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
 from mvpose_ros.graph.report import (OUTPUT_NAME, frame_of, print_periods, print_restarts, report, restart_effects,
                                      rig_prediction_lines, rig_report, score, score_sets)
@@ -216,7 +216,8 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
               f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
-                            expected=rig_connections(rig), quiet=RATE_QUIET_S, watch=watch)
+                            expected=rig_connections(rig), played=rig_played_connections(rig), quiet=RATE_QUIET_S,
+                            watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
