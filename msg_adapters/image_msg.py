@@ -179,11 +179,12 @@ def check_compressed(msg: CompressedImage, expected: tuple[int, int] | None = No
 
 
 def compressed_to_image(msg: CompressedImage, expected: tuple[int, int] | None = None,
-                        max_pixels: int = MAX_PIXELS) -> np.ndarray:
-    """(H, W, 3) uint8 BGR of a jpeg or png CompressedImage, decoded once check_compressed passes."""
+                        max_pixels: int = MAX_PIXELS, reduce: int = 1) -> np.ndarray:
+    """(H, W, 3) uint8 BGR of a jpeg or png CompressedImage, decoded once check_compressed passes
+    (a jpeg at 1/reduce of its size: encoded_image.decode_encoded)."""
     check_compressed(msg, expected, max_pixels)
     try:
-        return decode_encoded(np.frombuffer(msg.data, dtype=np.uint8), expected, max_pixels)
+        return decode_encoded(np.frombuffer(msg.data, dtype=np.uint8), expected, max_pixels, reduce)
     except ValueError as exc:
         raise _with_prefix('CompressedImage', exc) from None
 
@@ -198,9 +199,10 @@ def check_camera_image(msg: Image | CompressedImage, expected: tuple[int, int] |
         check_image(msg, expected)
 
 
-def to_bgr(msg: Image | CompressedImage, expected: tuple[int, int] | None = None) -> np.ndarray:
+def to_bgr(msg: Image | CompressedImage, expected: tuple[int, int] | None = None, reduce: int = 1) -> np.ndarray:
     """(H, W, 3) uint8 BGR of an Image or CompressedImage (expected: (width, height) pixels the
-    image must have; a CompressedImage's header is checked before it is decoded)."""
+    image must have; a CompressedImage's header is checked before it is decoded). reduce: a JPEG
+    may come back at 1/reduce of its size, where decoding it so costs less (other images whole)."""
     if isinstance(msg, CompressedImage):
-        return compressed_to_image(msg, expected)
+        return compressed_to_image(msg, expected, reduce=reduce)
     return msg_to_image(msg, expected)

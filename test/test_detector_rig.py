@@ -110,9 +110,10 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
     assert not bad & set(out) and all(len(v) == 1 for v in out.values())
     for msg in (m for v in out.values() for m in v):
         assert msg.header.frame_id == 'cam_1_optical'
-    # the same people as the ROS-free detector on the same JPEG (the node's settings: threads 1)
+    # the same people as the ROS-free detector on the same JPEG (the node's settings: threads 1),
+    # decoded shrunk as the node decodes it
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', threads=1))
-    expected = detector.detect(to_bgr(jpeg))
+    (expected,) = detector.detect_set([to_bgr(jpeg, reduce=detector.reduced_decoding(1032, 776))], sizes=[(1032, 776)])
     got = msg_to_people(out[first][0])
     assert len(got) == len(expected) >= 3
     for a, b in zip(got, expected):

@@ -147,6 +147,22 @@ def test_a_real_image_as_jpeg_and_png():
         assert back.shape == bgr.shape and np.abs(back.astype(int) - bgr).mean() < (3.0 if fmt == 'jpeg' else 1e-9)
 
 
+def test_a_jpeg_decodes_shrunk_on_request_and_other_images_whole():
+    """reduce k: a JPEG comes back at ceil(W / k) x ceil(H / k), close to the whole image shrunk
+    by area; a PNG and a raw Image whole; a factor libjpeg has not is refused."""
+    bgr = cv2.imread(str(dataset_dir('shelf') / 'frames' / 'cam0_000572.png'), cv2.IMREAD_COLOR)[:775, :1031]
+    jpeg = image_to_compressed_msg(bgr, HEADER, 'jpeg', quality=95)
+    for k in (2, 4, 8):
+        small = to_bgr(jpeg, expected=(1031, 775), reduce=k)
+        assert small.shape == (-(-775 // k), -(-1031 // k), 3)
+        area = cv2.resize(bgr, small.shape[1::-1], interpolation=cv2.INTER_AREA)
+        assert np.abs(small.astype(int) - area).mean() < 3.0
+    assert to_bgr(image_to_compressed_msg(bgr, HEADER, 'png'), reduce=4).shape == bgr.shape
+    assert to_bgr(image_to_msg(bgr, HEADER), reduce=4).shape == bgr.shape
+    with pytest.raises(ValueError, match=r'reduce 3: not one of \[1, 2, 4, 8\]'):
+        to_bgr(jpeg, reduce=3)
+
+
 @pytest.mark.parametrize('fmt, kind', [
     ('jpeg', 'jpeg'), ('png', 'png'), ('bgr8; jpeg compressed bgr8', 'jpeg'),
     ('rgb8; jpeg compressed bgr8', 'jpeg'), ('mono8; jpeg compressed mono8', 'jpeg'),

@@ -32,7 +32,9 @@ Image type: sensor_msgs/Image or CompressedImage (jpeg, png), taken from the ROS
 publisher of the topic is known at start-up (get_topic_names_and_types), else by image_transport's
 naming: a topic ending in '/compressed' is CompressedImage, any other an Image. A topic decided by
 its name is looked up again every TYPE_RECHECK s until the graph knows it; if its publishers then
-have the other type, the subscription is re-made (logged).
+have the other type, the subscription is re-made (logged). A JPEG is decoded shrunk by as much as
+the detector allows (OnnxPoseDetector.reduced_decoding: with heatmaps 'multipose', down to
+MultiPose's input side), its people mapped back to the camera's pixels.
 
 QoS: images and CameraInfo are camera inputs (runtime.camera_subscription): best effort, keep
 last `queue_depth`, so best-effort (sensor data) and reliable publishers both connect; the
@@ -151,11 +153,16 @@ def in_namespace(namespace: str, topic: str) -> str:
     return f'{namespace.rstrip("/")}/{topic}'
 
 
-def decode_image(msg: Image | CompressedImage, camera: Camera) -> Any:
+def decode_image(msg: Image | CompressedImage, camera: Camera, reduce: int = 1) -> Any:
     """(H, W, 3) uint8 BGR of a camera image of the calibrated size camera.width x camera.height
     (to_bgr: an Image's fields, a CompressedImage's jpeg/png header checked before decoding, the
-    data's size against what such an image takes first). ValueError of one line otherwise."""
-    return to_bgr(msg, (camera.width, camera.height))
+    data's size against what such an image takes first; a jpeg at 1/reduce of that size).
+    ValueError of one line otherwise."""
+    return to_bgr(msg, (camera.width, camera.height), reduce)
+
+
+def _size(camera: Camera) -> tuple[int, int]:
+    return camera.width, camera.height
 
 
 @dataclass
@@ -420,12 +427,14 @@ class HeatmapDetectorNode(Node):
         if self._backend == 'openpose':
             self._admit(cam, msg)
             return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
-        return people_to_msg(self._detector.detect(self._image(cam, msg)), msg.header)
+        (people,) = self._detector.detect_set([self._image(cam, msg)], sizes=[_size(cam.camera)])
+        return people_to_msg(people, msg.header)
 
     def _image(self, cam: _Camera, msg: Any) -> Any:
-        """The admitted, decoded BGR image of one camera input; ValueError (one line) otherwise."""
+        """The admitted, decoded BGR image of one camera input, a JPEG shrunk as the detector
+        allows (OnnxPoseDetector.reduced_decoding); ValueError (one line) otherwise."""
         self._admit(cam, msg)
-        return decode_image(msg, cam.camera)
+        return decode_image(msg, cam.camera, self._detector.reduced_decoding(*_size(cam.camera)))
 
     def _decoded(self, cam: _Camera, msg: Any) -> Any:
         """_image of one camera of a set (None without a message), or the ValueError it raised,
@@ -600,7 +609,8 @@ class HeatmapDetectorNode(Node):
                 if isinstance(image, ValueError):
                     self._drop(cam, stamp_ns(msg.header.stamp), str(image))
             images = [None if isinstance(image, ValueError) else image for image in images]
-            for cam, msg, people in zip(self._cameras, synced.items, self._detector.detect_set(images)):
+            sizes = [None if cam.camera is None else _size(cam.camera) for cam in self._cameras]
+            for cam, msg, people in zip(self._cameras, synced.items, self._detector.detect_set(images, sizes=sizes)):
                 if people is not None:
                     outputs.append((cam, people_to_msg(people, msg.header)))
         else:

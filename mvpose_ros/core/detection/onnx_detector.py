@@ -141,11 +141,13 @@ class DetectionTiming:
 
 @dataclass
 class _Found:
-    """MultiPose's people in image pixels: keypoints (P, 17, 3) u, v, score; boxes (P, 4) u0, v0,
-    u1, v1 (edges, pixel-centre coordinates); done: time.perf_counter() when the run ended."""
+    """MultiPose's people in the camera's pixels: keypoints (P, 17, 3) u, v, score; boxes (P, 4)
+    u0, v0, u1, v1 (edges, pixel-centre coordinates); size: the camera's (width, height);
+    done: time.perf_counter() when the run ended."""
 
     keypoints: np.ndarray
     boxes: np.ndarray
+    size: tuple[int, int]
     done: float
 
 
@@ -198,17 +200,31 @@ class OnnxPoseDetector:
         return self.detect_set([bgr])[0]
 
     def detect_set(self, images: Sequence[np.ndarray | None], boxes: Sequence[np.ndarray | None] | None = None,
-                   previous: Sequence[np.ndarray] | None = None) -> list[list[Person2D] | None]:
+                   previous: Sequence[np.ndarray] | None = None,
+                   sizes: Sequence[tuple[int, int] | None] | None = None) -> list[list[Person2D] | None]:
         """The people of each image (H, W, 3) uint8 BGR of a set (None for a camera without an
         image: None out). boxes: per camera, None to find the people with MultiPose, else their
         boxes (Q, 4) u0, v0, u1, v1 (pixel edges; tracked_crops.projected_boxes); previous: per
         camera, the inference keypoints (R, 16, 3) of its people in the previous set, whose ears
-        given boxes carry. ValueError naming the camera for an image that is not uint8 BGR, and for
-        boxes with heatmaps 'multipose' (its keypoints come from MultiPose's run on the image)."""
-        return self.finish(self.start_set(images, boxes, previous))
+        given boxes carry; sizes: per camera, its (width, height) (None: the image's), of which a
+        smaller image is a shrunk copy (reduced_decoding): people come back in the camera's pixels.
+        ValueError naming the camera for an image that is not uint8
+        BGR, for boxes with heatmaps 'multipose' (its keypoints come from MultiPose's run on the
+        image), and for sizes without it (crops are cut from the image)."""
+        return self.finish(self.start_set(images, boxes, previous, sizes))
+
+    def reduced_decoding(self, width: int, height: int) -> int:
+        """By how much (1, 2, 4 or 8) an image of a width x height camera may be shrunk before
+        detect_set without losing what the detector sees: with heatmaps 'multipose', the most that
+        keeps its long side at least MultiPose's input side; else 1 (crops need every pixel)."""
+        k = 1
+        while self.config.heatmaps == 'multipose' and k < 8 and max(width, height) >= 2 * k * self.config.input_size:
+            k *= 2
+        return k
 
     def start_set(self, images: Sequence[np.ndarray | None], boxes: Sequence[np.ndarray | None] | None = None,
-                  previous: Sequence[np.ndarray] | None = None) -> PendingSet:
+                  previous: Sequence[np.ndarray] | None = None,
+                  sizes: Sequence[tuple[int, int] | None] | None = None) -> PendingSet:
         """detect_set in two steps: check the set and start MultiPose on its images, returning once
         the last of them has a worker; finish() completes it. A caller that starts the next set
         then, while this one finishes, gives its first image the worker this set leaves idle (five
@@ -221,23 +237,32 @@ class OnnxPoseDetector:
         if cfg.heatmaps == 'multipose' and any(b is not None for b in boxes):
             raise ValueError("detect_set: heatmaps 'multipose' takes its keypoints from MultiPose on every image, "
                              'not from given boxes (run the person detector on every set)')
+        sizes = sizes if sizes is not None else [None] * len(images)
+        if len(sizes) != len(images):
+            raise ValueError(f'detect_set: {len(images)} images and {len(sizes)} sizes')
+        shrunk = [bgr is not None and size is not None and (bgr.shape[1], bgr.shape[0]) != tuple(size)
+                  for bgr, size in zip(images, sizes)]
+        if cfg.heatmaps != 'multipose' and any(shrunk):
+            raise ValueError(f"detect_set: heatmaps {cfg.heatmaps!r} cuts its crops from the image, which must be "
+                             "at the camera's size (shrunk images need heatmaps 'multipose')")
         for c, bgr in enumerate(images):
             if bgr is not None and (bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8):
                 raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
                                  f'got {bgr.dtype} {bgr.shape}')
         started = time.perf_counter()
-        finds = [self._start_find(bgr) for bgr, given in zip(images, boxes) if bgr is not None and given is None]
+        finds = [self._start_find(bgr, size or (bgr.shape[1], bgr.shape[0]))
+                 for bgr, given, size in zip(images, boxes, sizes) if bgr is not None and given is None]
         return PendingSet(list(images), list(boxes), previous, finds, started)
 
-    def _start_find(self, bgr: np.ndarray) -> Future[_Found]:
+    def _start_find(self, bgr: np.ndarray, size: tuple[int, int]) -> Future[_Found]:
         """_find_people on a free worker, waiting for one (at once without a pool)."""
         if self._pool is None:
             done: Future[_Found] = Future()
-            done.set_result(self._find_people(bgr))
+            done.set_result(self._find_people(bgr, size))
             return done
         self._free_workers.acquire()
         try:
-            future = self._pool.submit(self._find_people, bgr)
+            future = self._pool.submit(self._find_people, bgr, size)
         except BaseException:
             self._free_workers.release()
             raise
@@ -262,7 +287,7 @@ class OnnxPoseDetector:
                 continue
             if given is None:
                 found = next(finds)
-                inference = self._inference_keypoints(found.keypoints, bgr.shape)
+                inference = self._inference_keypoints(found.keypoints, found.size)
                 sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
                 if cfg.heatmaps == 'multipose':
                     alone[c] = (inference, sigmas)
@@ -290,9 +315,10 @@ class OnnxPoseDetector:
                                       sum(len(p) for p in out if p is not None), len(found_all))
         return out
 
-    def _find_people(self, bgr: np.ndarray) -> _Found:
+    def _find_people(self, bgr: np.ndarray, size: tuple[int, int]) -> _Found:
         """MultiPose on the whole letterboxed frame: people scoring at least min_person_score whose
-        box holds image pixels."""
+        box holds image pixels, in the pixels of a camera of size (width, height), of which bgr is
+        a copy (shrunk where smaller)."""
         side = self.config.input_size
         lb = whole_image(bgr.shape[1], bgr.shape[0], side)
         rgb = lb.apply(bgr)[None, ..., ::-1].astype(np.int32)  # BGR -> RGB on the small input, not the image
@@ -302,19 +328,24 @@ class OnnxPoseDetector:
         rows = rows[rows[:, n + 4] >= self.config.min_person_score]
         # normalised (y, x) -> input pixels: 1.0 is the input's far edge, at pixel side - 0.5
         yx = rows[:, :n].reshape(-1, _MULTIPOSE_KEYPOINTS, 3)
-        keypoints = np.concatenate([lb.to_image(yx[..., 1::-1] * side - 0.5), yx[..., 2:]], axis=-1)
+        uv = lb.to_image(yx[..., 1::-1] * side - 0.5)
         corners = lb.to_image(rows[:, [n + 1, n, n + 3, n + 2]].reshape(-1, 2, 2) * side - 0.5)
+        if (bgr.shape[1], bgr.shape[0]) != tuple(size):  # a shrunk copy: to the camera's pixels, edges to edges
+            scale = np.array(size, dtype=np.float64) / (bgr.shape[1], bgr.shape[0])
+            uv, corners = (uv + 0.5) * scale - 0.5, (corners + 0.5) * scale - 0.5
+        keypoints = np.concatenate([uv, yx[..., 2:]], axis=-1)
         boxes = corners.reshape(-1, 4)
-        edge = np.array([bgr.shape[1], bgr.shape[0]]) - 0.5
+        edge = np.array(size) - 0.5
         keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > -0.5) & (boxes[:, :2] < edge)).all(axis=1)
-        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), time.perf_counter())
+        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), tuple(size),
+                      time.perf_counter())
 
-    def _inference_keypoints(self, coco: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    def _inference_keypoints(self, coco: np.ndarray, size: tuple[int, int]) -> np.ndarray:
         """MultiPose's COCO keypoints (P, 17, 3) as inference joints (P, 16, 3): those scoring below
-        min_joint_score or outside the image (letterbox padding) missing, the ears too without
-        `ears`."""
+        min_joint_score or outside the camera's (width, height) image (letterbox padding) missing,
+        the ears too without `ears`."""
         keypoints = to_inference(coco, 'coco17')
-        edge = np.array([shape[1], shape[0]]) - 0.5
+        edge = np.array(size) - 0.5
         with np.errstate(invalid='ignore'):  # NaN rows are missing already
             inside = ((keypoints[..., :2] >= -0.5) & (keypoints[..., :2] <= edge)).all(axis=-1)
         drop = (keypoints[..., 2] < self.config.min_joint_score) | ~inside
