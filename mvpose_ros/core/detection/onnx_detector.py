@@ -208,9 +208,9 @@ class OnnxPoseDetector:
         camera, the inference keypoints (R, 16, 3) of its people in the previous set, whose ears
         given boxes carry; sizes: per camera, its (width, height) (None: the image's), of which a
         smaller image is a shrunk copy (reduced_decoding): people come back in the camera's pixels.
-        ValueError naming the camera for an image that is not uint8
-        BGR, for boxes with heatmaps 'multipose' (its keypoints come from MultiPose's run on the
-        image), and for sizes without it (crops are cut from the image)."""
+        ValueError naming the camera for an image that is not uint8 BGR, for boxes with heatmaps
+        'multipose' (its keypoints come from MultiPose's run on the image), and for a shrunk image
+        without it (crops are cut from the image)."""
         return self.finish(self.start_set(images, boxes, previous, sizes))
 
     def reduced_decoding(self, width: int, height: int) -> int:
@@ -240,8 +240,8 @@ class OnnxPoseDetector:
         sizes = sizes if sizes is not None else [None] * len(images)
         if len(sizes) != len(images):
             raise ValueError(f'detect_set: {len(images)} images and {len(sizes)} sizes')
-        shrunk = [bgr is not None and size is not None and (bgr.shape[1], bgr.shape[0]) != tuple(size)
-                  for bgr, size in zip(images, sizes)]
+        shrunk = (bgr is not None and size is not None and bgr.shape[1::-1] != tuple(size)
+                  for bgr, size in zip(images, sizes))
         if cfg.heatmaps != 'multipose' and any(shrunk):
             raise ValueError(f"detect_set: heatmaps {cfg.heatmaps!r} cuts its crops from the image, which must be "
                              "at the camera's size (shrunk images need heatmaps 'multipose')")
