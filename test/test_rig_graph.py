@@ -165,6 +165,7 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
     # the player's links, waited for once it is up: both ends of every camera's image and info
     assert rig_played_connections(rig) == {t: ('pub', 'sub') for c in rig.cameras for t in (c.image, c.camera_info)}
     assert len(rig_played_connections(rig)) == 4
+    assert rig_played_connections(rig, lockstep=True) == {**rig_played_connections(rig), LOCKSTEP_ACK: ('pub', 'sub')}
     # --rig alone: the template's defaults (association max_skew 0 = half a 25 Hz period)
     assert rig_sync([load_params(package_path(RIG_TEMPLATE))]) == (0.02, 0.5)
 

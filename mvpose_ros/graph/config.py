@@ -288,11 +288,16 @@ def rig_connections(rig: Rig) -> dict[str, Sequence[str]]:
     return topics
 
 
-def rig_played_connections(rig: Rig) -> dict[str, Sequence[str]]:
-    """The links from the player of a rig bag that must be matched before it plays: every camera's
+def rig_played_connections(rig: Rig, lockstep: bool = False) -> dict[str, Sequence[str]]:
+    """The player's links of a rig bag run that must be matched before it plays: every camera's
     image and camera_info topic (the detector, association and bp_solver read the CameraInfo of a
-    rig without intrinsics)."""
-    return {topic: ('pub', 'sub') for camera in rig.cameras for topic in (camera.image, camera.camera_info)}
+    rig without intrinsics) and, in lockstep, the acknowledgements it reads (a first one it missed
+    would hold the next set back for ack_timeout)."""
+    links: dict[str, Sequence[str]] = {topic: ('pub', 'sub') for camera in rig.cameras
+                                       for topic in (camera.image, camera.camera_info)}
+    if lockstep:
+        links[LOCKSTEP_ACK] = ('pub', 'sub')
+    return links
 
 
 def write_overrides(nodes: Sequence[NodeSpec], path: str | Path) -> Path:

@@ -216,8 +216,8 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
               f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
-                            expected=rig_connections(rig), played=rig_played_connections(rig), quiet=RATE_QUIET_S,
-                            watch=watch)
+                            expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
+                            quiet=RATE_QUIET_S, watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
