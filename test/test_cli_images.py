@@ -66,6 +66,9 @@ def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
     sets = re.findall(r'set (\d): MultiPose on (\d) images +([0-9.]+) ms, EfficientPose (\d+) people +([0-9.]+) ms.*'
                       r'MPJPE actor 1 ([0-9.]+) mm, actor 3 ([0-9.]+) mm, actor 4 ([0-9.]+) mm', out)
     assert [(s[0], s[1]) for s in sets] == [('0', '5'), ('1', '0'), ('2', '0')], out
+    # the four people of the scene in every set: no crop's duplicate of a person kept (it came back
+    # as a fifth 3D person in the second crop set, and crops planned from it kept it)
+    assert re.findall(r'; (\d) in 3D;', out) == ['4'] * 3, out
     for s in sets[1:]:
         assert float(s[2]) < 0.1 * float(s[4])  # no MultiPose: a small fraction of EfficientPose's time
         assert int(s[3]) >= 12 and all(float(m) < MPJPE_BOUND_MM for m in s[5:])

@@ -12,7 +12,10 @@ import pytest
 
 from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt_2d
-from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector, keypoint_people
+from mvpose_ros.core.detection.onnx_detector import (OnnxDetectorConfig, OnnxPoseDetector, keypoint_people,
+                                                     without_duplicates)
+from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.detection.onnx_models import EFFICIENTPOSE, MULTIPOSE, ModelError
 
 MODELS = data_root() / 'models'
@@ -183,6 +186,21 @@ def test_a_shrunk_copy_finds_the_same_people_in_the_cameras_pixels(shelf_image):
     assert efficientpose.reduced_decoding(1548, 1164) == 1
     with pytest.raises(ValueError, match="heatmaps 'efficientpose' cuts its crops from the image"):
         efficientpose.detect_set([small], sizes=[(w, h)])
+
+
+def test_a_person_found_twice_in_one_camera_is_kept_once():
+    """Of two people whose keypoints nearly coincide the one with more score stays, in its place;
+    neighbours whose boxes overlap, and people sharing fewer than two joints, all stay."""
+    rng = np.random.default_rng(0)
+    body = np.column_stack([rng.uniform(100, 200, 16), rng.uniform(100, 400, 16), np.full(16, 0.8)])
+    twin = body + np.array([3.0, -2.0, -0.1])  # 3.6 px off on a ~320 px person
+    neighbour = body + np.array([60.0, 0.0, 0.0])  # overlapping box, every joint 60 px away
+    few = np.column_stack([body[:, :2], np.r_[0.9, np.zeros(15)]])
+    people = [Person2D(k, PersonHeatmap(np.zeros((16, 1, 1), np.float32), np.zeros(2), 4.0))
+              for k in (twin, neighbour, body, few)]
+    kept = without_duplicates(people)
+    assert [p.keypoints[0, 0] for p in kept] == [neighbour[0, 0], body[0, 0], few[0, 0]]
+    assert without_duplicates(people[:2]) == people[:2] and without_duplicates([]) == []
 
 
 def test_fused_heatmaps_hold_the_efficientpose_evidence_and_multipose_keypoints(detector, shelf_image):

@@ -62,6 +62,9 @@ _EARS = (R_EAR, L_EAR)
 # shoulder midpoint and nose
 _LIMBS = np.arange(NUM_INFERENCE_JOINTS) < NECK
 _MULTIPOSE_KEYPOINTS = 17
+# Two people of one camera closer than this fraction of their size are one (without_duplicates):
+# real neighbours' keypoints, even overlapping, lie far apart for most joints.
+DUPLICATE_SEPARATION = 0.1
 
 
 @dataclass(frozen=True)
@@ -309,6 +312,8 @@ class OnnxPoseDetector:
             person = self._person(crop, raw, before)
             if person is not None:
                 out[crop.camera].append(person)
+        for c in {crop.camera for crop in crops}:
+            out[c] = without_duplicates(out[c])
         end = time.perf_counter()
         multipose = max((f.done for f in found_all), default=pending.started) - pending.started
         self.timing = DetectionTiming(multipose, t2 - t1, end - t2 + t1 - t0, end - pending.started,
@@ -417,6 +422,29 @@ def keypoint_people(keypoints: np.ndarray, sigmas: np.ndarray, stride: float) ->
     keep = (keypoints[..., 2] > 0).any(axis=1)
     return [Person2D(kp, render_heatmaps(kp[None, :, None], stride, float(sigma))[0])
             for kp, sigma in zip(keypoints[keep], sigmas[keep])]
+
+
+def without_duplicates(people: Sequence[Person2D], separation: float = DUPLICATE_SEPARATION) -> list[Person2D]:
+    """One camera's people without duplicates, in their order: of two people whose keypoints (the
+    joints both have) lie at a median distance below `separation` times the larger one's size (the
+    diagonal of its keypoints' box), the one with the lower score sum goes. EfficientPose finds a
+    person in every crop, so two crops on one person (overlapping boxes; a crop projected from an
+    occluded person's skeleton) give that person twice, and crops planned from the skeletons that
+    then come out keep the duplicate set after set."""
+    kept: list[Person2D] = []
+    for person in sorted(people, key=lambda p: -np.nansum(p.keypoints[:, 2])):
+        if not any(_same_person(person.keypoints, other.keypoints, separation) for other in kept):
+            kept.append(person)
+    return [p for p in people if any(p is k for k in kept)]
+
+
+def _same_person(a: np.ndarray, b: np.ndarray, separation: float) -> bool:
+    """Whether keypoints a, b (16, 3) u, v, score lie within separation times the larger size."""
+    both = (a[:, 2] > 0) & (b[:, 2] > 0)
+    if both.sum() < 2:
+        return False
+    size = max(np.hypot(*np.ptp(k[k[:, 2] > 0, :2], axis=0)) for k in (a, b))
+    return bool(np.median(np.hypot(*(a[both, :2] - b[both, :2]).T)) < separation * size)
 
 
 def _grown(boxes: np.ndarray, margin: float) -> np.ndarray:
