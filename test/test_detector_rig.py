@@ -76,8 +76,10 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
         out: dict[int, list[PointCloud2]] = {}
         _collect(node, '/rig/cam_1/people2d', out)
         sensor = node.create_publisher(CompressedImage, topic, qos_profile_sensor_data)  # a driver's QoS
+        # MultiPose's input at 256 px: the camera's 1032 px are more than twice that, so the node
+        # decodes the JPEG at 1/2 (OnnxPoseDetector.reduced_decoding)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=cam_1',
-                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}')
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', 'input_size:=256', '-p', f'rig:={rig}')
         sent = iter(range(1000 * MS, 2000 * MS, 40 * MS))
 
         def image(pub, frame_id='cam_1_optical', payload=data):
@@ -110,10 +112,11 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
     assert not bad & set(out) and all(len(v) == 1 for v in out.values())
     for msg in (m for v in out.values() for m in v):
         assert msg.header.frame_id == 'cam_1_optical'
-    # the same people as the ROS-free detector on the same JPEG (the node's settings: threads 1),
-    # decoded shrunk as the node decodes it
-    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', threads=1))
-    (expected,) = detector.detect_set([to_bgr(jpeg, reduce=detector.reduced_decoding(1032, 776))], sizes=[(1032, 776)])
+    # the same people as the ROS-free detector on the same JPEG (the node's settings: threads 1,
+    # input 256), decoded at 1/2 as the node decodes it, in the camera's pixels
+    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', threads=1, input_size=256))
+    assert detector.reduced_decoding(1032, 776) == 2
+    (expected,) = detector.detect_set([to_bgr(jpeg, reduce=2)], sizes=[(1032, 776)])
     got = msg_to_people(out[first][0])
     assert len(got) == len(expected) >= 3
     for a, b in zip(got, expected):
@@ -168,8 +171,8 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         info = node.create_publisher(CameraInfo, '/rig/right/camera_info', qos_profile_sensor_data)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
-                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', '-p', 'sync_timeout:=5.0',
-                          *overrides)
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', 'input_size:=256', '-p', f'rig:={rig}',
+                          '-p', 'sync_timeout:=5.0', *overrides)
         try:
             assert _stream_until(executor, lambda: info.publish(camera_to_info(shelf_cameras()[2],
                                                                                _header(0, 'right_optical'))),
@@ -198,6 +201,14 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
         for [msg] in into.values():
             assert msg.header.frame_id == f'{names[c]}_optical'
             assert len(msg_to_people(msg)) >= 2
+    # each camera's people in its own pixels, its JPEG decoded at 1/2 (input 256: reduced_decoding)
+    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', threads=1, input_size=256))
+    for c, into in enumerate(out):
+        (expected,) = detector.detect_set([to_bgr(jpegs[c], reduce=2)], sizes=[(1032, 776)])
+        got = msg_to_people(next(iter(into.values()))[0])
+        assert len(got) == len(expected)
+        for a, b in zip(got, expected):
+            np.testing.assert_allclose(a.keypoints, b.keypoints, atol=0.05)
     assert detected[0] == detected[1] == detected[2], 'every published set has all cameras'
     assert detected[0][-1] == sets - 1, 'the newest set is detected'
     assert 1 <= len(detected[0]) < sets, 'sets came faster than detection: some were dropped'
