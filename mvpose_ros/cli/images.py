@@ -19,10 +19,9 @@ second of the whole sequence; the sequence is solved as the rig graph's bp_solve
 (config/rig_template.yaml: a sliding window of sets, warm-started, the newest set out), so every
 set costs what it would there. MultiPose's runs of a set start while the set before finishes
 (OnnxPoseDetector.start_set: a worker the set's last image leaves idle takes the next set's
-first). With --person-detector-every K, MultiPose runs on every K-th set only
-and the sets between take their crops from the previous set's 3D skeletons (core.tracked_crops;
-a set then starts once the one before is solved). The files written and the score are those of
-the last set.
+first). With --person-detector-every K, MultiPose runs on every K-th set only and the sets between
+take their crops from the previous set's 3D skeletons (core.tracked_crops; a set then starts once
+the one before is solved). The files written and the score are those of the last set.
 
 --heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
 --keypoint-sigma times the person's box diagonal) and runs no EfficientPose; its keypoints need

@@ -7,8 +7,10 @@ on /diagnostics that each writer between them (the detectors' people2d, associat
 has matched its readers and each reader its writers (core.health.links: a volatile message sent
 before its writer and reader have matched each other is lost); the player then waits until its
 writers have matched their readers (the detectors', the recorder's) and for the recorder's start
-signal, which the recorder sends once its camera_info reader has matched the player's writer. So
-the first frame reaches every node, and its camera_info and skeletons reach the recorder.
+signal, which the recorder sends once its camera_info reader has matched the player's writer and
+the nodes report the player's links matched at their end too (`played`: the player's writer can
+match a reader before that reader has matched it). So the first frame reaches every node, and its
+camera_info and skeletons reach the recorder.
 
 With a Respawner, a node that dies is started again after its delay instead of ending the run
 (not the player: a new one would play the bag from its start again); the recorder is armed to
