@@ -32,7 +32,7 @@ from mvpose_ros.core.evaluation.predictions import read_results, write_predictio
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS
 from mvpose_ros.core.inference.window import TERMS
-from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig
+from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, SOLVER_PARAMETERS, StageConfig
 from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.types import Sequence2D
 
@@ -73,6 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help='heatmap cell size in pixels (the ROS graph config uses 8)')
     p.add_argument('--match-distance', type=float, default=d['match_distance'],
                    help='cross-view matching threshold, metres of mean ray distance')
+    p.add_argument('--max-view-residual', type=float, default=d['max_view_residual'],
+                   help=ASSOCIATION_PARAMETERS['max_view_residual'])
     p.add_argument('--collision-centre', type=float, default=d['collision_centre'])
     p.add_argument('--collision-width', type=float, default=d['collision_width'])
     p.add_argument('--seed', type=int, default=d['seed'])

@@ -54,6 +54,8 @@ SOLVER_PARAMETERS = {
 ASSOCIATION_PARAMETERS = {
     'track_iou': 'per-camera tracking: minimum box IoU (paper: 0.7)',
     'match_distance': 'cross-view matching: maximum mean ray-to-ray distance between two views of a person, metres',
+    'max_view_residual': 'a matched view whose keypoints lie further from the joints the other views triangulate '
+                         'than this share of its size (median) is left out (0: every view kept)',
 }
 # (low, high) inclusive of every numeric parameter (None: unbounded on that side)
 PARAMETER_RANGES: dict[str, tuple[float | None, float | None]] = {
@@ -61,10 +63,12 @@ PARAMETER_RANGES: dict[str, tuple[float | None, float | None]] = {
     'hypotheses': (1, None), 'bp_hypotheses': (0, None), 'seed': (0, None),
     'collision_centre': (0.0, 10.0), 'collision_width': (0.001, 10.0), 'frame_rate': (0.1, 1000.0),
     'max_gap': (0.0, 3600.0), 'track_iou': (0.0, 1.0), 'match_distance': (0.0, 10.0),
+    'max_view_residual': (0.0, 10.0),
 }
 # Thresholds and distances a running node applies to the frames after the change; every other
 # parameter sizes or seeds state made at start-up (read-only: a change needs a restart).
-LIVE_PARAMETERS = frozenset({'collision_centre', 'collision_width', 'max_gap', 'track_iou', 'match_distance'})
+LIVE_PARAMETERS = frozenset({'collision_centre', 'collision_width', 'max_gap', 'track_iou', 'match_distance',
+                             'max_view_residual'})
 
 
 @dataclass(frozen=True)
@@ -92,7 +96,8 @@ class StageConfig:
         solver = SolverConfig(sampling=sampling,
                               inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
         association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
-                              matching=replace(MatchingConfig(), max_distance=float(d['match_distance'])))
+                              matching=replace(MatchingConfig(), max_distance=float(d['match_distance'])),
+                              max_view_residual=float(d['max_view_residual']))
         return cls(association, solver)
 
     def to_params(self) -> dict[str, Any]:
@@ -108,6 +113,7 @@ class StageConfig:
             'collision_width': inference.factors.collision_width,
             'frame_rate': inference.frame_rate, 'max_gap': inference.max_gap,
             'track_iou': self.association.track_iou, 'match_distance': self.association.matching.max_distance,
+            'max_view_residual': self.association.max_view_residual,
         }
 
 

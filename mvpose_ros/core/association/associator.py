@@ -15,22 +15,28 @@ from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
 from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker
+from mvpose_ros.core.association.view_consistency import consistent_views
 
 
 @dataclass(frozen=True)
 class AssociationConfig:
-    """track_iou: the paper's 0.7; max_jump / max_age: how an id is recovered after occlusion."""
+    """track_iou: the paper's 0.7; max_jump / max_age: how an id is recovered after occlusion;
+    max_view_residual: a matched view the others contradict by more than this share of its size is
+    left out (view_consistency; 0: every matched view kept)."""
 
     track_iou: float = 0.7
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     max_jump: float = 0.5
     max_age: int = 25
+    max_view_residual: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0 < self.track_iou <= 1:
             raise ValueError(f'track_iou must be in (0, 1], got {self.track_iou}')
         if not (self.max_jump > 0 and self.max_age >= 0):
             raise ValueError(f'max_jump must be > 0 and max_age >= 0, got {self.max_jump}, {self.max_age}')
+        if not self.max_view_residual >= 0:
+            raise ValueError(f'max_view_residual must be >= 0, got {self.max_view_residual}')
 
 
 @dataclass
@@ -90,10 +96,11 @@ class Associator:
                 tracker.update(skeletons)
         rays = ViewRays.of(self.cameras, present)
         clusters = cluster_views(self.cameras, present, self.config.matching, rays)
-        views = [{c: present[c][i] for c, i in cl.items()} for cl in clusters]
         first = np.concatenate([[0], np.cumsum([len(p) for p in present])])
-        centres = rough_centres(rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
-                                self.config.matching.min_score)
+        rows = consistent_views(self.cameras, rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
+                                self.config.matching.min_score, self.config.max_view_residual)
+        views = [{int(rays.owner[r]): present[rays.owner[r]][r - first[rays.owner[r]]] for r in rs} for rs in rows]
+        centres = rough_centres(rays, rows, self.config.matching.min_score)
         keep = [i for i in range(len(views)) if np.all(np.isfinite(centres[i]))]
         views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)
         members = [{(c, p.track_id) for c, p in v.items()} for v in views]
