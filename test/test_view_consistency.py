@@ -23,7 +23,7 @@ from test_matching import _inference_points, _skeleton
 SHELF = dataset_dir('shelf')
 FRAME = 580  # actors 0, 1, 2 annotated
 MIN_SCORE = 0.1
-THRESHOLD = 0.1  # the default (config/*.yaml)
+THRESHOLD = AssociationConfig().max_view_residual
 
 
 @pytest.fixture(scope='module')
@@ -97,7 +97,7 @@ def test_two_views_are_never_split_and_zero_keeps_every_view(shelf_rig, pose):
 
 def test_the_associator_bundles_the_person_without_the_contradicted_view(shelf_rig, pose):
     people = _views(shelf_rig, pose, np.random.default_rng(4), range(5), bad=3, shift=np.array([0.4, 0.0, 0.0]))
-    (checked,) = Associator(shelf_rig, AssociationConfig(max_view_residual=THRESHOLD)).update(0, people)
+    (checked,) = Associator(shelf_rig, AssociationConfig()).update(0, people)
     (unchecked,) = Associator(shelf_rig, AssociationConfig(max_view_residual=0.0)).update(0, people)
     assert sorted(checked.views) == [0, 1, 2, 4]
     assert sorted(unchecked.views) == [0, 1, 2, 3, 4]

@@ -28,7 +28,7 @@ class AssociationConfig:
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     max_jump: float = 0.5
     max_age: int = 25
-    max_view_residual: float = 0.0
+    max_view_residual: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0 < self.track_iou <= 1:
