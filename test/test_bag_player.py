@@ -209,6 +209,10 @@ def test_rate_zero_runs_at_most_max_in_flight_frames_ahead_of_acks(probe, tmp_pa
     while len(received) < len(frames):  # acknowledging the last frame seen releases up to 3 more
         seen = len(received)
         assert acknowledge_until(round(received[-1][1] * 25 / S), lambda: len(received) > seen), log.read_text()
+    # every frame out, the last ones in flight: the player ends only once they are acknowledged
+    _spin_until(executor, lambda: proc.poll() is not None, 0.5)
+    assert proc.poll() is None, log.read_text()
+    assert acknowledge_until(frames[-1], lambda: proc.poll() is not None), log.read_text()
     assert _run_to_end(executor, proc, lambda: True) == 0, log.read_text()
     assert [stamp for _, stamp, _, _ in received] == [f * S // 25 for f in frames]
 
@@ -302,7 +306,8 @@ def test_sensor_qos_reaches_best_effort_readers_and_reliable_reaches_both(probe,
 def test_lockstep_publishes_the_next_set_once_the_previous_set_stamp_is_acknowledged(probe, tmp_path):
     """sets + rate 0 + max_in_flight 1: a set (every camera's image and CameraInfo, stamps up to
     13 ms apart) goes out whole, and the next only after an ack carrying the set's stamp, its
-    earliest member stamp; a set never acknowledged is given up after ack_timeout."""
+    earliest member stamp; a set never acknowledged is given up after ack_timeout, the last one
+    too before the player ends."""
     node, executor = probe
     bag, members = _rig_bag(tmp_path / 'bag', sets=4)
     received = []
@@ -341,7 +346,11 @@ def test_lockstep_publishes_the_next_set_once_the_previous_set_stamp_is_acknowle
     # set 1 is never acknowledged: after ack_timeout the player goes on with set 2
     assert _spin_until(executor, lambda: len(received) >= 9, 10.0), log.read_text()
     assert acknowledge(min(members[2]), 12)
+    # the last set is never acknowledged either: the player waits ack_timeout for it, then ends
+    _spin_until(executor, lambda: proc.poll() is not None, 1.0)
+    assert proc.poll() is None, log.read_text()
     assert _run_to_end(executor, proc, lambda: True) == 0, log.read_text()
     assert stamps() == sorted(s for m in members for s in m)
     text = log.read_text()
-    assert 'no ack of stamp' in text and 'done: 4 sets, 24 messages' in text and '1 never acknowledged' in text
+    assert text.count('no ack of stamp') == 2, text
+    assert 'done: 4 sets, 24 messages' in text and '2 never acknowledged' in text

@@ -8,7 +8,8 @@ a synchronised set instead (bags.replay.group_sets: the cameras' image messages 
 approximate synchronisation of their header stamps within `max_skew`, each camera's CameraInfo
 with them; a set's stamp is its earliest member stamp, the stamp the graph's bundles and
 skeletons of that set carry): rate 0, sets and max_in_flight 1 is lockstep, the next set going out
-once the previous one is acknowledged. Messages go out as the bag's CDR bytes; for loop k >= 1
+once the previous one is acknowledged; with rate 0 the player ends once the last frames are
+acknowledged too (or given up after `ack_timeout`). Messages go out as the bag's CDR bytes; for loop k >= 1
 only the header stamp bytes are rewritten (pacing and stamp arithmetic: mvpose_ros.bags.replay).
 Optionally publishes /clock with the bag stamp. `qos`: 'reliable' (the graph's DATA_QOS: every
 reader that keeps up gets every message) or 'sensor' (best-effort, keep-last 5, as a camera driver publishes:
@@ -243,7 +244,10 @@ class BagPlayerNode(Node):
             self._start = time.monotonic()
             if not self._advance():
                 return
-        self._play()
+        if self._next is None:
+            self._drain()
+        else:
+            self._play()
 
     def _on_ack(self, cdr: bytes) -> None:
         try:
@@ -253,7 +257,10 @@ class BagPlayerNode(Node):
             return
         if self._in_flight.acked(stamp) and self._playing and not self.finished.done():
             self._progress = time.monotonic()
-            self._play()
+            if self._next is None:
+                self._drain()
+            else:
+                self._play()
 
     def _advance(self) -> bool:
         """Read the next frame into self._next; False once finished (end of bag or damage)."""
@@ -264,7 +271,7 @@ class BagPlayerNode(Node):
             self._finish(2)
             return False
         if self._next is None:
-            self._finish(0)
+            self._drain()
             return False
         if self._first_ns is None:
             self._first_ns = self._next[2].stamp_ns
@@ -303,6 +310,27 @@ class BagPlayerNode(Node):
             self._monitor.delivered(time.monotonic(), behind, None)
             if not self._advance():
                 return
+
+    def _drain(self) -> None:
+        """The bag is played: finish, with rate 0 once downstream has acknowledged every frame in
+        flight (or ack_timeout has given them up). Exiting at once could take the last frame with
+        it: the middleware sends large messages from a thread of this process, and a best-effort
+        writer has no acknowledgement to wait for."""
+        if self._in_flight is not None and len(self._in_flight):
+            if not self._ack_timeout:
+                self._timer.cancel()  # _on_ack ends it
+                return
+            wait = self._progress + self._ack_timeout - time.monotonic()
+            if wait > 0:
+                self._timer.timer_period_ns = max(1, int(wait * NS))
+                self._timer.reset()
+                return
+            while len(self._in_flight):
+                given_up = self._in_flight.give_up()
+                self._given_up += 1
+                self.get_logger().warning(f'no ack of stamp {given_up} ns within {self._ack_timeout:g} s: '
+                                          f'dropped downstream ({self._given_up} so far)')
+        self._finish(0)
 
     def _publish(self, loop: int, stamp: int, offset: int, frame: Frame) -> None:
         if self._clock_pub is not None:
