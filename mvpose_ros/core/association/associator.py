@@ -99,7 +99,8 @@ class Associator:
         first = np.concatenate([[0], np.cumsum([len(p) for p in present])])
         rows = consistent_views(self.cameras, rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
                                 self.config.matching.min_score, self.config.max_view_residual)
-        views = [{int(rays.owner[r]): present[rays.owner[r]][r - first[rays.owner[r]]] for r in rs} for rs in rows]
+        skeleton = [p for ps in present for p in ps]  # by row of rays
+        views = [{int(rays.owner[r]): skeleton[r] for r in rs} for rs in rows]
         centres = rough_centres(rays, rows, self.config.matching.min_score)
         keep = [i for i in range(len(views)) if np.all(np.isfinite(centres[i]))]
         views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)

@@ -42,22 +42,22 @@ def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: S
     used = idx >= 0  # (P, K)
     kp = np.where(used[..., None, None], rays.keypoints[idx], np.nan)  # (P, K, J, 3)
     seen = used[..., None] & (kp[..., 2] > min_score)  # (P, K, J)
-    n_k = width
     # every line's share of the closest-point system once; without `out` = all minus its own
     terms = line_terms(rays.origins[idx][:, :, None], np.where(seen[..., None], rays.dirs[idx], 0.0))  # (9, P, K, J)
     terms *= seen
-    points = solve_line_terms(terms.sum(axis=2, keepdims=True) - terms, n_k)  # (P, out, J, 3)
+    points = solve_line_terms(terms.sum(axis=2, keepdims=True) - terms, width)  # (P, out, J, 3)
     points[seen.sum(axis=1, keepdims=True) - seen < 2] = np.nan
     camera = np.where(used, rays.owner[np.maximum(idx, 0)], -1)  # (P, K)
-    pixels = np.full(points.shape[:2] + points.shape[1:3] + (2,), np.nan)  # (P, out, view, J, 2)
+    pixels = np.full((len(people), width, width, seen.shape[2], 2), np.nan)  # (P, out, view, J, 2)
     for c, cam in enumerate(cameras):
         p, v = np.nonzero(camera == c)
         if len(p):
             pixels[p, :, v] = cam.project(points[p])
     error = np.linalg.norm(pixels - kp[:, None, ..., :2], axis=-1)  # (P, out, view, J)
     error = np.where(seen[:, None] & np.isfinite(error), error, np.inf)
-    u, v = (np.where(seen, kp[..., i], np.nan) for i in (0, 1))
-    size = np.hypot(*(np.fmax.reduce(x, axis=-1) - np.fmin.reduce(x, axis=-1) for x in (u, v)))  # (P, K)
+    extent = [np.fmax.reduce(x, axis=-1) - np.fmin.reduce(x, axis=-1)
+              for x in np.where(seen, np.moveaxis(kp[..., :2], -1, 0), np.nan)]  # u, v: (P, K) each
+    size = np.hypot(*extent)
     return _median(error) / np.where(size > 0, size, np.nan)[:, None]
 
 
