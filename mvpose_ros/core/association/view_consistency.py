@@ -80,20 +80,14 @@ def consistent_views(cameras: Sequence[Camera], rays: ViewRays, people: Sequence
         return kept
     active = [p for p, v in enumerate(kept) if len(v) >= 3]
     while active:
-        residual = leave_one_out_residuals(cameras, rays, [kept[p] for p in active], min_score)
-        still = []
-        for row, p in enumerate(active):
-            k = len(kept[p])
-            r = residual[row, :k, :k]  # [out, view]
-            left_out = np.diagonal(r)
-            spread = np.where(np.eye(k, dtype=bool) | np.isnan(r), -np.inf, r).max(axis=1)  # worst of the rest
-            candidate = np.isfinite(left_out) & np.isfinite(spread)
-            if not candidate.any():
-                continue
-            worst = int(np.argmin(np.where(candidate, spread, np.inf)))
-            if left_out[worst] > max_residual and spread[worst] < left_out[worst]:
-                del kept[p][worst]
-                if len(kept[p]) >= 3:
-                    still.append(p)
-        active = still
+        r = leave_one_out_residuals(cameras, rays, [kept[p] for p in active], min_score)  # (A, out, view)
+        left_out = np.diagonal(r, axis1=1, axis2=2)  # (A, K)
+        spread = np.where(np.eye(r.shape[1], dtype=bool) | np.isnan(r), -np.inf, r).max(axis=2)  # worst of the rest
+        candidate = np.isfinite(left_out) & np.isfinite(spread)
+        worst = np.argmin(np.where(candidate, spread, np.inf), axis=1)  # (A,)
+        out, rest = (np.take_along_axis(x, worst[:, None], axis=1)[:, 0] for x in (left_out, spread))
+        drop = candidate.any(axis=1) & (out > max_residual) & (rest < out)
+        for row in np.flatnonzero(drop):
+            del kept[active[row]][worst[row]]
+        active = [active[row] for row in np.flatnonzero(drop) if len(kept[active[row]]) >= 3]
     return kept
