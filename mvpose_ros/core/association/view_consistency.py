@@ -67,8 +67,8 @@ def _median(values: np.ndarray) -> np.ndarray:
     ordered = np.sort(values, axis=-1)
     n = np.isfinite(ordered).sum(axis=-1)
     lo = np.take_along_axis(ordered, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
-    hi = np.take_along_axis(ordered, np.maximum(n // 2, 0)[..., None], axis=-1)[..., 0]
-    return np.where(n > 0, 0.5 * (lo + np.where(n > 1, hi, lo)), np.nan)
+    hi = np.take_along_axis(ordered, (n // 2)[..., None], axis=-1)[..., 0]
+    return np.where(n > 0, 0.5 * (lo + hi), np.nan)
 
 
 def consistent_views(cameras: Sequence[Camera], rays: ViewRays, people: Sequence[Sequence[int]],
