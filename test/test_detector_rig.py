@@ -13,18 +13,21 @@ from typing import Callable
 
 import cv2
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import camera_to_info
+from msg_adapters.diagnostics_msg import msg_to_statuses
 from msg_adapters.image_msg import image_to_compressed_msg, to_bgr
 from msg_adapters.people_msg import msg_to_people
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
+from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import probe, spin_until, start_node, stop
 
@@ -75,11 +78,14 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
     with probe(domain, 'rig_detector_probe') as (node, executor):
         out: dict[int, list[PointCloud2]] = {}
         _collect(node, '/rig/cam_1/people2d', out)
+        arrays: list[DiagnosticArray] = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, DIAGNOSTICS_QOS)
         sensor = node.create_publisher(CompressedImage, topic, qos_profile_sensor_data)  # a driver's QoS
         # MultiPose's input at 256 px: the camera's 1032 px are more than twice that, so the node
         # decodes the JPEG at 1/2 (OnnxPoseDetector.reduced_decoding)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=cam_1',
-                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', 'input_size:=256', '-p', f'rig:={rig}')
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', 'input_size:=256', '-p', f'rig:={rig}',
+                          '-p', 'diagnostics.period:=0.2')
         sent = iter(range(1000 * MS, 2000 * MS, 40 * MS))
 
         def image(pub, frame_id='cam_1_optical', payload=data):
@@ -93,7 +99,10 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
             image(sensor, payload=data[:len(data) // 2])
             truncated = next(sent) - 40 * MS
             image(sensor, payload=data[:len(data) // 3])  # the same cause again
-            assert spin_until(executor, lambda: 'no end marker' in log.read_text()), log.read_text()
+            # the second is counted, not logged: the next messages go out once the node's diagnostics
+            # count both (a keep-last input could otherwise lose it behind them)
+            assert spin_until(executor, lambda: _dropped_since_start(arrays, 'cam_1') >= 2), log.read_text()
+            assert 'no end marker' in log.read_text()
             image(sensor, payload=b'\x00' * 64)
             image(sensor, frame_id='cam_2_optical')
             assert spin_until(executor, lambda: 'not a JPEG or PNG' in log.read_text()
@@ -129,6 +138,13 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
     assert sum("frame_id 'cam_2_optical' is not this camera ('cam_1_optical')" in line for line in errors) == 1
     assert 'cam_1: 2 x CompressedImage data: the jpeg (1032x776) has no end marker (truncated)' in text  # counted
     assert 'Traceback' not in text
+
+
+def _dropped_since_start(arrays: list[DiagnosticArray], camera: str) -> int:
+    """The input `camera`'s 'dropped since start' in the newest diagnostics that report it (0 before any)."""
+    counts = [int(s.values['dropped since start']) for a in arrays for s in msg_to_statuses(a)
+              if s.name.endswith(f': input {camera}')]
+    return counts[-1] if counts else 0
 
 
 def _explicit_rig(path, names: list[str], with_intrinsics: list[bool]) -> None:
