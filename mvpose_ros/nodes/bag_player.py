@@ -291,19 +291,9 @@ class BagPlayerNode(Node):
                     self._timer.reset()
                     return
             elif self._in_flight.full:
-                if not self._ack_timeout:
-                    self._timer.cancel()  # _on_ack resumes
+                if self._waiting_for_ack():
                     return
-                wait = self._progress + self._ack_timeout - time.monotonic()
-                if wait > 0:
-                    self._timer.timer_period_ns = max(1, int(wait * NS))
-                    self._timer.reset()  # _on_ack resumes sooner
-                    return
-                given_up = self._in_flight.give_up()
-                self._given_up += 1
-                self._progress = time.monotonic()
-                self.get_logger().warning(f'no ack of stamp {given_up} ns within {self._ack_timeout:g} s: '
-                                          f'dropped downstream, going on ({self._given_up} so far)')
+                self._give_up()
             t0 = time.perf_counter()
             self._publish(loop, stamp, offset, frame)
             self._monitor.processed(time.monotonic(), {'publish': time.perf_counter() - t0})
@@ -317,20 +307,32 @@ class BagPlayerNode(Node):
         it: the middleware sends large messages from a thread of this process, and a best-effort
         writer has no acknowledgement to wait for."""
         if self._in_flight is not None and len(self._in_flight):
-            if not self._ack_timeout:
-                self._timer.cancel()  # _on_ack ends it
-                return
-            wait = self._progress + self._ack_timeout - time.monotonic()
-            if wait > 0:
-                self._timer.timer_period_ns = max(1, int(wait * NS))
-                self._timer.reset()
+            if self._waiting_for_ack():
                 return
             while len(self._in_flight):
-                given_up = self._in_flight.give_up()
-                self._given_up += 1
-                self.get_logger().warning(f'no ack of stamp {given_up} ns within {self._ack_timeout:g} s: '
-                                          f'dropped downstream ({self._given_up} so far)')
+                self._give_up()
         self._finish(0)
+
+    def _waiting_for_ack(self) -> bool:
+        """Rate 0, frames in flight: whether to wait on (the timer armed for the rest of
+        ack_timeout, or left to _on_ack without one) rather than give up the oldest."""
+        if not self._ack_timeout:
+            self._timer.cancel()  # _on_ack resumes
+            return True
+        wait = self._progress + self._ack_timeout - time.monotonic()
+        if wait > 0:
+            self._timer.timer_period_ns = max(1, int(wait * NS))
+            self._timer.reset()  # _on_ack resumes sooner
+            return True
+        return False
+
+    def _give_up(self) -> None:
+        """Stop waiting for the oldest frame in flight: downstream dropped it."""
+        given_up = self._in_flight.give_up()
+        self._given_up += 1
+        self._progress = time.monotonic()
+        self.get_logger().warning(f'no ack of stamp {given_up} ns within {self._ack_timeout:g} s: '
+                                  f'dropped downstream ({self._given_up} so far)')
 
     def _publish(self, loop: int, stamp: int, offset: int, frame: Frame) -> None:
         if self._clock_pub is not None:
