@@ -110,8 +110,11 @@ class HeatmapStack:
         cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - start[maps]
         heatmap = maps // self.start.shape[1]
         row, col = np.divmod(cell, self.shape[heatmap, 1])
-        cr = np.stack([col, row], axis=-1) + (jitter - 0.5)
-        uv = self.origin.reshape(-1, 2)[maps] + self.stride[heatmap, None] * cr
+        stride = self.stride[heatmap]
+        origin = self.origin.reshape(-1, 2)[maps]
+        uv = np.empty((len(maps), 2))
+        uv[:, 0] = origin[:, 0] + stride * (col + (jitter[:, 0] - 0.5))
+        uv[:, 1] = origin[:, 1] + stride * (row + (jitter[:, 1] - 0.5))
         uv[end == first] = np.nan
         return uv
 
@@ -137,8 +140,10 @@ class HeatmapStack:
         """Bilinear values (N, J, K) of each map at pixels uv (N, J, K, 2); 0 outside the grid
         of cell centres and for NaN pixels."""
         uv = np.asarray(uv, dtype=np.float64)
-        cr = (uv - self.origin[:, :, None]) / self.stride[:, None, None, None]
-        c, r = cr[..., 0], cr[..., 1]
+        # u and v apart: broadcasts over a last axis of 2 are slow
+        inv = 1.0 / self.stride[:, None, None]
+        c = (uv[..., 0] - self.origin[:, :, None, 0]) * inv
+        r = (uv[..., 1] - self.origin[:, :, None, 1]) * inv
         h = self.shape[:, 0, None, None]
         w = self.shape[:, 1, None, None]
         inside = (c >= 0) & (c <= w - 1) & (r >= 0) & (r <= h - 1)  # False for NaN
