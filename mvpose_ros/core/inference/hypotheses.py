@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import functools
 import itertools
+import warnings
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
-from mvpose_ros.core.geometry.camera import Camera, line_terms, solve_line_terms
+from mvpose_ros.core.geometry.camera import Camera, line_terms, rig_directions, solve_line_terms
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
@@ -72,8 +73,10 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     n_views, n_joints = stack.start.shape
     if n_views == 0:
         return []
-    n_maps = n_views * n_joints
-    first_view = np.concatenate([[0], np.cumsum([len(v) for v in people])]).astype(np.intp)
+    n_people, n_maps = len(people), n_views * n_joints
+    counts = np.array([len(v) for v in people], dtype=np.intp)
+    first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
+    owner = np.repeat(np.arange(n_people), counts)  # (V,) each view's person
     # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator: one
     # call per person gives the same stream as a call per array
     u = np.empty((n_views, n_joints, m))
@@ -85,27 +88,27 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
         jitter[lo:hi] = draws[:, n_joints * m:].reshape(-1, n_joints, m, 2)
     peaks = stack.peak()  # (V, J, 3)
 
-    # every (person, joint) seen by >= 2 cameras: its m rays per hypothesis, padded to K cameras
-    seen = peaks[..., 2] > 0  # (V, J)
-    groups: list[tuple[int, np.ndarray, np.ndarray]] = []  # (person, its views seeing the joints, joints)
-    for p in range(len(people)):
-        mine = seen[first_view[p]:first_view[p + 1]]
-        key = (mine << np.arange(len(mine))[:, None]).sum(axis=0)  # (J,) bit c: view c sees the joint
-        for pattern in np.unique(key):
-            groups.append((p, first_view[p] + np.flatnonzero(mine[:, key == pattern][:, 0]),
-                           np.flatnonzero(key == pattern)))
-    width = max((len(cams) for _, cams, _ in groups), default=0)
+    # each (person, joint): how many of the person's views see it, and those views in order
+    sees = np.zeros((n_people, counts.max(), n_joints), dtype=bool)
+    sees[owner, np.arange(n_views) - first_view[owner]] = peaks[..., 2] > 0
+    n_seen = sees.sum(axis=1)  # (P, J)
+    seeing = first_view[:-1, None, None] + np.argsort(~sees, axis=1, kind='stable')  # (P, K, J) views, seeing first
+    width = int(n_seen.max())
     # Rays are made only for the draws a hypothesis uses (a camera of a joint seen by 5 uses ~23
     # of its m): first every map's peak (ray v * J + j), then each map's first need[v, j] draws.
+    # The joints seen by n >= 2 views share one plan of which rays make each hypothesis.
     need = np.zeros((n_views, n_joints), dtype=np.intp)
-    plans = []
-    for p, cams, joints in groups:
-        if len(cams) >= 2:
-            plan = _plan(len(cams), m, config.peak_hypotheses, width)
-            need[cams[:, None], joints] = plan[2][:, None]
-            plans.append((p, cams, joints, plan))
-        elif len(cams) == 1:
-            need[cams[0], joints] = m  # every draw, for the rays of a single view (below)
+    plans = []  # (plan, persons (Q,), joints (Q,), views (Q, n)) per n
+    for n in range(2, width + 1):
+        pp, pj = np.nonzero(n_seen == n)
+        if len(pp):
+            views = seeing[pp, :n, pj]
+            plan = _plan(n, m, config.peak_hypotheses, width)
+            need[views, pj[:, None]] = plan[2]
+            plans.append((plan, pp, pj, views))
+    single_p, single_j = np.nonzero(n_seen == 1)
+    single_view = seeing[single_p, 0, single_j]
+    need[single_view, single_j] = m  # every draw, for the rays of a single view (below)
     first_draw = n_maps + np.concatenate([[0], np.cumsum(need.ravel())[:-1]]).reshape(n_views, n_joints)
     maps = np.repeat(np.arange(n_maps), need.ravel())
     k = np.arange(len(maps)) - (first_draw.ravel() - n_maps)[maps]  # each draw's index within its map
@@ -113,78 +116,69 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
                              stack.sample_at(maps, u.reshape(n_maps, m)[maps, k],
                                              jitter.reshape(n_maps, m, 2)[maps, k])])  # (R, 2)
     view = np.concatenate([np.arange(n_maps), maps]) // n_joints  # (R,)
-    dirs = np.empty((len(pixels), 3))
-    centres = np.empty((n_views, 3))
     cameras = [cam for views in people for cam, _ in views]
     rig = list({id(c): c for c in cameras}.values())
-    camera_of = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])[view]  # (R,)
-    for i, cam in enumerate(rig):
-        mine = camera_of == i
-        dirs[mine] = cam.directions(pixels[mine])
-        centres[[v for v, c in enumerate(cameras) if c is cam]] = cam.centre
+    camera_of_view = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])  # (V,)
+    dirs = rig_directions(rig, camera_of_view[view], pixels)  # (R, 3)
+    centres = np.stack([cam.centre for cam in rig])[camera_of_view]  # (V, 3)
 
-    out = np.full((len(people), n_joints, m, 3), np.nan)
+    out = np.full((n_people, n_joints, m, 3), np.nan)
     if plans:
         # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
         # shares and one solve for the whole frame; the last column is no ray at all (zeros), for
         # the slots where a subset is padded to K cameras
         terms = np.zeros((9, len(dirs) + 1))
         line_terms(centres[view], dirs, out=terms[:, :-1])
-        ray = np.concatenate([_rays(cams[cam_of], joints, draw, m, n_joints, first_draw)
-                              for _, cams, joints, (cam_of, draw, _) in plans])  # (Q, m, K)
+        ray = np.concatenate([_rays(views[:, cam_of], pj, draw, m, n_joints, first_draw)
+                              for (cam_of, draw, _), _, pj, views in plans])  # (Q, m, K)
         ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
         summed = terms[:, ray[0]]  # (9, Q, m)
         for slot in ray[1:]:
             summed += terms[:, slot]
-        pp = np.concatenate([np.full(len(joints), p) for p, _, joints, _ in plans])
-        pj = np.concatenate([joints for _, _, joints, _ in plans])
+        pp = np.concatenate([pp for _, pp, _, _ in plans])
+        pj = np.concatenate([pj for _, _, pj, _ in plans])
         out[pp, pj] = solve_line_terms(summed, width)  # (Q, m, 3)
 
-    results: list[np.ndarray | None] = []
-    for p in range(len(people)):
-        hyp = out[p]
-        if np.all(np.isnan(hyp)):
-            results.append(None)
-            continue
-        centre = np.nanmean(hyp.reshape(-1, 3), axis=0)
-        anchors = _anchors(hyp, config) if config.single_view_depth == 'limb' else None
-        for q, cams, joints in groups:
-            if q != p:
-                continue
-            if len(cams) == 1:
-                origin = centres[cams[0]]
-                direction = dirs[first_draw[cams[0], joints][:, None] + np.arange(m)]  # (joints, m, 3)
-                depth = direction @ (centre - origin)
-                if config.single_view_depth == 'limb':
-                    depth = _limb_depths(depth, direction, origin, joints, anchors)
-                hyp[joints] = origin + depth[..., None] * direction
-            elif len(cams) == 0:
-                hyp[joints] = centre
-        results.append(hyp)
-    return results
+    located = ~np.isnan(out).all(axis=(1, 2, 3))  # (P,) anyone with a joint seen twice
+    with np.errstate(invalid='ignore'), warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)  # the mean of nobody: NaN, left out below
+        centre = np.nanmean(out.reshape(n_people, -1, 3), axis=1)  # (P, 3)
+    # a joint seen by a single camera: its m rays, each at a depth chosen below
+    keep = located[single_p]
+    single_p, single_j, single_view = single_p[keep], single_j[keep], single_view[keep]
+    origin = centres[single_view]  # (S, 3)
+    direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]  # (S, m, 3)
+    depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
+    if config.single_view_depth == 'limb':
+        depth = _limb_depths(depth, direction, origin, single_j, _anchors(out, config)[single_p])
+    out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
+    unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
+    out[unseen_p, unseen_j] = centre[unseen_p, None]
+    return [out[p] if located[p] else None for p in range(n_people)]
 
 
 def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
-    """(J, 3) best single point of each joint seen by >= 2 cameras (NaN for the others): with
-    peaks, its first hypothesis (the peak triangulation of all its cameras when the peaks fit in
-    M), else the median of its hypotheses."""
+    """(P, J, 3) best single point of each joint seen by >= 2 cameras (NaN for the others) of
+    hypotheses (P, J, M, 3): with peaks, its first hypothesis (the peak triangulation of all its
+    cameras when the peaks fit in M), else the median of its hypotheses."""
     if config.peak_hypotheses:
-        return hyp[:, 0].copy()
-    out = np.full((len(hyp), 3), np.nan)
-    seen = ~np.isnan(hyp[:, 0, 0])
+        return hyp[:, :, 0].copy()
+    out = np.full(hyp.shape[:2] + (3,), np.nan)
+    seen = ~np.isnan(hyp[:, :, 0, 0])
     out[seen] = np.median(hyp[seen], axis=1)
     return out
 
 
 def _limb_depths(depth: np.ndarray, direction: np.ndarray, origin: np.ndarray, joints: np.ndarray,
                  anchors: np.ndarray) -> np.ndarray:
-    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (3,) of `joints` (n,)
+    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (n, 3) of `joints` (n,)
     where each ray meets the sphere of its bone's length around its parent's anchor (anchors
-    (J, 3)); of the two, the one nearer the given depth (the person's centre). A ray missing the
-    sphere takes its point nearest the parent; a joint without a located parent keeps `depth`."""
+    (n, J, 3): the joints of each ray's person); of the two, the one nearer the given depth (the
+    person's centre). A ray missing the sphere takes its point nearest the parent; a joint without
+    a located parent keeps `depth`."""
     parent = INFERENCE_PARENT[joints]
     length = PRIOR_BONE_LENGTH[joints]
-    anchor = anchors[np.maximum(parent, 0)]  # (n, 3)
+    anchor = anchors[np.arange(len(joints)), np.maximum(parent, 0)]  # (n, 3)
     rel = anchor - origin
     mid = np.einsum('nmd,nd->nm', direction, rel)  # depth of the point nearest the parent
     half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
