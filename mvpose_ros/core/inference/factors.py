@@ -63,15 +63,19 @@ def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple
     if not people:
         return []
     cameras = [cam for views in people for cam, _ in views]
-    owner = np.repeat(np.arange(len(people)), [len(v) for v in people])
-    uv = np.empty(stack.start.shape + (hypotheses[0].shape[1], 2))  # (V, J, M, 2)
+    counts = np.array([len(v) for v in people])
+    owner = np.repeat(np.arange(len(people)), counts)
+    points = np.stack(hypotheses)  # (P, J, M, 3)
+    uv = np.empty(stack.start.shape + (points.shape[2], 2))  # (V, J, M, 2)
     for cam in {id(c): c for c in cameras}.values():
         idx = [v for v, c in enumerate(cameras) if c is cam]
-        uv[idx] = cam.project(np.stack([hypotheses[p] for p in owner[idx]]))
+        uv[idx] = cam.project(points[owner[idx]])
     values = stack.lookup(uv)  # (V, J, M); NaN projections (behind a camera) give 0
     total = np.zeros((len(people),) + values.shape[1:])
-    np.add.at(total, owner, values)
-    total /= np.maximum(np.bincount(owner, minlength=len(people)), 1)[:, None, None]
+    seen = counts > 0
+    # views are in person order: each person's sum over its views in one pass, view after view
+    total[seen] = np.add.reduceat(values, np.concatenate([[0], np.cumsum(counts)[:-1]])[seen], axis=0)
+    total /= np.maximum(counts, 1)[:, None, None]
     rows = total.sum(axis=-1, keepdims=True)
     uniform = np.full_like(total, 1.0 / total.shape[-1])
     out = np.where(rows > 0, total / np.where(rows > 0, rows, 1.0), uniform)
