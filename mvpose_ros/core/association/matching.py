@@ -122,11 +122,13 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
     order = np.argsort(np.round(dist[a, b] / TIE_M), kind='stable')
     owner: dict[int, int] = {}  # view (row of dist) -> its cluster
     clusters: list[list[int]] = []
+    camera_bits: list[int] = []  # per cluster, bit c set when it has a view of camera c
 
     def linked(x: list[int], y: list[int]) -> bool:
-        """The two groups of views are one person: other cameras, and close on average."""
-        if {view[u][0] for u in x} & {view[v][0] for v in y}:
-            return False
+        """The two groups of views are one person: close on average (their cameras differ). Two
+        single views are, being an edge (closer than max_distance) of different cameras."""
+        if len(x) == 1 and len(y) == 1:
+            return True
         cross = dist[np.ix_(x, y)]
         return bool(np.mean(cross[np.isfinite(cross)]) <= config.max_distance)
 
@@ -134,6 +136,10 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
         u, v = int(a[e]), int(b[e])
         cu, cv = owner.get(u), owner.get(v)
         if cu is not None and cu == cv:
+            continue
+        bits_u = camera_bits[cu] if cu is not None else 1 << view[u][0]
+        bits_v = camera_bits[cv] if cv is not None else 1 << view[v][0]
+        if bits_u & bits_v:  # a camera sees each view of a person once
             continue
         x = clusters[cu] if cu is not None else [u]
         y = clusters[cv] if cv is not None else [v]
@@ -143,10 +149,13 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
         target = cu if cu is not None else cv if cv is not None else len(clusters)
         if target == len(clusters):
             clusters.append(merged)
+            camera_bits.append(bits_u | bits_v)
         else:
             clusters[target] = merged
+            camera_bits[target] = bits_u | bits_v
         if cu is not None and cv is not None:
             clusters[cv] = []
+            camera_bits[cv] = 0
         for w in merged:
             owner[w] = target
     return [{view[w][0]: view[w][1] for w in c} for c in clusters if len(c) >= 2]
