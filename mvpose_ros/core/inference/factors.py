@@ -105,14 +105,18 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     scale = config.temporal_scale if s0 == s1 == 1.0 else config.temporal_scale * 0.5 * (s0 + s1)
     j, ma, mc = mid.shape[:3]
     mid = mid.reshape(j, ma * mc, 3)
-    # |b - mid|^2 expanded so the M^3 part is a single batched matmul; summed in place over a
-    # full-size copy of |mid|^2 (a broadcast sum would loop over rows of only M elements)
     mb = cur.shape[1]
-    sq = np.repeat(np.einsum('jkd,jkd->jk', mid, mid), mb, axis=1).reshape(j, ma * mc, mb)
-    sq += np.einsum('jbd,jbd->jb', cur, cur)[:, None, :]
-    # 2 mid.b as one product with 2b (exact: a power of two) and b^T contiguous, so the matmul
-    # takes its fast path; every M^3 step below works in place, the arrays being large
-    sq -= mid @ np.ascontiguousarray(2.0 * cur.transpose(0, 2, 1))
+    # |b - mid|^2 = [mid, |mid|^2, 1] . [-2b, 1, |b|^2]: the whole M^3 part is one batched matmul
+    # (sums and broadcasts over rows of only M elements took longer than the product)
+    left = np.empty((j, ma * mc, 5))
+    left[..., :3] = mid
+    left[..., 3] = np.einsum('jkd,jkd->jk', mid, mid)
+    left[..., 4] = 1.0
+    right = np.empty((j, 5, mb))
+    right[:, :3] = -2.0 * cur.transpose(0, 2, 1)
+    right[:, 3] = 1.0
+    right[:, 4] = np.einsum('jbd,jbd->jb', cur, cur)
+    sq = left @ right  # every M^3 step below works in place, the arrays being large
     # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
     table = np.maximum(sq, 0.0, out=sq).astype(np.float32)
     if config.temporal_form == 'laplace':
