@@ -129,15 +129,15 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
         # the slots where a subset is padded to K cameras
         terms = np.zeros((9, len(dirs) + 1))
         line_terms(centres[view], dirs, out=terms[:, :-1])
-        ray = np.concatenate([_rays(views[:, cam_of], pj, draw, m, n_joints, first_draw)
-                              for (cam_of, draw, _), _, pj, views in plans])  # (Q, m, K)
+        ray = np.concatenate([_rays(plan_views[:, cam_of], plan_joints, draw, m, n_joints, first_draw)
+                              for (cam_of, draw, _), _, plan_joints, plan_views in plans])  # (Q, m, K)
         ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
         summed = terms[:, ray[0]]  # (9, Q, m)
         for slot in ray[1:]:
             summed += terms[:, slot]
-        pp = np.concatenate([pp for _, pp, _, _ in plans])
-        pj = np.concatenate([pj for _, _, pj, _ in plans])
-        out[pp, pj] = solve_line_terms(summed, width)  # (Q, m, 3)
+        persons = np.concatenate([plan_persons for _, plan_persons, _, _ in plans])
+        joints = np.concatenate([plan_joints for _, _, plan_joints, _ in plans])
+        out[persons, joints] = solve_line_terms(summed, width)  # (Q, m, 3)
 
     located = ~np.isnan(out).all(axis=(1, 2, 3))  # (P,) anyone with a joint seen twice
     with np.errstate(invalid='ignore'), warnings.catch_warnings():
