@@ -76,6 +76,35 @@ def _check_nodes(nodes, params):
         assert fqn == f'/{spec.name}'
 
 
+def test_crowd_overrides_reach_the_solver_after_the_file(monkeypatch):
+    """config/crowd.yaml (mvpose-graph --overrides) holds bp_solver values only; given after
+    shelf.yaml, the real node takes them and keeps the file's others."""
+    crowd = CONFIG.with_name('crowd.yaml')
+    assert set(load_params(crowd)) == {'bp_solver'}
+    spec = next(n for n in graph_nodes(5, 'b', 1.0) if n.executable == 'bp_solver')
+    cmd = node_command(spec, [CONFIG, crowd], python='python')
+    with ros_domain(monkeypatch):
+        rclpy.init(args=['prog', *cmd[3:]], signal_handler_options=SignalHandlerOptions.NO)
+        node = importlib.import_module('mvpose_ros.nodes.bp_solver').BpSolverNode()
+        try:
+            got = {k: node.get_parameter(k).value for k in ('hypotheses', 'bp_hypotheses', 'window', 'lag')}
+        finally:
+            node.destroy_node()
+            rclpy.try_shutdown()
+    shelf = load_params(CONFIG)['bp_solver']
+    assert got == {**load_params(crowd)['bp_solver'], 'window': shelf['window'], 'lag': shelf['lag']}
+    assert got['hypotheses'] != shelf['hypotheses']
+
+
+def test_overrides_take_node_sections_only(tmp_path):
+    from mvpose_ros.graph.session import _override_files
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(f'{RUNNER_SECTION}:\n  ros__parameters:\n    rate: 2.0\n')
+    with pytest.raises(ValueError, match=f'bad.yaml: --overrides takes node sections only, not {RUNNER_SECTION}'):
+        _override_files([bad])
+    assert _override_files([CONFIG.with_name('crowd.yaml')]) == [CONFIG.with_name('crowd.yaml').resolve()]
+
+
 def test_command_puts_overrides_after_the_file():
     spec = NodeSpec('heatmap_detector', 'cam3', {'camera': 3, 'data_root': 'true'})
     cmd = node_command(spec, '/p.yaml', python='py')

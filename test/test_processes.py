@@ -317,7 +317,7 @@ def _fake_graph(tmp_path, monkeypatch, timeout):
                       .replace('timeout: 120.0', f'timeout: {timeout!r}'))
 
     def fake_command(spec, params_file, python=sys.executable):
-        assert Path(params_file) == config.resolve()
+        assert [Path(p) for p in params_file] == [config.resolve()]  # no --overrides
         return [python, str(script), spec.executable, str(spec.parameters.get('start_topic', '-')), '--ros-args',
                 *(['-r', f'__ns:=/{spec.namespace}'] if spec.namespace else [])]
 

@@ -150,10 +150,12 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
     config = tmp_path / 'mine.yaml'
     config.write_text('/**/association:\n  ros__parameters:\n    max_skew: 0.01\n'
                       'mvpose_graph:\n  ros__parameters:\n    rate: 2.0\n')
+    crowd = tmp_path / 'crowd.yaml'
+    crowd.write_text('bp_solver:\n  ros__parameters:\n    hypotheses: 32\n')
     args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=config, data_root=None, lockstep=False,
-                           rate=None, qos=None, predictions=None, loops=2)
+                           rate=None, qos=None, predictions=None, loops=2, overrides=[crowd])
     rig, run, settings, files, sets = rig_run_plan(args)
-    assert files == [package_path(RIG_TEMPLATE), config.resolve()]
+    assert files == [package_path(RIG_TEMPLATE), config.resolve(), crowd.resolve()]
     assert run.rate == 2.0 and run.qos == 'sensor' and run.max_skew == 0.01 and not run.lockstep
     # two passes: the second moved on by the bag's log span plus a period, as the player moves it
     span = 2 * PERIOD + 5 * MS + PERIOD

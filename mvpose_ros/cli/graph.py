@@ -59,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--config', type=Path,
                    help='ROS 2 parameter file with every node and the mvpose_graph section (with --rig: '
                         'overrides config/rig_template.yaml)')
+    p.add_argument('--overrides', type=Path, action='append', default=[], metavar='FILE',
+                   help='a parameter file of node sections only, applied after --config (and the rig '
+                        'template); repeatable, a later file wins: e.g. config/crowd.yaml')
     p.add_argument('--rig', type=Path, help='rig file: run the graph on a recording of this rig (needs --bag)')
     p.add_argument('--lockstep', action='store_true',
                    help='--rig: publish the next synchronised set once the previous one is through (every set '

@@ -14,7 +14,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 from contextlib import contextmanager
-from typing import Any, Iterator, Sequence, TextIO
+from typing import Any, Iterator, Mapping, Sequence, TextIO
 
 import rclpy
 from rclpy.context import Context
@@ -27,7 +27,7 @@ from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
-from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, GraphSettings, NodeSpec, RigRun,
+from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
                                      detector_backend, graph_nodes, graph_settings, load_params, output_topics,
                                      rig_connections, rig_graph_nodes, rig_played_connections, rig_sync, runner_section,
                                      unknown_nodes, write_overrides)
@@ -61,12 +61,13 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
                        rate=settings.rate if args.rate is None else args.rate)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     config = args.config.resolve()
+    overrides = _override_files(args.overrides)
     bag = Path(settings.bag).resolve()
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
     params = load_params(args.config)
     try:
-        backend = detector_backend(params)
+        backend = detector_backend(_merged([params] + [load_params(f) for f in overrides]))
         if backend not in INPUT_TOPICS:
             raise ValueError(f'heatmap_detector backend {backend!r} is not one of {", ".join(INPUT_TOPICS)}')
     except ValueError as exc:
@@ -77,16 +78,15 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     stamps = input_stamps(bag, '/' + camera_topic(0, input_topic), args.loops)
     per_loop = len(stamps) // args.loops
     nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root, args.loops, start_topic=START_TOPIC)
-    for section in unknown_nodes(params, nodes):
-        print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
+    _warn_unknown([args.config, *overrides], nodes, err)
 
     watch = _supervision(args, nodes, err)
     nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
     _environment(config.parent, args.domain_id)
     with _recording(frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
-        outcome = run_graph(settings, config, nodes, stamps, log_dir, node, executor, input_topic, per_loop,
-                            watch=watch)
+        outcome = run_graph(settings, [config, *overrides], nodes, stamps, log_dir, node, executor, input_topic,
+                            per_loop, watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
     effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
@@ -157,7 +157,8 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     if not rig_path.is_file():
         raise FileNotFoundError(f'--rig: no such file: {args.rig}')
     rig = load_rig_file(rig_path, data_root=root)
-    files = [package_path(RIG_TEMPLATE)] + ([args.config.resolve()] if args.config else [])
+    files = ([package_path(RIG_TEMPLATE)] + ([args.config.resolve()] if args.config else [])
+             + _override_files(args.overrides))
     params_list = [load_params(f) for f in files]
     section = RIG_RUNNER_DEFAULTS | {k: v for k, v in runner_section(params_list).items() if k in RIG_RUNNER_DEFAULTS}
     max_skew, sync_timeout = rig_sync(params_list)
@@ -188,6 +189,30 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     return rig, run, settings, files, sets
 
 
+def _override_files(paths: Sequence[Path]) -> list[Path]:
+    """--overrides files, resolved; ValueError when one holds the runner's own section (its
+    settings come from --config alone)."""
+    for path in paths:
+        if RUNNER_SECTION in load_params(path):
+            raise ValueError(f'{path}: --overrides takes node sections only, not {RUNNER_SECTION}')
+    return [p.resolve() for p in paths]
+
+
+def _merged(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> dict[str, dict[str, object]]:
+    """Parameter files' sections merged node by node, a later file's values winning."""
+    out: dict[str, dict[str, object]] = {}
+    for params in params_list:
+        for node, section in params.items():
+            out[node] = {**out.get(node, {}), **section}
+    return out
+
+
+def _warn_unknown(paths: Sequence[Path], nodes: Sequence[NodeSpec], err: TextIO) -> None:
+    for path in paths:
+        for section in unknown_nodes(load_params(path), nodes):
+            print(f'{PROG}: warning: {path}: section {section} matches no node of the graph', file=err)
+
+
 def _stamps_only(s: SyncSet) -> SyncSet:
     """The set without its message bytes (the runner keeps only stamps)."""
     s.messages = []
@@ -199,9 +224,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     rig, run, settings, files, sets = rig_run_plan(args)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC)
-    if args.config is not None:
-        for section in unknown_nodes(load_params(args.config), nodes):
-            print(f'{PROG}: warning: {args.config}: section {section} matches no node of the graph', file=err)
+    _warn_unknown(files[1:], nodes, err)
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
     stamps = [s.stamp_ns for s in sets]
