@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import itertools
-import warnings
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -140,9 +139,8 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
         out[persons, joints] = solve_line_terms(summed, width)  # (Q, m, 3)
 
     located = ~np.isnan(out).all(axis=(1, 2, 3))  # (P,) anyone with a joint seen twice
-    with np.errstate(invalid='ignore'), warnings.catch_warnings():
-        warnings.simplefilter('ignore', RuntimeWarning)  # the mean of nobody: NaN, left out below
-        centre = np.nanmean(out.reshape(n_people, -1, 3), axis=1)  # (P, 3)
+    centre = np.full((n_people, 3), np.nan)
+    centre[located] = np.nanmean(out[located].reshape(-1, n_joints * m, 3), axis=1)
     # a joint seen by a single camera: its m rays, each at a depth chosen below
     keep = located[single_p]
     single_p, single_j, single_view = single_p[keep], single_j[keep], single_view[keep]
@@ -150,7 +148,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]  # (S, m, 3)
     depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
     if config.single_view_depth == 'limb':
-        depth = _limb_depths(depth, direction, origin, single_j, _anchors(out, config)[single_p])
+        depth = _limb_depths(depth, direction, origin, single_p, single_j, _anchors(out, config))
     out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
     unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
     out[unseen_p, unseen_j] = centre[unseen_p, None]
@@ -169,16 +167,16 @@ def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
     return out
 
 
-def _limb_depths(depth: np.ndarray, direction: np.ndarray, origin: np.ndarray, joints: np.ndarray,
-                 anchors: np.ndarray) -> np.ndarray:
-    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (n, 3) of `joints` (n,)
-    where each ray meets the sphere of its bone's length around its parent's anchor (anchors
-    (n, J, 3): the joints of each ray's person); of the two, the one nearer the given depth (the
-    person's centre). A ray missing the sphere takes its point nearest the parent; a joint without
-    a located parent keeps `depth`."""
+def _limb_depths(depth: np.ndarray, direction: np.ndarray, origin: np.ndarray, persons: np.ndarray,
+                 joints: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (n, 3) of joints
+    `joints` (n,) of `persons` (n,) where each ray meets the sphere of its bone's length around its
+    parent's anchor (anchors (P, J, 3)); of the two, the one nearer the given depth (the person's
+    centre). A ray missing the sphere takes its point nearest the parent; a joint without a
+    located parent keeps `depth`."""
     parent = INFERENCE_PARENT[joints]
     length = PRIOR_BONE_LENGTH[joints]
-    anchor = anchors[np.arange(len(joints)), np.maximum(parent, 0)]  # (n, 3)
+    anchor = anchors[persons, np.maximum(parent, 0)]  # (n, 3)
     rel = anchor - origin
     mid = np.einsum('nmd,nd->nm', direction, rel)  # depth of the point nearest the parent
     half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
