@@ -1,0 +1,39 @@
+"""Compiled kernels: loops that numpy can only run as many small calls, each with its Python cost.
+
+Every kernel of the package is compiled the same way, by `kernel`:
+- for the signatures it names, when its module is imported: a call with other types is a
+  TypeError, never a compilation in the middle of a frame;
+- cached on disk beside its module: the first import after an install compiles (seconds), later
+  processes load the machine code;
+- without the GIL, so a node's worker thread and its executor run side by side;
+- without fast-math and with numpy's error model (x / 0 is inf, not an exception): the same
+  arithmetic as the numpy it replaces, up to the order of sums.
+
+`python -m mvpose_ros.core.compiled` imports every module that holds kernels, so that a graph's
+nodes, started together, load the cache instead of each compiling the same code.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Callable
+
+import numba
+
+# Every module that defines kernels (test_compiled checks that none is missing).
+KERNEL_MODULES: tuple[str, ...] = ()
+
+
+def kernel(*signatures: str) -> Callable[[Callable], Callable]:
+    """Decorator: compile a function to machine code for `signatures` (numba's strings, e.g.
+    'float64[:, ::1](float64[:, ::1], int64)')."""
+    return numba.njit(list(signatures), cache=True, nogil=True, error_model='numpy')
+
+
+def compile_all() -> None:
+    """Import every module that holds kernels: compiles them, or loads them from the cache."""
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
+
+
+if __name__ == '__main__':
+    compile_all()
