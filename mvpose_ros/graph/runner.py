@@ -20,6 +20,8 @@ the last frame's output is in (the frames lost in the restart never come).
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -209,6 +211,8 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     outcome = Outcome(stamps, MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
+    # nodes started together on a fresh install would each compile the same kernels at once
+    subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
     with ProcessGroup(log_dir, env) as group:
         try:
             for spec in nodes:
