@@ -17,26 +17,6 @@ _LIMB_ORDER = ([k for k in range(len(BODY25_PAF_PAIRS)) if k not in BODY25_REDUN
                + sorted(BODY25_REDUNDANT_LIMBS))
 
 
-def _limb_connections(score: np.ndarray, min_score: float) -> list[tuple[int, int, float]]:
-    """Greedy one-to-one matching of a limb's candidate pairs by score (n_a, n_b), best first (ties
-    in index order). Plain Python: a limb has a handful of candidates, too few for numpy calls to
-    pay off."""
-    n_b = score.shape[1]
-    flat = score.ravel().tolist()
-    # best first, ties in index order (sorted is stable, also reversed)
-    order = sorted([k for k, s in enumerate(flat) if s > min_score], key=flat.__getitem__, reverse=True)
-    used_a: set[int] = set()
-    used_b: set[int] = set()
-    out = []
-    for k in order:
-        ia, ib = divmod(k, n_b)
-        if ia not in used_a and ib not in used_b:
-            used_a.add(ia)
-            used_b.add(ib)
-            out.append((ia, ib, flat[k]))
-    return out
-
-
 def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 0.05,
                  min_joints: int = 4, min_mean_score: float = 0.3) -> np.ndarray:
     """Group one frame's BODY25 candidates into people; returns (P, 25) int candidate index per
@@ -56,45 +36,61 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
         of sharpened PAF scores of their connections) / joint count is lower, are dropped
         (OpenPose's subset filter).
     """
-    # plain Python lists throughout: per frame a few dozen candidates, and numpy scalars are slow
+    # Every limb's candidate pairs in one array, ordered by limb (in _LIMB_ORDER), then by
+    # sharpened score, best first, ties in index order (lexsort is stable): the greedy matching
+    # below then walks them once, in plain Python (a few dozen pairs: numpy scalars are slow).
+    pafs = [frame.pafs[k] for k in _LIMB_ORDER]
+    sizes = np.array([p.size for p in pafs])
+    score = np.power(np.concatenate([p.ravel() for p in pafs] + [np.zeros(0)]), paf_power)
+    limb = np.repeat(np.arange(len(pafs)), sizes)
+    pick = np.flatnonzero(score > min_paf)
+    pick = pick[np.lexsort((-score[pick], limb[pick]))]
+    n_b = np.array([p.shape[1] if p.size else 1 for p in pafs])
+    ia, ib = np.divmod(pick - (np.cumsum(sizes) - sizes)[limb[pick]], n_b[limb[pick]])
+    cand_first = np.cumsum([0] + [len(c) for c in frame.candidates]).tolist()
+    cand_score = np.concatenate([c[:, 2] for c in frame.candidates] + [np.zeros(0)]).tolist()
+
     owner = [[-1] * len(c) for c in frame.candidates]  # person index per candidate
     people: list[list[int] | None] = []
     scores: list[float] = []
-
-    for k in _LIMB_ORDER:
-        a, b = BODY25_PAF_PAIRS[k]
-        raw = frame.pafs[k]
-        if raw.size == 0:
+    current = -1
+    for r, ca, cb, paf in zip(limb[pick].tolist(), ia.tolist(), ib.tolist(), score[pick].tolist()):
+        if r != current:  # each candidate of a limb takes at most one pair
+            current = r
+            used_a: set[int] = set()
+            used_b: set[int] = set()
+            a, b = BODY25_PAF_PAIRS[_LIMB_ORDER[r]]
+            redundant = _LIMB_ORDER[r] in BODY25_REDUNDANT_LIMBS
+        if ca in used_a or cb in used_b:
             continue
-        redundant = k in BODY25_REDUNDANT_LIMBS
-        sa, sb = frame.candidates[a][:, 2].tolist(), frame.candidates[b][:, 2].tolist()
-        for ca, cb, paf in _limb_connections(np.power(raw, paf_power), min_paf):
-            pa, pb = owner[a][ca], owner[b][cb]
-            if pa < 0 and pb < 0:
-                if redundant:
-                    continue
-                person = [-1] * BODY25_NUM_JOINTS
-                person[a], person[b] = ca, cb
-                owner[a][ca] = owner[b][cb] = len(people)
-                people.append(person)
-                scores.append(sa[ca] + sb[cb] + paf)
-            elif pa < 0 or pb < 0:
-                # attach the free end unless its person already has that joint
-                p, j, c, s = (pb, a, ca, sa[ca]) if pa < 0 else (pa, b, cb, sb[cb])
-                if people[p][j] < 0:
-                    people[p][j] = c
-                    owner[j][c] = p
-                    scores[p] += s + paf
-            elif pa != pb:
-                first, second = people[pa], people[pb]
-                if any(x >= 0 and y >= 0 for x, y in zip(first, second)):
-                    continue  # the two fragments disagree on some joint
-                for j, c in enumerate(second):
-                    if c >= 0:
-                        first[j] = c
-                        owner[j][c] = pa
-                scores[pa] += scores[pb] + paf
-                people[pb] = None
+        used_a.add(ca)
+        used_b.add(cb)
+        pa, pb = owner[a][ca], owner[b][cb]
+        if pa < 0 and pb < 0:
+            if redundant:
+                continue
+            person = [-1] * BODY25_NUM_JOINTS
+            person[a], person[b] = ca, cb
+            owner[a][ca] = owner[b][cb] = len(people)
+            people.append(person)
+            scores.append(cand_score[cand_first[a] + ca] + cand_score[cand_first[b] + cb] + paf)
+        elif pa < 0 or pb < 0:
+            # attach the free end unless its person already has that joint
+            p, j, c = (pb, a, ca) if pa < 0 else (pa, b, cb)
+            if people[p][j] < 0:
+                people[p][j] = c
+                owner[j][c] = p
+                scores[p] += cand_score[cand_first[j] + c] + paf
+        elif pa != pb:
+            first, second = people[pa], people[pb]
+            if any(x >= 0 and y >= 0 for x, y in zip(first, second)):
+                continue  # the two fragments disagree on some joint
+            for j, c in enumerate(second):
+                if c >= 0:
+                    first[j] = c
+                    owner[j][c] = pa
+            scores[pa] += scores[pb] + paf
+            people[pb] = None
 
     kept = []
     for person, score in zip(people, scores):
