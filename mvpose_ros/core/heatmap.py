@@ -210,5 +210,8 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
     gu = np.where(np.abs(du) <= cut, np.exp(inv * du ** 2), 0)  # (P, J, n, w)
     weight = np.minimum(centres[..., 2:], 1.0).astype(np.float32)
     gv = weight * np.where(np.abs(dv) <= cut, np.exp(inv * dv ** 2), 0)  # (P, J, n, h)
-    maps = np.max(gv[..., :, None] * gu[..., None, :], axis=2)  # outer products (P, J, h, w)
+    # outer products (P, J, h, w), one centre row at a time: no (P, J, n, h, w) temporary
+    maps = gv[..., 0, :, None] * gu[..., 0, None, :]
+    for k in range(1, gv.shape[2]):
+        np.maximum(maps, gv[..., k, :, None] * gu[..., k, None, :], out=maps)
     return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]
