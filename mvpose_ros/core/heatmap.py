@@ -187,7 +187,8 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
     valid = np.isfinite(centres).all(axis=-1) & (centres[..., 2] > 0)
     # rows that count first, then only as many rows as the fullest map has: padding rows render
     # as zeros, which never change the max, so the maps are the same
-    order = np.argsort(~valid, axis=-1, kind='stable')[..., :max(int(valid.sum(axis=-1).max(initial=0)), 1)]
+    count = valid.sum(axis=-1)  # (P, J)
+    order = np.argsort(~valid, axis=-1, kind='stable')[..., :max(int(count.max(initial=0)), 1)]
     centres = np.take_along_axis(centres, order[..., None], axis=-2)
     valid = np.take_along_axis(valid, order, axis=-1)
     centres[~valid] = 0.0
@@ -210,8 +211,10 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
     gu = np.where(np.abs(du) <= cut, np.exp(inv * du ** 2), 0)  # (P, J, n, w)
     weight = np.minimum(centres[..., 2:], 1.0).astype(np.float32)
     gv = weight * np.where(np.abs(dv) <= cut, np.exp(inv * dv ** 2), 0)  # (P, J, n, h)
-    # outer products (P, J, h, w), one centre row at a time: no (P, J, n, h, w) temporary
+    # outer products (P, J, h, w), one centre row at a time (no (P, J, n, h, w) temporary), the
+    # rows after the first only for the maps that have them (most maps have one)
     maps = gv[..., 0, :, None] * gu[..., 0, None, :]
     for k in range(1, gv.shape[2]):
-        np.maximum(maps, gv[..., k, :, None] * gu[..., k, None, :], out=maps)
+        more = np.nonzero(count > k)
+        maps[more] = np.maximum(maps[more], gv[more][:, k, :, None] * gu[more][:, k, None, :])
     return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]
