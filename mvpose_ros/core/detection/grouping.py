@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 
 
@@ -36,68 +37,91 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
         of sharpened PAF scores of their connections) / joint count is lower, are dropped
         (OpenPose's subset filter).
     """
-    # Every limb's candidate pairs in one array, ordered by limb (in _LIMB_ORDER), then by
-    # sharpened score, best first, ties in index order (lexsort is stable): the greedy matching
-    # below then walks them once, in plain Python (a few dozen pairs: numpy scalars are slow).
+    # the greedy walk is compiled (_group): in Python it was a few hundred steps per frame
     pafs = [frame.pafs[k] for k in _LIMB_ORDER]
-    sizes = np.array([p.size for p in pafs])
-    score = np.power(np.concatenate([p.ravel() for p in pafs] + [np.zeros(0)]), paf_power)
-    limb = np.repeat(np.arange(len(pafs)), sizes)
-    pick = np.flatnonzero(score > min_paf)
-    pick = pick[np.lexsort((-score[pick], limb[pick]))]
-    n_b = np.array([p.shape[1] if p.size else 1 for p in pafs])
-    ia, ib = np.divmod(pick - (np.cumsum(sizes) - sizes)[limb[pick]], n_b[limb[pick]])
-    cand_first = np.cumsum([0] + [len(c) for c in frame.candidates]).tolist()
-    cand_score = np.concatenate([c[:, 2] for c in frame.candidates] + [np.zeros(0)]).tolist()
+    score = np.asarray(np.power(np.concatenate(pafs, axis=None), paf_power), dtype=np.float64)
+    n_b = np.array([p.shape[1] for p in pafs])
+    n_cand = np.array([len(c) for c in frame.candidates])
+    cand = np.ascontiguousarray(np.concatenate(frame.candidates), dtype=np.float64)
+    return _group(score, n_b, cand, n_cand, float(min_paf), int(min_joints), float(min_mean_score))
 
-    owner = [[-1] * len(c) for c in frame.candidates]  # person index per candidate
-    people: list[list[int] | None] = []
-    scores: list[float] = []
-    current = -1
-    for r, ca, cb, paf in zip(limb[pick].tolist(), ia.tolist(), ib.tolist(), score[pick].tolist()):
-        if r != current:  # each candidate of a limb takes at most one pair
-            current = r
-            used_a: set[int] = set()
-            used_b: set[int] = set()
-            a, b = BODY25_PAF_PAIRS[_LIMB_ORDER[r]]
-            redundant = _LIMB_ORDER[r] in BODY25_REDUNDANT_LIMBS
-        if ca in used_a or cb in used_b:
-            continue
-        used_a.add(ca)
-        used_b.add(cb)
-        pa, pb = owner[a][ca], owner[b][cb]
-        if pa < 0 and pb < 0:
-            if redundant:
+
+# joints a, b of each limb in _LIMB_ORDER; the limbs from _TREE_LIMBS on (the redundant ones)
+# never start a person
+_LIMB_A = np.array([BODY25_PAF_PAIRS[k][0] for k in _LIMB_ORDER])
+_LIMB_B = np.array([BODY25_PAF_PAIRS[k][1] for k in _LIMB_ORDER])
+_TREE_LIMBS = len(_LIMB_ORDER) - len(BODY25_REDUNDANT_LIMBS)
+
+
+@kernel('int64[:, ::1](float64[::1], int64[::1], float64[:, ::1], int64[::1], float64, int64, float64)')
+def _group(score, n_b, cand, n_cand, min_paf, min_joints, min_mean_score):
+    """group_body25 on flat arrays: score (S,) the sharpened PAF entries of every limb in
+    _LIMB_ORDER, each limb's (n_a, n_b) matrix row-major; cand (C, 3) every candidate, joint
+    after joint, n_cand (25,) of them per joint."""
+    cand_first = np.zeros(BODY25_NUM_JOINTS + 1, dtype=np.int64)
+    cand_first[1:] = np.cumsum(n_cand)
+    n_max = len(cand) // 2 + 1  # a person starts with two free candidates
+    owner = np.full(len(cand), -1)  # person per candidate
+    used = np.full(len(cand), -1)  # the last limb that paired a candidate
+    people = np.full((n_max, BODY25_NUM_JOINTS), -1)
+    total = np.zeros(n_max)  # candidate scores + PAF scores of each person
+    alive = np.ones(n_max, dtype=np.bool_)
+    n_people = 0
+    pairs = np.empty(len(score), dtype=np.int64)
+    start = 0
+    for r in range(len(n_b)):
+        a, b = _LIMB_A[r], _LIMB_B[r]
+        size = (cand_first[a + 1] - cand_first[a]) * n_b[r]
+        # the limb's pairs above min_paf, best first, ties in index order (stable insertion sort)
+        n = 0
+        for k in range(start, start + size):
+            if score[k] > min_paf:
+                i = n
+                while i > 0 and score[pairs[i - 1]] < score[k]:
+                    pairs[i] = pairs[i - 1]
+                    i -= 1
+                pairs[i] = k
+                n += 1
+        for i in range(n):
+            k = pairs[i]
+            ga = cand_first[a] + (k - start) // n_b[r]
+            gb = cand_first[b] + (k - start) % n_b[r]
+            if used[ga] == r or used[gb] == r:
                 continue
-            person = [-1] * BODY25_NUM_JOINTS
-            person[a], person[b] = ca, cb
-            owner[a][ca] = owner[b][cb] = len(people)
-            people.append(person)
-            scores.append(cand_score[cand_first[a] + ca] + cand_score[cand_first[b] + cb] + paf)
-        elif pa < 0 or pb < 0:
-            # attach the free end unless its person already has that joint
-            p, j, c = (pb, a, ca) if pa < 0 else (pa, b, cb)
-            if people[p][j] < 0:
-                people[p][j] = c
-                owner[j][c] = p
-                scores[p] += cand_score[cand_first[j] + c] + paf
-        elif pa != pb:
-            first, second = people[pa], people[pb]
-            if any(x >= 0 and y >= 0 for x, y in zip(first, second)):
-                continue  # the two fragments disagree on some joint
-            for j, c in enumerate(second):
-                if c >= 0:
-                    first[j] = c
-                    owner[j][c] = pa
-            scores[pa] += scores[pb] + paf
-            people[pb] = None
+            used[ga] = used[gb] = r
+            paf = score[k]
+            pa, pb = owner[ga], owner[gb]
+            if pa < 0 and pb < 0:
+                if r >= _TREE_LIMBS:
+                    continue
+                people[n_people, a], people[n_people, b] = ga - cand_first[a], gb - cand_first[b]
+                owner[ga] = owner[gb] = n_people
+                total[n_people] = cand[ga, 2] + cand[gb, 2] + paf
+                n_people += 1
+            elif pa < 0 or pb < 0:
+                # attach the free end unless its person already has that joint
+                p, j, g = (pb, a, ga) if pa < 0 else (pa, b, gb)
+                if people[p, j] < 0:
+                    people[p, j] = g - cand_first[j]
+                    owner[g] = p
+                    total[p] += cand[g, 2] + paf
+            elif pa != pb:
+                if np.any((people[pa] >= 0) & (people[pb] >= 0)):
+                    continue  # the two fragments disagree on some joint
+                for j in range(BODY25_NUM_JOINTS):
+                    c = people[pb, j]
+                    if c >= 0:
+                        people[pa, j] = c
+                        owner[cand_first[j] + c] = pa
+                total[pa] += total[pb] + paf
+                alive[pb] = False
+        start += size
 
-    kept = []
-    for person, score in zip(people, scores):
-        if person is None:
-            continue
-        n = sum(c >= 0 for c in person)
-        if n >= min_joints and score / n >= min_mean_score:
-            kept.append((score, person))
-    kept.sort(key=lambda x: -x[0])
-    return np.array([p for _, p in kept], dtype=np.int64).reshape(-1, BODY25_NUM_JOINTS)
+    n_joints = (people[:n_people] >= 0).sum(axis=1)
+    kept = np.flatnonzero(alive[:n_people] & (n_joints >= min_joints)
+                          & (total[:n_people] / np.maximum(n_joints, 1) >= min_mean_score))
+    kept = kept[np.argsort(-total[kept], kind='mergesort')]  # best first, ties in creation order
+    out = np.empty((len(kept), BODY25_NUM_JOINTS), dtype=np.int64)
+    for i in range(len(kept)):
+        out[i] = people[kept[i]]
+    return out
