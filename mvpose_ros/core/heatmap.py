@@ -8,6 +8,8 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
+
 MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
@@ -180,41 +182,100 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
 
     Max (not sum) so that a map's value at a candidate is that candidate's own weight:
     overlapping evidence does not inflate the data term and values stay in [0, 1]."""
-    centres = np.array(centres, dtype=np.float64)
+    centres = np.ascontiguousarray(centres, dtype=np.float64)
     if len(centres) == 0:
         return []
-    margin = MARGIN_SIGMAS * sigma
-    valid = np.isfinite(centres).all(axis=-1) & (centres[..., 2] > 0)
-    # rows that count first, then only as many rows as the fullest map has: padding rows render
-    # as zeros, which never change the max, so the maps are the same
-    count = valid.sum(axis=-1)  # (P, J)
-    order = np.argsort(~valid, axis=-1, kind='stable')[..., :max(int(count.max(initial=0)), 1)]
-    centres = np.take_along_axis(centres, order[..., None], axis=-2)
-    valid = np.take_along_axis(valid, order, axis=-1)
-    centres[~valid] = 0.0
-    has = valid.any(axis=-1)  # (P, J)
-    lo = np.where(valid[..., None], centres[..., :2], np.inf).min(axis=-2) - margin  # (P, J, 2)
-    hi = np.where(valid[..., None], centres[..., :2], -np.inf).max(axis=-2) + margin
-    # a map without evidence sits at its person's first evidence (it is all zeros anyway)
-    anchor = np.where(has[..., None], lo, np.inf).min(axis=1, keepdims=True)
-    anchor = np.where(np.isfinite(anchor), anchor, 0.0)
-    lo = np.where(has[..., None], lo, anchor)
-    hi = np.where(has[..., None], hi, anchor)
-    lo = np.floor(lo / stride) * stride  # cells on the image's lattice of stride px, as a network's output
-    w, h = np.ceil((hi - lo) / stride).astype(int).reshape(-1, 2).max(axis=0) + 1
-    rel = (centres[..., :2] - lo[..., None, :]).astype(np.float32)  # (P, J, n, 2) pixels from cell [0, 0]
-    us = np.float32(stride) * np.arange(w, dtype=np.float32)
-    vs = np.float32(stride) * np.arange(h, dtype=np.float32)
-    inv = np.float32(-0.5 / sigma ** 2)
-    cut = np.float32(margin)
-    du, dv = us - rel[..., :1], vs - rel[..., 1:]
-    gu = np.where(np.abs(du) <= cut, np.exp(inv * du ** 2), 0)  # (P, J, n, w)
-    weight = np.minimum(centres[..., 2:], 1.0).astype(np.float32)
-    gv = weight * np.where(np.abs(dv) <= cut, np.exp(inv * dv ** 2), 0)  # (P, J, n, h)
-    # outer products (P, J, h, w), one centre row at a time (no (P, J, n, h, w) temporary), the
-    # rows after the first only for the maps that have them (most maps have one)
-    maps = gv[..., 0, :, None] * gu[..., 0, None, :]
-    for k in range(1, gv.shape[2]):
-        more = np.nonzero(count > k)
-        maps[more] = np.maximum(maps[more], gv[more][:, k, :, None] * gu[more][:, k, None, :])
-    return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]
+    n_p, n_j = centres.shape[:2]
+    lo = np.empty((n_p, n_j, 2))
+    weight = np.empty(centres.shape[:3], dtype=np.float32)
+    count = np.empty((n_p, n_j), dtype=np.int64)
+    # Compiled: the layout and exponents, then the maps (each Gaussian only within its cut).
+    # numpy takes the exponentials: the compiled float32 exp differs from numpy's in the last bits.
+    gauss, w = _gaussian_exponents(centres, float(stride), MARGIN_SIGMAS * sigma, np.float32(-0.5 / sigma ** 2),
+                                   lo, weight, count)
+    np.exp(gauss, out=gauss)
+    maps = _max_of_gaussians(gauss, weight, count, w)
+    return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(n_p)]
+
+
+@kernel('Tuple((float32[:, :, :, ::1], int64))(float64[:, :, :, ::1], float64, float64, float32, '
+        'float64[:, :, ::1], float32[:, :, ::1], int64[:, ::1])')
+def _gaussian_exponents(centres, stride, margin, inv, lo, weight, count):
+    """render_heatmaps' layout and Gaussian exponents. Writes each map's origin lo (P, J, 2), its
+    rows that count (weight > 0, finite) first in weight (P, J, n) (clipped to 1) and their
+    number count (P, J); returns the exponents (P, J, max(count), w + h), -inf beyond the cut,
+    of each row's Gaussian along u at the w cell columns, then along v at the h cell rows, all
+    in float32 as numpy would compute them, and w."""
+    n_p, n_j, n = centres.shape[:3]
+    hi = np.empty((n_p, n_j, 2))
+    for p in range(n_p):
+        anchor = np.array([np.inf, np.inf])
+        for j in range(n_j):
+            c = 0
+            low = np.array([np.inf, np.inf])
+            high = np.array([-np.inf, -np.inf])
+            for k in range(n):
+                u, v, wt = centres[p, j, k]
+                if np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0:
+                    low[0], low[1] = min(low[0], u), min(low[1], v)
+                    high[0], high[1] = max(high[0], u), max(high[1], v)
+                    weight[p, j, c] = np.float32(min(wt, 1.0))
+                    c += 1
+            count[p, j] = c
+            lo[p, j] = low - margin
+            hi[p, j] = high + margin
+            if c > 0:
+                anchor = np.minimum(anchor, lo[p, j])
+        # a map without evidence sits at its person's first evidence (it is all zeros anyway)
+        for i in range(2):
+            if not np.isfinite(anchor[i]):
+                anchor[i] = 0.0
+        for j in range(n_j):
+            if count[p, j] == 0:
+                lo[p, j] = anchor
+                hi[p, j] = anchor
+    grid = np.zeros(2, dtype=np.int64)
+    for p in range(n_p):
+        for j in range(n_j):
+            for i in range(2):
+                lo[p, j, i] = np.floor(lo[p, j, i] / stride) * stride  # cells on the image's lattice
+                grid[i] = max(grid[i], int(np.ceil((hi[p, j, i] - lo[p, j, i]) / stride)))
+    w, h = grid[0] + 1, grid[1] + 1
+    stride32, cut = np.float32(stride), np.float32(margin)
+    out = np.full((n_p, n_j, max(count.max(), 1), w + h), -np.inf, dtype=np.float32)
+    for p in range(n_p):
+        for j in range(n_j):
+            c = 0
+            for k in range(n):
+                u, v, wt = centres[p, j, k]
+                if np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0:
+                    for i, (rel, cells) in enumerate(((np.float32(u - lo[p, j, 0]), w),
+                                                      (np.float32(v - lo[p, j, 1]), h))):
+                        for x in range(cells):
+                            d = stride32 * np.float32(x) - rel
+                            if abs(d) <= cut:
+                                out[p, j, c, i * w + x] = inv * (d * d)
+                    c += 1
+    return out, w
+
+
+@kernel('float32[:, :, :, ::1](float32[:, :, :, ::1], float32[:, :, ::1], int64[:, ::1], int64)')
+def _max_of_gaussians(gauss, weight, count, w):
+    """Maps (P, J, h, w): the max over each map's rows (count (P, J) of them) of the outer product
+    of weight (P, J, n) * its Gaussian along v and its Gaussian along u (gauss: (P, J, n, w + h),
+    u then v); rows and cells where the Gaussian is 0 are skipped."""
+    n_p, n_j, _, size = gauss.shape
+    h = size - w
+    maps = np.zeros((n_p, n_j, h, w), dtype=np.float32)
+    for p in range(n_p):
+        for j in range(n_j):
+            for k in range(count[p, j]):
+                for r in range(h):
+                    a = weight[p, j, k] * gauss[p, j, k, w + r]
+                    if a == 0:
+                        continue
+                    for c in range(w):
+                        value = a * gauss[p, j, k, c]
+                        if value > maps[p, j, r, c]:
+                            maps[p, j, r, c] = value
+    return maps
