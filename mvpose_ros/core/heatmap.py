@@ -185,33 +185,32 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
     centres = np.ascontiguousarray(centres, dtype=np.float64)
     if len(centres) == 0:
         return []
-    n_p, n_j = centres.shape[:2]
-    lo = np.empty((n_p, n_j, 2))
-    weight = np.empty(centres.shape[:3], dtype=np.float32)
-    count = np.empty((n_p, n_j), dtype=np.int64)
-    # Compiled: the layout and exponents, then the maps (each Gaussian only within its cut).
-    # numpy takes the exponentials: the compiled float32 exp differs from numpy's in the last bits.
-    gauss, w = _gaussian_exponents(centres, float(stride), MARGIN_SIGMAS * sigma, np.float32(-0.5 / sigma ** 2),
-                                   lo, weight, count)
-    np.exp(gauss, out=gauss)
-    maps = _max_of_gaussians(gauss, weight, count, w)
-    return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(n_p)]
+    lo = np.empty(centres.shape[:2] + (2,))
+    # Compiled: the layout and, for each row that counts, its Gaussian's exponents within the cut,
+    # then the maps. numpy takes the exponentials: the compiled float32 exp differs from numpy's
+    # in the last bits.
+    exponents, rows, weight, w, h = _gaussian_exponents(centres, float(stride), MARGIN_SIGMAS * sigma,
+                                                        np.float32(-0.5 / sigma ** 2), lo)
+    np.exp(exponents, out=exponents)
+    maps = _max_of_gaussians(exponents, rows, weight, len(centres), centres.shape[1], h, w)
+    return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]
 
 
-@kernel('Tuple((float32[:, :, :, ::1], int64))(float64[:, :, :, ::1], float64, float64, float32, '
-        'float64[:, :, ::1], float32[:, :, ::1], int64[:, ::1])')
-def _gaussian_exponents(centres, stride, margin, inv, lo, weight, count):
-    """render_heatmaps' layout and Gaussian exponents. Writes each map's origin lo (P, J, 2), its
-    rows that count (weight > 0, finite) first in weight (P, J, n) (clipped to 1) and their
-    number count (P, J); returns the exponents (P, J, max(count), w + h), -inf beyond the cut,
-    of each row's Gaussian along u at the w cell columns, then along v at the h cell rows, all
-    in float32 as numpy would compute them, and w."""
+@kernel('Tuple((float32[::1], int64[:, ::1], float32[::1], int64, int64))(float64[:, :, :, ::1], float64, float64, '
+        'float32, float64[:, :, ::1])')
+def _gaussian_exponents(centres, stride, margin, inv, lo):
+    """render_heatmaps' layout and Gaussian exponents. Writes each map's origin lo (P, J, 2);
+    returns the float32 exponents, as numpy computed them, of each row that counts (weight > 0,
+    finite) along u at the cell columns u0:u1 within the cut, then along v at the cell rows v0:v1;
+    per such row (R, 7) p, j, u0, u1, v0, v1, start of its exponents, and (R,) its weight clipped
+    to 1, in float32; and the grid's w, h."""
     n_p, n_j, n = centres.shape[:3]
     hi = np.empty((n_p, n_j, 2))
+    has = np.zeros((n_p, n_j), dtype=np.bool_)
+    n_rows = 0
     for p in range(n_p):
         anchor = np.array([np.inf, np.inf])
         for j in range(n_j):
-            c = 0
             low = np.array([np.inf, np.inf])
             high = np.array([-np.inf, -np.inf])
             for k in range(n):
@@ -219,19 +218,18 @@ def _gaussian_exponents(centres, stride, margin, inv, lo, weight, count):
                 if np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0:
                     low[0], low[1] = min(low[0], u), min(low[1], v)
                     high[0], high[1] = max(high[0], u), max(high[1], v)
-                    weight[p, j, c] = np.float32(min(wt, 1.0))
-                    c += 1
-            count[p, j] = c
+                    has[p, j] = True
+                    n_rows += 1
             lo[p, j] = low - margin
             hi[p, j] = high + margin
-            if c > 0:
+            if has[p, j]:
                 anchor = np.minimum(anchor, lo[p, j])
         # a map without evidence sits at its person's first evidence (it is all zeros anyway)
         for i in range(2):
             if not np.isfinite(anchor[i]):
                 anchor[i] = 0.0
         for j in range(n_j):
-            if count[p, j] == 0:
+            if not has[p, j]:
                 lo[p, j] = anchor
                 hi[p, j] = anchor
     grid = np.zeros(2, dtype=np.int64)
@@ -240,42 +238,48 @@ def _gaussian_exponents(centres, stride, margin, inv, lo, weight, count):
             for i in range(2):
                 lo[p, j, i] = np.floor(lo[p, j, i] / stride) * stride  # cells on the image's lattice
                 grid[i] = max(grid[i], int(np.ceil((hi[p, j, i] - lo[p, j, i]) / stride)))
-    w, h = grid[0] + 1, grid[1] + 1
+    size = grid + 1  # w, h
     stride32, cut = np.float32(stride), np.float32(margin)
-    out = np.full((n_p, n_j, max(count.max(), 1), w + h), -np.inf, dtype=np.float32)
+    rows = np.empty((n_rows, 7), dtype=np.int64)
+    weight = np.empty(n_rows, dtype=np.float32)
+    exponents = np.empty(n_rows * (size[0] + size[1]), dtype=np.float32)
+    r, end = 0, 0
     for p in range(n_p):
         for j in range(n_j):
-            c = 0
             for k in range(n):
                 u, v, wt = centres[p, j, k]
-                if np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0:
-                    for i, (rel, cells) in enumerate(((np.float32(u - lo[p, j, 0]), w),
-                                                      (np.float32(v - lo[p, j, 1]), h))):
-                        for x in range(cells):
-                            d = stride32 * np.float32(x) - rel
-                            if abs(d) <= cut:
-                                out[p, j, c, i * w + x] = inv * (d * d)
-                    c += 1
-    return out, w
+                if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0):
+                    continue
+                rows[r, 0], rows[r, 1], rows[r, 6] = p, j, end
+                for i in range(2):
+                    rel = np.float32((u if i == 0 else v) - lo[p, j, i])  # pixels from cell [0, 0]
+                    first, last = size[i], 0
+                    for x in range(size[i]):
+                        d = stride32 * np.float32(x) - rel
+                        if abs(d) <= cut:  # |d| grows away from rel: the cells within are a range
+                            exponents[end] = inv * (d * d)
+                            end += 1
+                            first, last = min(first, x), x + 1
+                    rows[r, 2 + 2 * i], rows[r, 3 + 2 * i] = first, max(last, first)
+                weight[r] = np.float32(min(wt, 1.0))
+                r += 1
+    return exponents[:end], rows, weight, size[0], size[1]
 
 
-@kernel('float32[:, :, :, ::1](float32[:, :, :, ::1], float32[:, :, ::1], int64[:, ::1], int64)')
-def _max_of_gaussians(gauss, weight, count, w):
-    """Maps (P, J, h, w): the max over each map's rows (count (P, J) of them) of the outer product
-    of weight (P, J, n) * its Gaussian along v and its Gaussian along u (gauss: (P, J, n, w + h),
-    u then v); rows and cells where the Gaussian is 0 are skipped."""
-    n_p, n_j, _, size = gauss.shape
-    h = size - w
+@kernel('float32[:, :, :, ::1](float32[::1], int64[:, ::1], float32[::1], int64, int64, int64, int64)')
+def _max_of_gaussians(gauss, rows, weight, n_p, n_j, h, w):
+    """Maps (P, J, h, w): the max over the rows (_gaussian_exponents' (R, 7) and weight (R,)) of
+    the outer product of weight * the row's Gaussian along v and its Gaussian along u (gauss:
+    their values); cells outside the row's cut are left alone (its Gaussian is 0 there)."""
     maps = np.zeros((n_p, n_j, h, w), dtype=np.float32)
-    for p in range(n_p):
-        for j in range(n_j):
-            for k in range(count[p, j]):
-                for r in range(h):
-                    a = weight[p, j, k] * gauss[p, j, k, w + r]
-                    if a == 0:
-                        continue
-                    for c in range(w):
-                        value = a * gauss[p, j, k, c]
-                        if value > maps[p, j, r, c]:
-                            maps[p, j, r, c] = value
+    for i in range(len(rows)):
+        p, j, u0, u1, v0, v1, start = rows[i]
+        for r in range(v0, v1):
+            a = weight[i] * gauss[start + (u1 - u0) + (r - v0)]
+            if a == 0:
+                continue
+            for c in range(u0, u1):
+                value = a * gauss[start + (c - u0)]
+                if value > maps[p, j, r, c]:
+                    maps[p, j, r, c] = value
     return maps
