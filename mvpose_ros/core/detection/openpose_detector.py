@@ -40,10 +40,12 @@ class OpenPoseDetectorConfig:
 def grouped_keypoints(frame: OpenPoseFrame, groups: np.ndarray) -> np.ndarray:
     """(P, 25, 3) u, v, score of the grouped candidates (groups: (P, 25) index or -1); missing
     joints are (NaN, NaN, 0)."""
-    sizes = [len(c) for c in frame.candidates]
-    first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
-    rows = np.concatenate(frame.candidates + [np.array([[np.nan, np.nan, 0.0]])])  # last row: missing
+    first = np.array([0] + [len(c) for c in frame.candidates[:-1]]).cumsum()
+    rows = np.concatenate(frame.candidates + [_MISSING])
     return rows[np.where(groups >= 0, first + groups, len(rows) - 1)]
+
+
+_MISSING = np.array([[np.nan, np.nan, 0.0]])  # grouped_keypoints' row for a joint without candidate
 
 
 def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,
