@@ -154,3 +154,67 @@ def test_real_groups_are_valid_on_every_frame(cam):
             assert len(np.unique(used)) == len(used)  # a candidate belongs to one person
         assert np.all((groups >= 0).sum(axis=1) >= 4)
     assert 2 <= np.median(n_people) <= 4
+
+
+def _reference_grouping(frame: OpenPoseFrame, paf_power=0.2, min_paf=0.05, min_joints=4, min_mean_score=0.3):
+    """group_body25 written out limb by limb, pair by pair."""
+    people, scores = [], []
+    owner = {}  # (joint, candidate) -> person
+    order = [k for k in range(26) if k not in BODY25_REDUNDANT_LIMBS] + sorted(BODY25_REDUNDANT_LIMBS)
+    for k in order:
+        a, b = BODY25_PAF_PAIRS[k]
+        paf = np.power(frame.pafs[k], paf_power)
+        pairs = sorted(((-paf[i, j], i, j) for i in range(paf.shape[0]) for j in range(paf.shape[1])
+                        if paf[i, j] > min_paf))
+        used_a, used_b = set(), set()
+        for s, ia, ib in pairs:
+            if ia in used_a or ib in used_b:
+                continue
+            used_a.add(ia)
+            used_b.add(ib)
+            pa, pb = owner.get((a, ia), -1), owner.get((b, ib), -1)
+            if pa < 0 and pb < 0:
+                if k not in BODY25_REDUNDANT_LIMBS:
+                    owner[a, ia] = owner[b, ib] = len(people)
+                    people.append({a: ia, b: ib})
+                    scores.append(frame.candidates[a][ia, 2] + frame.candidates[b][ib, 2] - s)
+            elif pa < 0 or pb < 0:
+                p, j, c = (pb, a, ia) if pa < 0 else (pa, b, ib)
+                if j not in people[p]:
+                    people[p][j] = c
+                    owner[j, c] = p
+                    scores[p] += frame.candidates[j][c, 2] - s
+            elif pa != pb and not set(people[pa]) & set(people[pb]):
+                for j, c in people[pb].items():
+                    people[pa][j] = c
+                    owner[j, c] = pa
+                scores[pa] += scores[pb] - s
+                people[pb] = None
+    kept = sorted((-s, i) for i, (p, s) in enumerate(zip(people, scores))
+                  if p is not None and len(p) >= min_joints and s / len(p) >= min_mean_score)
+    out = np.full((len(kept), 25), -1)
+    for row, (_, i) in enumerate(kept):
+        for j, c in people[i].items():
+            out[row, j] = c
+    return out
+
+
+@pytest.mark.parametrize('seed', range(20))
+def test_matches_the_pair_by_pair_formulation(seed):
+    """Random frames: 0-4 candidates per joint, PAF scores on a coarse grid (ties between pairs
+    of a limb), a third of them 0 (rejected)."""
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(0, 5, 25)
+    candidates = [np.c_[rng.uniform(0, 500, (n, 2)), rng.integers(1, 10, n) / 10] for n in counts]
+    pafs = [np.round(rng.uniform(0, 1, (counts[a], counts[b])), 1) * (rng.random((counts[a], counts[b])) > 0.3)
+            for a, b in BODY25_PAF_PAIRS]
+    frame = OpenPoseFrame(candidates, pafs)
+    for min_joints in (1, 4):
+        np.testing.assert_array_equal(group_body25(frame, min_joints=min_joints, min_mean_score=0.0),
+                                      _reference_grouping(frame, min_joints=min_joints, min_mean_score=0.0))
+        np.testing.assert_array_equal(group_body25(frame), _reference_grouping(frame))
+
+
+def test_no_candidates():
+    frame = OpenPoseFrame([np.zeros((0, 3))] * 25, [np.zeros((0, 0))] * 26)
+    assert group_body25(frame).shape == (0, 25)

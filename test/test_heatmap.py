@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap, render_heatmaps
 
 STRIDE, SIGMA = 4.0, 6.0
 
@@ -66,6 +66,59 @@ def test_max_combination_keeps_each_weight():
     np.testing.assert_allclose(hm.lookup(cells[None])[0], expected, rtol=1e-5, atol=1e-7)
     assert 0.45 < hm.lookup(np.array([[[202.0, 200.0]]]))[0, 0] <= 0.5  # max, not sum
     assert 0.9 < hm.lookup(np.array([[[202.0, 260.0]]]))[0, 0] <= 1.0  # 2 px off the cell centre
+
+
+def _reference_render(centres: np.ndarray, stride: float, sigma: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """render_heatmaps written out map by map, cell by cell: per person (maps, origin)."""
+    margin = MARGIN_SIGMAS * sigma
+    layout = []
+    for person in centres:
+        rows = [c[np.isfinite(c).all(axis=1) & (c[:, 2] > 0)] for c in person]
+        lo = np.array([r[:, :2].min(axis=0) - margin if len(r) else (np.inf, np.inf) for r in rows])
+        hi = np.array([r[:, :2].max(axis=0) + margin if len(r) else (np.inf, np.inf) for r in rows])
+        anchor = lo.min(axis=0)
+        anchor[~np.isfinite(anchor)] = 0.0
+        empty = np.array([len(r) == 0 for r in rows])
+        lo[empty], hi[empty] = anchor, anchor
+        layout.append((rows, np.floor(lo / stride) * stride, hi))
+    w, h = np.max([np.ceil((hi - lo) / stride).max(axis=0) for _, lo, hi in layout], axis=0).astype(int) + 1
+    out = []
+    for rows, lo, _ in layout:
+        maps = np.zeros((len(rows), h, w), np.float32)
+        for j, r in enumerate(rows):
+            for u, v, weight in r:
+                for row in range(h):
+                    for col in range(w):
+                        du, dv = stride * col - (u - lo[j, 0]), stride * row - (v - lo[j, 1])
+                        if abs(du) <= margin and abs(dv) <= margin:
+                            g = min(weight, 1.0) * np.exp(-(du ** 2 + dv ** 2) / (2 * sigma ** 2))
+                            maps[j, row, col] = max(maps[j, row, col], g)
+        out.append((maps, lo))
+    return out
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_render_heatmaps_matches_the_cell_by_cell_formulation(seed):
+    """Random people of 3 maps of up to 4 rows each: weights above 1, 0 and negative, NaN rows,
+    empty maps and a person without any evidence."""
+    rng = np.random.default_rng(seed)
+    n_p, n_j, n = rng.integers(1, 4), 3, rng.integers(1, 5)
+    centres = np.c_[rng.uniform(0, 120, (n_p * n_j * n, 2)), rng.uniform(-0.5, 1.5, n_p * n_j * n)]
+    centres = centres.reshape(n_p, n_j, n, 3)
+    centres[rng.random((n_p, n_j, n)) < 0.2, 0] = np.nan
+    centres[rng.random((n_p, n_j)) < 0.3] = 0.0
+    if seed == 0:
+        centres[-1, ..., 2] = 0.0
+    heatmaps = render_heatmaps(centres, STRIDE, SIGMA)
+    assert len(heatmaps) == n_p
+    for hm, (maps, origin) in zip(heatmaps, _reference_render(centres, STRIDE, SIGMA)):
+        assert hm.maps.dtype == np.float32 and hm.maps.shape == maps.shape and hm.stride == STRIDE
+        np.testing.assert_array_equal(hm.origin, origin)
+        np.testing.assert_allclose(hm.maps, maps, rtol=1e-5, atol=1e-7)
+
+
+def test_render_heatmaps_of_nobody():
+    assert render_heatmaps(np.zeros((0, 16, 1, 3)), STRIDE, SIGMA) == []
 
 
 def test_sample_single_gaussian_moments():

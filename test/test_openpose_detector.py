@@ -11,8 +11,9 @@ from mvpose_ros.core.geometry.body import (BODY25_INFERENCE_JOINTS, HEAD, INFERE
 from mvpose_ros.core.evaluation.datasets import data_root
 from mvpose_ros.core.detection.grouping import group_body25
 from mvpose_ros.core.detection.openpose import read_body25
-from mvpose_ros.core.detection.openpose_detector import (OpenPoseDetectorConfig, detect_people,
+from mvpose_ros.core.detection.openpose_detector import (OpenPoseDetectorConfig, detect_grouped, detect_people,
                                                          grouped_keypoints)
+from mvpose_ros.core.heatmap import render_heatmaps
 
 LINE = 272  # actorsGT frame 572
 
@@ -129,6 +130,50 @@ def test_secondary_candidates_enter_the_map(frames):
             np.testing.assert_array_equal(p0.heatmap.lookup(uv)[j], 0.0)
             np.testing.assert_allclose(p1.heatmap.lookup(uv)[j], 0.5 * others[far, 2],
                                        rtol=0.15)
+
+
+def _reference_maps(frame, groups, keypoints, config):
+    """The maps of detect_grouped's people (groups (P, 25), keypoints (P, 16, 3)) from each
+    joint's centre rows listed one by one: own candidate, secondary ones, counterpart."""
+    rows = []
+    for g, kp in zip(groups, keypoints):
+        seen = kp[kp[:, 2] > 0, :2]
+        radius = config.secondary_radius * np.hypot(*(seen.max(axis=0) - seen.min(axis=0)))
+        person = []
+        for j, b in enumerate(BODY25_INFERENCE_JOINTS):
+            joint = []
+            if g[b] >= 0:
+                own = frame.candidates[b][g[b]]
+                joint.append(own)
+                joint += [c * (1, 1, config.secondary_weight) for i, c in enumerate(frame.candidates[b])
+                          if i != g[b] and np.linalg.norm(c[:2] - own[:2]) <= radius]
+            m = BODY25_INFERENCE_JOINTS[INFERENCE_MIRROR[j]]
+            if config.mirror_weight > 0 and m != b and g[m] >= 0:  # also where joint j is missing
+                joint.append(frame.candidates[m][g[m]] * (1, 1, config.mirror_weight))
+            person.append(joint)
+        rows.append(person)
+    n = max([len(joint) for person in rows for joint in person] + [1])
+    centres = np.zeros((len(rows), NUM_INFERENCE_JOINTS, n, 3))
+    for p, person in enumerate(rows):
+        for j, joint in enumerate(person):
+            centres[p, j, :len(joint)] = np.reshape(joint, (-1, 3))
+    return [hm.maps for hm in render_heatmaps(centres, config.stride, config.sigma)]
+
+
+@pytest.mark.parametrize('config', [
+    OpenPoseDetectorConfig(),
+    OpenPoseDetectorConfig(secondary_radius=0.6, secondary_weight=0.5, mirror_weight=0.3),
+    OpenPoseDetectorConfig(secondary_radius=0.0, mirror_weight=1.0)])
+def test_maps_match_the_joint_by_joint_centres(config):
+    root = data_root() / 'data' / 'shelf' / 'openpose_body25'
+    for c in range(5):
+        for frame in read_body25(root / f'{c}.txt')[LINE - 40:LINE + 40:8]:
+            groups, people = detect_grouped(frame, config)
+            keypoints = np.array([p.keypoints for p in people]).reshape(-1, NUM_INFERENCE_JOINTS, 3)
+            expected = _reference_maps(frame, groups, keypoints, config)
+            assert len(expected) == len(people)
+            for person, maps in zip(people, expected):
+                np.testing.assert_array_equal(person.heatmap.maps, maps)
 
 
 def test_fast_enough(frames):

@@ -20,7 +20,11 @@ from typing import Callable
 import numba
 
 # Every module that defines kernels (test_compiled checks that none is missing).
-KERNEL_MODULES: tuple[str, ...] = ()
+KERNEL_MODULES: tuple[str, ...] = (
+    'mvpose_ros.core.detection.grouping',
+    'mvpose_ros.core.detection.openpose_detector',
+    'mvpose_ros.core.heatmap',
+)
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:

@@ -8,6 +8,8 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
+
 MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
@@ -180,35 +182,104 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
 
     Max (not sum) so that a map's value at a candidate is that candidate's own weight:
     overlapping evidence does not inflate the data term and values stay in [0, 1]."""
-    centres = np.array(centres, dtype=np.float64)
+    centres = np.ascontiguousarray(centres, dtype=np.float64)
     if len(centres) == 0:
         return []
-    margin = MARGIN_SIGMAS * sigma
-    valid = np.isfinite(centres).all(axis=-1) & (centres[..., 2] > 0)
-    # rows that count first, then only as many rows as the fullest map has: padding rows render
-    # as zeros, which never change the max, so the maps are the same
-    order = np.argsort(~valid, axis=-1, kind='stable')[..., :max(int(valid.sum(axis=-1).max(initial=0)), 1)]
-    centres = np.take_along_axis(centres, order[..., None], axis=-2)
-    valid = np.take_along_axis(valid, order, axis=-1)
-    centres[~valid] = 0.0
-    has = valid.any(axis=-1)  # (P, J)
-    lo = np.where(valid[..., None], centres[..., :2], np.inf).min(axis=-2) - margin  # (P, J, 2)
-    hi = np.where(valid[..., None], centres[..., :2], -np.inf).max(axis=-2) + margin
-    # a map without evidence sits at its person's first evidence (it is all zeros anyway)
-    anchor = np.where(has[..., None], lo, np.inf).min(axis=1, keepdims=True)
-    anchor = np.where(np.isfinite(anchor), anchor, 0.0)
-    lo = np.where(has[..., None], lo, anchor)
-    hi = np.where(has[..., None], hi, anchor)
-    lo = np.floor(lo / stride) * stride  # cells on the image's lattice of stride px, as a network's output
-    w, h = np.ceil((hi - lo) / stride).astype(int).reshape(-1, 2).max(axis=0) + 1
-    rel = (centres[..., :2] - lo[..., None, :]).astype(np.float32)  # (P, J, n, 2) pixels from cell [0, 0]
-    us = np.float32(stride) * np.arange(w, dtype=np.float32)
-    vs = np.float32(stride) * np.arange(h, dtype=np.float32)
-    inv = np.float32(-0.5 / sigma ** 2)
-    cut = np.float32(margin)
-    du, dv = us - rel[..., :1], vs - rel[..., 1:]
-    gu = np.where(np.abs(du) <= cut, np.exp(inv * du ** 2), 0)  # (P, J, n, w)
-    weight = np.minimum(centres[..., 2:], 1.0).astype(np.float32)
-    gv = weight * np.where(np.abs(dv) <= cut, np.exp(inv * dv ** 2), 0)  # (P, J, n, h)
-    maps = np.max(gv[..., :, None] * gu[..., None, :], axis=2)  # outer products (P, J, h, w)
+    lo = np.empty(centres.shape[:2] + (2,))
+    # Compiled: the layout and, for each row that counts, its Gaussian's exponents within the cut,
+    # then the maps. numpy takes the exponentials: the compiled float32 exp differs from numpy's
+    # in the last bits.
+    exponents, rows, weight, w, h = _gaussian_exponents(centres, float(stride), MARGIN_SIGMAS * sigma,
+                                                        np.float32(-0.5 / sigma ** 2), lo)
+    np.exp(exponents, out=exponents)
+    maps = _max_of_gaussians(exponents, rows, weight, len(centres), centres.shape[1], h, w)
     return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]
+
+
+@kernel('Tuple((float32[::1], int64[:, ::1], float32[::1], int64, int64))(float64[:, :, :, ::1], float64, float64, '
+        'float32, float64[:, :, ::1])')
+def _gaussian_exponents(centres, stride, margin, inv, lo):
+    """render_heatmaps' layout and Gaussian exponents. Writes each map's origin lo (P, J, 2);
+    returns the float32 exponents, as numpy computed them, of each row that counts (weight > 0,
+    finite) along u at the cell columns u0:u1 within the cut, then along v at the cell rows v0:v1;
+    per such row (R, 7) p, j, u0, u1, v0, v1, start of its exponents, and (R,) its weight clipped
+    to 1, in float32; and the grid's w, h."""
+    n_p, n_j, n = centres.shape[:3]
+    hi = np.empty((n_p, n_j, 2))
+    has = np.zeros((n_p, n_j), dtype=np.bool_)
+    n_rows = 0
+    for p in range(n_p):
+        anchor = np.array([np.inf, np.inf])
+        for j in range(n_j):
+            low = np.array([np.inf, np.inf])
+            high = np.array([-np.inf, -np.inf])
+            for k in range(n):
+                u, v, wt = centres[p, j, k]
+                if np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0:
+                    low[0], low[1] = min(low[0], u), min(low[1], v)
+                    high[0], high[1] = max(high[0], u), max(high[1], v)
+                    has[p, j] = True
+                    n_rows += 1
+            lo[p, j] = low - margin
+            hi[p, j] = high + margin
+            if has[p, j]:
+                anchor = np.minimum(anchor, lo[p, j])
+        # a map without evidence sits at its person's first evidence (it is all zeros anyway)
+        for i in range(2):
+            if not np.isfinite(anchor[i]):
+                anchor[i] = 0.0
+        for j in range(n_j):
+            if not has[p, j]:
+                lo[p, j] = anchor
+                hi[p, j] = anchor
+    grid = np.zeros(2, dtype=np.int64)
+    for p in range(n_p):
+        for j in range(n_j):
+            for i in range(2):
+                lo[p, j, i] = np.floor(lo[p, j, i] / stride) * stride  # cells on the image's lattice
+                grid[i] = max(grid[i], int(np.ceil((hi[p, j, i] - lo[p, j, i]) / stride)))
+    size = grid + 1  # w, h
+    stride32, cut = np.float32(stride), np.float32(margin)
+    rows = np.empty((n_rows, 7), dtype=np.int64)
+    weight = np.empty(n_rows, dtype=np.float32)
+    exponents = np.empty(n_rows * (size[0] + size[1]), dtype=np.float32)
+    r, end = 0, 0
+    for p in range(n_p):
+        for j in range(n_j):
+            for k in range(n):
+                u, v, wt = centres[p, j, k]
+                if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(wt) and wt > 0):
+                    continue
+                rows[r, 0], rows[r, 1], rows[r, 6] = p, j, end
+                for i in range(2):
+                    rel = np.float32((u if i == 0 else v) - lo[p, j, i])  # pixels from cell [0, 0]
+                    first, last = size[i], 0
+                    for x in range(size[i]):
+                        d = stride32 * np.float32(x) - rel
+                        if abs(d) <= cut:  # |d| grows away from rel: the cells within are a range
+                            exponents[end] = inv * (d * d)
+                            end += 1
+                            first, last = min(first, x), x + 1
+                    rows[r, 2 + 2 * i], rows[r, 3 + 2 * i] = first, max(last, first)
+                weight[r] = np.float32(min(wt, 1.0))
+                r += 1
+    return exponents[:end], rows, weight, size[0], size[1]
+
+
+@kernel('float32[:, :, :, ::1](float32[::1], int64[:, ::1], float32[::1], int64, int64, int64, int64)')
+def _max_of_gaussians(gauss, rows, weight, n_p, n_j, h, w):
+    """Maps (P, J, h, w): the max over the rows (_gaussian_exponents' (R, 7) and weight (R,)) of
+    the outer product of weight * the row's Gaussian along v and its Gaussian along u (gauss:
+    their values); cells outside the row's cut are left alone (its Gaussian is 0 there)."""
+    maps = np.zeros((n_p, n_j, h, w), dtype=np.float32)
+    for i in range(len(rows)):
+        p, j, u0, u1, v0, v1, start = rows[i]
+        for r in range(v0, v1):
+            a = weight[i] * gauss[start + (u1 - u0) + (r - v0)]
+            if a == 0:
+                continue
+            for c in range(u0, u1):
+                value = a * gauss[start + (c - u0)]
+                if value > maps[p, j, r, c]:
+                    maps[p, j, r, c] = value
+    return maps

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 
 
@@ -15,26 +16,6 @@ from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAI
 BODY25_REDUNDANT_LIMBS = frozenset(BODY25_PAF_PAIRS.index(p) for p in ((2, 17), (5, 18)))
 _LIMB_ORDER = ([k for k in range(len(BODY25_PAF_PAIRS)) if k not in BODY25_REDUNDANT_LIMBS]
                + sorted(BODY25_REDUNDANT_LIMBS))
-
-
-def _limb_connections(score: np.ndarray, min_score: float) -> list[tuple[int, int, float]]:
-    """Greedy one-to-one matching of a limb's candidate pairs by score (n_a, n_b), best first (ties
-    in index order). Plain Python: a limb has a handful of candidates, too few for numpy calls to
-    pay off."""
-    n_b = score.shape[1]
-    flat = score.ravel().tolist()
-    # best first, ties in index order (sorted is stable, also reversed)
-    order = sorted([k for k, s in enumerate(flat) if s > min_score], key=flat.__getitem__, reverse=True)
-    used_a: set[int] = set()
-    used_b: set[int] = set()
-    out = []
-    for k in order:
-        ia, ib = divmod(k, n_b)
-        if ia not in used_a and ib not in used_b:
-            used_a.add(ia)
-            used_b.add(ib)
-            out.append((ia, ib, flat[k]))
-    return out
 
 
 def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 0.05,
@@ -56,52 +37,91 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
         of sharpened PAF scores of their connections) / joint count is lower, are dropped
         (OpenPose's subset filter).
     """
-    # plain Python lists throughout: per frame a few dozen candidates, and numpy scalars are slow
-    owner = [[-1] * len(c) for c in frame.candidates]  # person index per candidate
-    people: list[list[int] | None] = []
-    scores: list[float] = []
+    # the greedy walk is compiled (_group): in Python it was a few hundred steps per frame
+    pafs = [frame.pafs[k] for k in _LIMB_ORDER]
+    score = np.asarray(np.power(np.concatenate(pafs, axis=None), paf_power), dtype=np.float64)
+    n_b = np.array([p.shape[1] for p in pafs])
+    n_cand = np.array([len(c) for c in frame.candidates])
+    cand = np.ascontiguousarray(np.concatenate(frame.candidates), dtype=np.float64)
+    return _group(score, n_b, cand, n_cand, float(min_paf), int(min_joints), float(min_mean_score))
 
-    for k in _LIMB_ORDER:
-        a, b = BODY25_PAF_PAIRS[k]
-        raw = frame.pafs[k]
-        if raw.size == 0:
-            continue
-        redundant = k in BODY25_REDUNDANT_LIMBS
-        sa, sb = frame.candidates[a][:, 2].tolist(), frame.candidates[b][:, 2].tolist()
-        for ca, cb, paf in _limb_connections(np.power(raw, paf_power), min_paf):
-            pa, pb = owner[a][ca], owner[b][cb]
+
+# joints a, b of each limb in _LIMB_ORDER; the limbs from _TREE_LIMBS on (the redundant ones)
+# never start a person
+_LIMB_A = np.array([BODY25_PAF_PAIRS[k][0] for k in _LIMB_ORDER])
+_LIMB_B = np.array([BODY25_PAF_PAIRS[k][1] for k in _LIMB_ORDER])
+_TREE_LIMBS = len(_LIMB_ORDER) - len(BODY25_REDUNDANT_LIMBS)
+
+
+@kernel('int64[:, ::1](float64[::1], int64[::1], float64[:, ::1], int64[::1], float64, int64, float64)')
+def _group(score, n_b, cand, n_cand, min_paf, min_joints, min_mean_score):
+    """group_body25 on flat arrays: score (S,) the sharpened PAF entries of every limb in
+    _LIMB_ORDER, each limb's (n_a, n_b) matrix row-major; cand (C, 3) every candidate, joint
+    after joint, n_cand (25,) of them per joint."""
+    cand_first = np.zeros(BODY25_NUM_JOINTS + 1, dtype=np.int64)
+    cand_first[1:] = np.cumsum(n_cand)
+    n_max = len(cand) // 2 + 1  # a person starts with two free candidates
+    owner = np.full(len(cand), -1)  # person per candidate
+    used = np.full(len(cand), -1)  # the last limb that paired a candidate
+    people = np.full((n_max, BODY25_NUM_JOINTS), -1)
+    total = np.zeros(n_max)  # candidate scores + PAF scores of each person
+    alive = np.ones(n_max, dtype=np.bool_)
+    n_people = 0
+    pairs = np.empty(len(score), dtype=np.int64)
+    start = 0
+    for r in range(len(n_b)):
+        a, b = _LIMB_A[r], _LIMB_B[r]
+        size = (cand_first[a + 1] - cand_first[a]) * n_b[r]
+        # the limb's pairs above min_paf, best first, ties in index order (stable insertion sort)
+        n = 0
+        for k in range(start, start + size):
+            if score[k] > min_paf:
+                i = n
+                while i > 0 and score[pairs[i - 1]] < score[k]:
+                    pairs[i] = pairs[i - 1]
+                    i -= 1
+                pairs[i] = k
+                n += 1
+        for i in range(n):
+            k = pairs[i]
+            ga = cand_first[a] + (k - start) // n_b[r]
+            gb = cand_first[b] + (k - start) % n_b[r]
+            if used[ga] == r or used[gb] == r:
+                continue
+            used[ga] = used[gb] = r
+            paf = score[k]
+            pa, pb = owner[ga], owner[gb]
             if pa < 0 and pb < 0:
-                if redundant:
+                if r >= _TREE_LIMBS:
                     continue
-                person = [-1] * BODY25_NUM_JOINTS
-                person[a], person[b] = ca, cb
-                owner[a][ca] = owner[b][cb] = len(people)
-                people.append(person)
-                scores.append(sa[ca] + sb[cb] + paf)
+                people[n_people, a], people[n_people, b] = ga - cand_first[a], gb - cand_first[b]
+                owner[ga] = owner[gb] = n_people
+                total[n_people] = cand[ga, 2] + cand[gb, 2] + paf
+                n_people += 1
             elif pa < 0 or pb < 0:
                 # attach the free end unless its person already has that joint
-                p, j, c, s = (pb, a, ca, sa[ca]) if pa < 0 else (pa, b, cb, sb[cb])
-                if people[p][j] < 0:
-                    people[p][j] = c
-                    owner[j][c] = p
-                    scores[p] += s + paf
+                p, j, g = (pb, a, ga) if pa < 0 else (pa, b, gb)
+                if people[p, j] < 0:
+                    people[p, j] = g - cand_first[j]
+                    owner[g] = p
+                    total[p] += cand[g, 2] + paf
             elif pa != pb:
-                first, second = people[pa], people[pb]
-                if any(x >= 0 and y >= 0 for x, y in zip(first, second)):
+                if np.any((people[pa] >= 0) & (people[pb] >= 0)):
                     continue  # the two fragments disagree on some joint
-                for j, c in enumerate(second):
+                for j in range(BODY25_NUM_JOINTS):
+                    c = people[pb, j]
                     if c >= 0:
-                        first[j] = c
-                        owner[j][c] = pa
-                scores[pa] += scores[pb] + paf
-                people[pb] = None
+                        people[pa, j] = c
+                        owner[cand_first[j] + c] = pa
+                total[pa] += total[pb] + paf
+                alive[pb] = False
+        start += size
 
-    kept = []
-    for person, score in zip(people, scores):
-        if person is None:
-            continue
-        n = sum(c >= 0 for c in person)
-        if n >= min_joints and score / n >= min_mean_score:
-            kept.append((score, person))
-    kept.sort(key=lambda x: -x[0])
-    return np.array([p for _, p in kept], dtype=np.int64).reshape(-1, BODY25_NUM_JOINTS)
+    n_joints = (people[:n_people] >= 0).sum(axis=1)
+    kept = np.flatnonzero(alive[:n_people] & (n_joints >= min_joints)
+                          & (total[:n_people] / np.maximum(n_joints, 1) >= min_mean_score))
+    kept = kept[np.argsort(-total[kept], kind='mergesort')]  # best first, ties in creation order
+    out = np.empty((len(kept), BODY25_NUM_JOINTS), dtype=np.int64)
+    for i in range(len(kept)):
+        out[i] = people[kept[i]]
+    return out

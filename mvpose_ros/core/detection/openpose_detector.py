@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.body import BODY25_INFERENCE_JOINTS, INFERENCE_MIRROR, to_inference
 from mvpose_ros.core.detection.grouping import group_body25
 from mvpose_ros.core.heatmap import render_heatmaps
@@ -39,10 +40,12 @@ class OpenPoseDetectorConfig:
 def grouped_keypoints(frame: OpenPoseFrame, groups: np.ndarray) -> np.ndarray:
     """(P, 25, 3) u, v, score of the grouped candidates (groups: (P, 25) index or -1); missing
     joints are (NaN, NaN, 0)."""
-    sizes = [len(c) for c in frame.candidates]
-    first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
-    rows = np.concatenate(frame.candidates + [np.array([[np.nan, np.nan, 0.0]])])  # last row: missing
+    first = np.array([0] + [len(c) for c in frame.candidates[:-1]]).cumsum()
+    rows = np.concatenate(frame.candidates + [_MISSING])
     return rows[np.where(groups >= 0, first + groups, len(rows) - 1)]
+
+
+_MISSING = np.array([[np.nan, np.nan, 0.0]])  # grouped_keypoints' row for a joint without candidate
 
 
 def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,
@@ -52,27 +55,53 @@ def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,
     weight 0 are padding. Per joint: its own candidate, the other candidates of its BODY25 type
     within secondary_radius of the person's keypoint-box diagonal, and with mirror_weight > 0
     its left/right counterpart's own candidate."""
-    n_p = len(groups)
-    types = BODY25_INFERENCE_JOINTS
-    n_cand = max([len(frame.candidates[b]) for b in types] + [1])
-    cand = np.zeros((len(types), n_cand, 3))  # (16, C, 3) every candidate of each joint's type
-    for j, b in enumerate(types):
-        cand[j, :len(frame.candidates[b])] = frame.candidates[b]
-    own = groups[:, types]  # (P, 16)
-    has = own >= 0
-    own_rows = np.where(has[..., None], cand[np.arange(len(types)), np.maximum(own, 0)], 0.0)  # (P, 16, 3)
-    with np.errstate(invalid='ignore'):  # people without keypoints never reach here
-        span = np.nanmax(keypoints[..., :2], axis=1) - np.nanmin(keypoints[..., :2], axis=1)
+    # the radius in numpy (np.hypot is libm's), the rows compiled; fmax, fmin skip missing joints
+    span = np.fmax.reduce(keypoints[..., :2], axis=1) - np.fmin.reduce(keypoints[..., :2], axis=1)
     radius = config.secondary_radius * np.hypot(span[:, 0], span[:, 1])  # (P,)
-    near = np.linalg.norm(cand[None, :, :, :2] - own_rows[:, :, None, :2], axis=-1) <= radius[:, None, None]
-    near &= has[..., None] & (np.arange(n_cand) != own[..., None])
-    secondary = np.where(near[..., None], cand[None] * (1.0, 1.0, config.secondary_weight), 0.0)
-    parts = [own_rows[:, :, None], secondary]
-    if config.mirror_weight > 0:
-        mirror = own_rows[:, INFERENCE_MIRROR] * (1.0, 1.0, config.mirror_weight)
-        mirror[:, types[INFERENCE_MIRROR] == types] = 0.0  # joints that are their own counterpart
-        parts.append(mirror[:, :, None])
-    return np.concatenate(parts, axis=2) if n_p else np.zeros((0, len(types), 1, 3))
+    cand = np.ascontiguousarray(np.concatenate(frame.candidates), dtype=np.float64)
+    n_cand = np.array([len(c) for c in frame.candidates])
+    return _centre_rows(cand, n_cand, np.ascontiguousarray(groups, dtype=np.int64), radius,
+                        float(config.secondary_weight), float(config.mirror_weight))
+
+
+_TYPES = np.asarray(BODY25_INFERENCE_JOINTS, dtype=np.int64)  # BODY25 joint of each inference joint
+_MIRROR = np.asarray(INFERENCE_MIRROR, dtype=np.int64)
+
+
+@kernel('float64[:, :, :, ::1](float64[:, ::1], int64[::1], int64[:, ::1], float64[::1], float64, float64)')
+def _centre_rows(cand, n_cand, groups, radius, secondary_weight, mirror_weight):
+    """_centres' rows from cand (C, 3), every candidate joint after joint (n_cand (25,) per joint),
+    and radius (P,): per person and joint, row 0 its own candidate, row 1 + c its BODY25 type's
+    candidate c when a secondary one, the last row (with mirror_weight > 0) its counterpart's."""
+    first = np.zeros(len(n_cand) + 1, dtype=np.int64)
+    first[1:] = np.cumsum(n_cand)
+    width = 1
+    for b in _TYPES:
+        width = max(width, n_cand[b])
+    if len(groups) == 0:
+        return np.zeros((0, len(_TYPES), 1, 3))
+    mirror = mirror_weight > 0
+    out = np.zeros((len(groups), len(_TYPES), 1 + width + int(mirror), 3))
+    for p in range(len(groups)):
+        for j in range(len(_TYPES)):
+            b = _TYPES[j]
+            if groups[p, b] >= 0:
+                own = first[b] + groups[p, b]
+                out[p, j, 0] = cand[own]
+                for c in range(n_cand[b]):
+                    du, dv = cand[first[b] + c, 0] - cand[own, 0], cand[first[b] + c, 1] - cand[own, 1]
+                    if c != groups[p, b] and np.sqrt(du * du + dv * dv) <= radius[p]:
+                        out[p, j, 1 + c, 0] = cand[first[b] + c, 0] * 1.0
+                        out[p, j, 1 + c, 1] = cand[first[b] + c, 1] * 1.0
+                        out[p, j, 1 + c, 2] = cand[first[b] + c, 2] * secondary_weight
+            # the counterpart's evidence, also where the joint itself is missing
+            m = _TYPES[_MIRROR[j]]
+            if mirror and m != b and groups[p, m] >= 0:
+                counterpart = first[m] + groups[p, m]
+                out[p, j, -1, 0] = cand[counterpart, 0] * 1.0
+                out[p, j, -1, 1] = cand[counterpart, 1] * 1.0
+                out[p, j, -1, 2] = cand[counterpart, 2] * mirror_weight
+    return out
 
 
 def detect_people(frame: OpenPoseFrame, config: OpenPoseDetectorConfig) -> list[Person2D]:
