@@ -47,8 +47,16 @@ class IdentityKeeper:
         known_ids = list(self._known)
         ids = [-1] * len(members)
         if members and known_ids:
-            shared = np.array([[sum(self._known[k].members.get(t, 0) for t in m) for k in known_ids]
-                               for m in members])
+            # per (camera, track) the known ids it was part of: a look-up per track, not per pair of people
+            votes: dict[tuple[int, int], list[tuple[int, int]]] = {}
+            for col, k in enumerate(known_ids):
+                for t, frames in self._known[k].members.items():
+                    votes.setdefault(t, []).append((col, frames))
+            shared = np.zeros((len(members), len(known_ids)), dtype=int)
+            for row, m in enumerate(members):
+                for t in m:
+                    for col, frames in votes.get(t, ()):
+                        shared[row, col] += frames
             jump = np.linalg.norm(centres[:, None] - np.array([self._known[k].centre for k in known_ids])[None],
                                   axis=-1)
             allowed = (shared > 0) | (jump <= self.max_jump)
