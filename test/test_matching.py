@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.association.associator import AssociationConfig, Associator, rough_centres
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, TOP_HEAD
-from mvpose_ros.core.geometry.camera import Camera, ray_ray_distance
+from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, ray_ray_distance
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
 from mvpose_ros.core.association.identity import IdentityKeeper
@@ -214,6 +214,26 @@ def test_cluster_views_equals_the_greedy_clustering_written_with_lists(monkeypat
     first = np.concatenate([[0], np.cumsum(per_camera)])
     clusters = cluster_views([None] * 5, people, MatchingConfig(max_distance=0.15))
     assert [[first[c] + i for c, i in cl.items()] for cl in clusters] == _greedy_by_lists(d, owner, 0.15)
+
+
+def test_rough_centres_equal_the_mean_of_each_persons_triangulated_joints():
+    """Random rays of nine cameras (sums of eight lines and more go in numpy's pairwise order);
+    people of one to nine views, one whose joints no two views see."""
+    rng = np.random.default_rng(3)
+    rays = _random_rays(rng, [3] * 9)
+    people = [[0, 4, 7, 10, 13, 16, 19, 22, 25], [1, 5], [2, 8, 11, 14, 17, 20, 23, 26], [6], [9, 12, 15]]
+    even = np.arange(16) % 2 == 0
+    rays.keypoints[9, :, 2], rays.keypoints[12, :, 2], rays.keypoints[15, :, 2] = 0.9 * even, 0.9 * ~even, 0.0
+    expected = []
+    for views in people:
+        seen = rays.keypoints[views, :, 2].T > 0.1  # (J, K)
+        points = closest_point_to_rays(np.broadcast_to(rays.origins[views], seen.shape + (3,)),
+                                       np.where(seen[..., None], rays.dirs[views].transpose(1, 0, 2), 0.0), seen)
+        twice = seen.sum(axis=1) >= 2
+        expected.append(points[twice].mean(axis=0) if twice.any() else np.full(3, np.nan))
+    np.testing.assert_allclose(rough_centres(rays, people, 0.1), expected, rtol=1e-12, equal_nan=True)
+    assert np.isnan(rough_centres(rays, people, 0.1)[4]).all()
+    assert rough_centres(rays, [], 0.1).shape == (0, 3)
 
 
 @pytest.mark.parametrize('seed', range(3))

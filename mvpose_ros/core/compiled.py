@@ -20,7 +20,8 @@ from typing import Callable
 import numba
 
 # Every module that defines kernels (test_compiled checks that none is missing).
-KERNEL_MODULES: tuple[str, ...] = ('mvpose_ros.core.association.matching', 'mvpose_ros.core.association.tracking',
+KERNEL_MODULES: tuple[str, ...] = ('mvpose_ros.core.association.associator', 'mvpose_ros.core.association.matching',
+                                   'mvpose_ros.core.association.tracking',
                                    'mvpose_ros.core.association.view_consistency')
 
 
