@@ -104,20 +104,17 @@ def _distorted_rig(rng):
     return rig
 
 
-@pytest.mark.parametrize('distorted', [False, True])
-def test_residuals_equal_the_array_formulation_on_random_people(shelf_rig, distorted):
-    """Random joints seen by random views (some joints by fewer than three, some views by one
-    joint), people of two to five views, on the Shelf rig and a distorted one."""
-    rng = np.random.default_rng(5)
-    rig = _distorted_rig(rng) if distorted else shelf_rig
+def _random_people(rng, rig, views_per_person, noise_px=5.0, shifted=0.0):
+    """People of the given numbers of views (each camera once) at random joints, seen with
+    noise_px of noise; some joints unseen, some views with one joint only, a share `shifted` of
+    the views drawn about 0.5 m off, each its own way. Their rays and each person's rows of them."""
     people = []
-    for n_views in (5, 2, 3, 4, 3, 1):
-        n_views = min(n_views, len(rig))
+    for n_views in views_per_person:
         joints = rng.normal([0.0, 0.0, 1.0], 0.4, (16, 3))
-        cameras = rng.choice(len(rig), n_views, replace=False)
         views = []
-        for c in cameras:
-            uv = rig[c].project(joints) + rng.normal(0.0, 5.0, (16, 2))
+        for c in rng.choice(len(rig), min(n_views, len(rig)), replace=False):
+            moved = joints + (rng.random() < shifted) * rng.choice([-0.3, 0.3], 3)
+            uv = rig[c].project(moved) + rng.normal(0.0, noise_px, (16, 2))
             score = np.where(rng.random(16) < 0.3, 0.0, 0.9)
             if rng.random() < 0.2:
                 score[1:] = 0.0
@@ -133,10 +130,52 @@ def test_residuals_equal_the_array_formulation_on_random_people(shelf_rig, disto
         for c, _ in views:
             rows[-1].append(int(first[c] + taken[c]))
             taken[c] += 1
+    return rays, rows
+
+
+@pytest.mark.parametrize('distorted', [False, True])
+def test_residuals_equal_the_array_formulation_on_random_people(shelf_rig, distorted):
+    """Random joints seen by random views (some joints by fewer than three, some views by one
+    joint), people of one to five views, on the Shelf rig and a distorted one."""
+    rng = np.random.default_rng(5)
+    rig = _distorted_rig(rng) if distorted else shelf_rig
+    rays, rows = _random_people(rng, rig, (5, 2, 3, 4, 3, 1))
     got = leave_one_out_residuals(rig, rays, rows, MIN_SCORE)
     expected = _residuals_by_arrays(rig, rays, rows, MIN_SCORE)
     np.testing.assert_allclose(got, expected, rtol=1e-12, equal_nan=True)
     assert leave_one_out_residuals(rig, rays, [], MIN_SCORE).shape == (0, 0, 0)
+
+
+def _consistent_by_rounds(cameras, rays, people, min_score, max_residual):
+    """consistent_views written as rounds over every person still checked, on
+    leave_one_out_residuals of them all at once."""
+    kept = [list(v) for v in people]
+    active = [p for p, v in enumerate(kept) if len(v) >= 3]
+    while active:
+        r = leave_one_out_residuals(cameras, rays, [kept[p] for p in active], min_score)
+        left_out = np.diagonal(r, axis1=1, axis2=2)
+        spread = np.where(np.eye(r.shape[1], dtype=bool) | np.isnan(r), -np.inf, r).max(axis=2)
+        candidate = np.isfinite(left_out) & np.isfinite(spread)
+        worst = np.argmin(np.where(candidate, spread, np.inf), axis=1)
+        out, rest = left_out[np.arange(len(active)), worst], spread[np.arange(len(active)), worst]
+        drop = candidate.any(axis=1) & (out > max_residual) & (rest < out)
+        for row in np.flatnonzero(drop):
+            del kept[active[row]][worst[row]]
+        active = [active[row] for row in np.flatnonzero(drop) if len(kept[active[row]]) >= 3]
+    return kept
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_consistent_views_equal_the_rounds_on_random_people(shelf_rig, seed):
+    """Random people of two to five views, a third of the views drawn off (some people lose two:
+    more than one round), with little noise; and people without any view."""
+    rng = np.random.default_rng(seed)
+    rays, rows = _random_people(rng, shelf_rig, (5, 5, 4, 3, 2, 5, 4, 3), noise_px=1.0, shifted=0.35)
+    kept = consistent_views(shelf_rig, rays, rows, MIN_SCORE, THRESHOLD)
+    assert kept == _consistent_by_rounds(shelf_rig, rays, rows, MIN_SCORE, THRESHOLD)
+    assert kept != rows
+    assert consistent_views(shelf_rig, rays, rows + [[]], MIN_SCORE, THRESHOLD) == kept + [[]]
+    assert consistent_views(shelf_rig, rays, [], MIN_SCORE, THRESHOLD) == []
 
 
 @pytest.mark.parametrize('cameras', [(0, 1, 2, 3, 4), (0, 1, 2, 4), (1, 2, 3)])

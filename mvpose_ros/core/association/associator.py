@@ -72,7 +72,9 @@ def _rough_centres(keypoints, origins, dirs, idx, min_score):
                 row = idx[p, k]
                 if row >= 0 and keypoints[row, j, 2] > min_score:
                     d = dirs[row, j]
-                    direction[:] = d / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                    norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                    for i in range(3):
+                        direction[i] = d[i] / norm
                     _line_terms(origins[row], direction, terms[k])
                     seen += 1
             if seen < 2:
@@ -81,7 +83,8 @@ def _rough_centres(keypoints, origins, dirs, idx, min_score):
                 column[:] = terms[:, i]
                 summed[i] = _pairwise_sum(column, 0, width)
             _solve_line_terms(summed, width, point)
-            total += point
+            for i in range(3):
+                total[i] += point[i]
             located += 1
         out[p] = total / (located if located else np.nan)
     return out

@@ -18,7 +18,7 @@ def _box_iou(a, b):
     for i in range(len(a)):
         area_a = (a[i, 2] - a[i, 0]) * (a[i, 3] - a[i, 1])
         for k in range(len(b)):
-            if np.isnan(a[i]).any() or np.isnan(b[k]).any():
+            if np.isnan(a[i, 0] + a[i, 1] + a[i, 2] + a[i, 3] + b[k, 0] + b[k, 1] + b[k, 2] + b[k, 3]):
                 continue
             w = min(a[i, 2], b[k, 2]) - max(a[i, 0], b[k, 0])
             h = min(a[i, 3], b[k, 3]) - max(a[i, 1], b[k, 1])

@@ -18,6 +18,7 @@ too. The check repeats while three or more views remain.
 """
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import numpy as np
@@ -64,102 +65,147 @@ def _solve_line_terms(terms, n_lines, out):
     out[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
 
 
-@kernel('void(float64[::1], float64[:, ::1], float64[::1], float64[:, ::1], float64[::1], float64[::1])')
-def _project(point, R, t, K, dist, out):
-    """Camera.project of one point (3,) into out (2,) pixels, for a camera R (3, 3), t (3,), K (3, 3),
-    dist (5,) k1, k2, p1, p2, k3: the same arithmetic, so the same bits; NaN at or behind it."""
-    x, y, z = point[0], point[1], point[2]
-    depth = R[2, 0] * x + R[2, 1] * y + R[2, 2] * z + t[2]
-    inv = 1.0 / depth if depth > 0 else np.nan
-    xn = (R[0, 0] * x + R[0, 1] * y + R[0, 2] * z + t[0]) * inv
-    yn = (R[1, 0] * x + R[1, 1] * y + R[1, 2] * z + t[1]) * inv
-    if np.any(dist != 0):
-        k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-        r2 = xn * xn + yn * yn
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
-                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
-    out[0] = K[0, 0] * xn + K[0, 1] * yn + K[0, 2]
-    out[1] = K[1, 0] * xn + K[1, 1] * yn + K[1, 2]
-
-
 @kernel('float64(float64[::1])')
 def _median(values):
-    """The median of values (sorted in place); NaN when there are none."""
-    if len(values) == 0:
-        return np.nan
-    values.sort()
+    """The median of values (sorted in place); NaN when there are none. By insertion: for the few
+    joints of a skeleton, numba's sort costs ten times as much (it allocates its stack)."""
     n = len(values)
+    if n == 0:
+        return np.nan
+    for i in range(1, n):
+        x = values[i]
+        k = i
+        while k > 0 and values[k - 1] > x:
+            values[k] = values[k - 1]
+            k -= 1
+        values[k] = x
     return 0.5 * (values[(n - 1) // 2] + values[n // 2])
 
 
-@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], float64, '
-        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1])')
-def _residuals(keypoints, owner, origins, dirs, idx, min_score, R, t, K, dist, out):
-    """leave_one_out_residuals into out (P, K, K), people's views idx (P, K) (-1: padding), the
-    rays of ViewRays and the rig's R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5)."""
-    n_people, width = idx.shape
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[::1], int64, float64, '
+        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1], float64[:, ::1])')
+def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, R, t, K, dist, distorted, out):
+    """leave_one_out_residuals of one person into out[:width, :width], its views the rows
+    views[:width] of the rays of ViewRays (-1: padding), and the rig's R (C, 3, 3), t (C, 3),
+    K (C, 3, 3), dist (C, 5) and whether each has distortion (C,). width: the most views of any
+    person of the call (it scales the singularity threshold)."""
     n_joints = keypoints.shape[1]
     seen = np.zeros((width, n_joints), dtype=np.bool_)
     terms = np.zeros((width, n_joints, 9))
     total = np.zeros((n_joints, 9))
     without = np.empty(9)
     points = np.empty((n_joints, 3))
-    pixel = np.empty(2)
-    size = np.empty(width)
+    size = np.full(width, np.nan)
     error = np.empty(n_joints)
-    for p in range(n_people):
-        seen[:] = False
-        terms[:] = 0.0
-        total[:] = 0.0
-        for k in range(width):
-            row = idx[p, k]
-            size[k] = np.nan
-            if row < 0:
-                continue
-            lo_u = lo_v = np.inf
-            hi_u = hi_v = -np.inf
-            for j in range(n_joints):
-                if keypoints[row, j, 2] > min_score:
-                    seen[k, j] = True
-                    _line_terms(origins[row], dirs[row, j], terms[k, j])
-                    total[j] += terms[k, j]
-                    u, v = keypoints[row, j, 0], keypoints[row, j, 1]
-                    if u == u:  # NaN skipped, as fmin / fmax do
-                        lo_u, hi_u = min(lo_u, u), max(hi_u, u)
-                    if v == v:
-                        lo_v, hi_v = min(lo_v, v), max(hi_v, v)
-            if hi_u >= lo_u and hi_v >= lo_v:
-                extent = np.hypot(hi_u - lo_u, hi_v - lo_v)
-                if extent > 0:
-                    size[k] = extent
-        for left_out in range(width):  # a padding one leaves nothing out
-            for j in range(n_joints):
-                others = 0  # views seeing joint j besides left_out
-                for k in range(width):
-                    if seen[k, j] and k != left_out:
-                        others += 1
-                if others < 2:
-                    points[j] = np.nan
-                else:
-                    without[:] = total[j] - terms[left_out, j]
-                    _solve_line_terms(without, width, points[j])
+    for k in range(width):
+        row = views[k]
+        if row < 0:
+            continue
+        lo_u = lo_v = np.inf
+        hi_u = hi_v = -np.inf
+        for j in range(n_joints):
+            if keypoints[row, j, 2] > min_score:
+                seen[k, j] = True
+                _line_terms(origins[row], dirs[row, j], terms[k, j])
+                for i in range(9):
+                    total[j, i] += terms[k, j, i]
+                u, v = keypoints[row, j, 0], keypoints[row, j, 1]
+                if u == u:  # NaN skipped, as fmin / fmax do
+                    lo_u, hi_u = min(lo_u, u), max(hi_u, u)
+                if v == v:
+                    lo_v, hi_v = min(lo_v, v), max(hi_v, v)
+        if hi_u >= lo_u and hi_v >= lo_v:
+            extent = np.hypot(hi_u - lo_u, hi_v - lo_v)
+            if extent > 0:
+                size[k] = extent
+    for left_out in range(width):  # a padding one leaves nothing out
+        for j in range(n_joints):
+            others = 0  # views seeing joint j besides left_out
             for k in range(width):
-                row = idx[p, k]
-                if row < 0:
-                    out[p, left_out, k] = np.nan
-                    continue
-                c = owner[row]
-                n = 0
-                for j in range(n_joints):
-                    if seen[k, j]:
-                        _project(points[j], R[c], t[c], K[c], dist[c], pixel)
-                        du, dv = pixel[0] - keypoints[row, j, 0], pixel[1] - keypoints[row, j, 1]
-                        e = np.sqrt(du * du + dv * dv)
-                        if np.isfinite(e):
-                            error[n] = e
-                            n += 1
-                out[p, left_out, k] = _median(error[:n]) / size[k]
+                if seen[k, j] and k != left_out:
+                    others += 1
+            if others < 2:
+                points[j] = np.nan
+            else:
+                for i in range(9):
+                    without[i] = total[j, i] - terms[left_out, j, i]
+                _solve_line_terms(without, width, points[j])
+        for k in range(width):
+            row = views[k]
+            if row < 0:
+                out[left_out, k] = np.nan
+                continue
+            c = owner[row]
+            n = 0
+            for j in range(n_joints):
+                if seen[k, j]:
+                    # Camera.project, the same arithmetic so the same bits (written out here: a
+                    # call per joint cost three times the projection)
+                    x, y, z = points[j, 0], points[j, 1], points[j, 2]
+                    depth = R[c, 2, 0] * x + R[c, 2, 1] * y + R[c, 2, 2] * z + t[c, 2]
+                    inv = 1.0 / depth if depth > 0 else np.nan
+                    xn = (R[c, 0, 0] * x + R[c, 0, 1] * y + R[c, 0, 2] * z + t[c, 0]) * inv
+                    yn = (R[c, 1, 0] * x + R[c, 1, 1] * y + R[c, 1, 2] * z + t[c, 1]) * inv
+                    if distorted[c]:
+                        k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
+                        r2 = xn * xn + yn * yn
+                        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
+                                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
+                    du = K[c, 0, 0] * xn + K[c, 0, 1] * yn + K[c, 0, 2] - keypoints[row, j, 0]
+                    dv = K[c, 1, 0] * xn + K[c, 1, 1] * yn + K[c, 1, 2] - keypoints[row, j, 1]
+                    e = np.sqrt(du * du + dv * dv)
+                    if np.isfinite(e):
+                        error[n] = e
+                        n += 1
+            out[left_out, k] = _median(error[:n]) / size[k]
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], float64, '
+        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1], float64[:, :, ::1])')
+def _residuals(keypoints, owner, origins, dirs, idx, min_score, R, t, K, dist, distorted, out):
+    """leave_one_out_residuals into out (P, K, K) of people's views idx (P, K) (-1: padding)."""
+    for p in range(len(idx)):
+        _person_residuals(keypoints, owner, origins, dirs, idx[p], idx.shape[1], min_score, R, t, K, dist, distorted,
+                          out[p])
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], int64[::1], '
+        'float64, float64, float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1])')
+def _leave_out_contradicted(keypoints, owner, origins, dirs, idx, lengths, min_score, max_residual, R, t, K, dist,
+                            distorted):
+    """consistent_views on people's views idx (P, K) (-1: padding), lengths (P,) views each: both
+    updated in place. Each round decides for every person still checked at once, with the
+    residuals of a batch as wide as its widest person (as leave_one_out_residuals of them)."""
+    n_people, most = idx.shape
+    r = np.empty((most, most))
+    left_out = np.empty(most)
+    spread = np.empty(most)
+    active = lengths >= 3
+    while active.any():
+        width = 0
+        for p in range(n_people):
+            if active[p]:
+                width = max(width, lengths[p])
+        for p in range(n_people):
+            if not active[p]:
+                continue
+            _person_residuals(keypoints, owner, origins, dirs, idx[p], width, min_score, R, t, K, dist, distorted, r)
+            worst = -1  # the view whose leaving out leaves the others most consistent
+            for k in range(width):
+                left_out[k] = r[k, k]
+                spread[k] = -np.inf  # worst residual of the rest
+                for v in range(width):
+                    if v != k and not np.isnan(r[k, v]):
+                        spread[k] = max(spread[k], r[k, v])
+                if np.isfinite(left_out[k]) and np.isfinite(spread[k]) and (worst < 0 or spread[k] < spread[worst]):
+                    worst = k
+            active[p] = False
+            if worst >= 0 and left_out[worst] > max_residual and spread[worst] < left_out[worst]:
+                idx[p, worst:most - 1] = idx[p, worst + 1:].copy()
+                idx[p, most - 1] = -1
+                lengths[p] -= 1
+                active[p] = lengths[p] >= 3
 
 
 def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: Sequence[Sequence[int]],
@@ -176,31 +222,35 @@ def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: S
     idx = np.full((len(people), width), -1, dtype=np.int64)
     for p, views in enumerate(people):
         idx[p, :len(views)] = views
-    rig = [cam if cam is not None else _NO_CAMERA for cam in cameras]  # one not known yet has no views
-    _residuals(np.ascontiguousarray(rays.keypoints, dtype=np.float64), rays.owner.astype(np.int64),
-               np.ascontiguousarray(rays.origins, dtype=np.float64), np.ascontiguousarray(rays.dirs, dtype=np.float64),
-               idx, float(min_score), np.stack([cam.R for cam in rig]), np.stack([cam.t for cam in rig]),
-               np.stack([cam.K for cam in rig]), np.stack([cam.dist for cam in rig]), out)
+    _residuals(*_ray_arrays(rays), idx, float(min_score), *_rig_arrays(tuple(cameras)), out)
     return out
+
+
+def _ray_arrays(rays: ViewRays) -> tuple[np.ndarray, ...]:
+    """keypoints, owner, origins and dirs of rays as the kernels take them."""
+    return (np.ascontiguousarray(rays.keypoints, dtype=np.float64), rays.owner.astype(np.int64),
+            np.ascontiguousarray(rays.origins, dtype=np.float64), np.ascontiguousarray(rays.dirs, dtype=np.float64))
+
+
+@functools.lru_cache(maxsize=8)
+def _rig_arrays(cameras: tuple[Camera | None, ...]) -> tuple[np.ndarray, ...]:
+    """R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5) and has_distortion (C,) of a rig, made once
+    per rig (a camera not known yet, None, has no views: any values do)."""
+    rig = [cam if cam is not None else _NO_CAMERA for cam in cameras]
+    return (np.stack([cam.R for cam in rig]), np.stack([cam.t for cam in rig]), np.stack([cam.K for cam in rig]),
+            np.stack([cam.dist for cam in rig]), np.array([cam.has_distortion for cam in rig]))
 
 
 def consistent_views(cameras: Sequence[Camera], rays: ViewRays, people: Sequence[Sequence[int]],
                      min_score: float, max_residual: float) -> list[list[int]]:
     """people[p] (rows of `rays`, one per camera) without the views the others contradict (module
     docstring); each keeps at least two. max_residual <= 0 keeps every view."""
-    kept = [list(v) for v in people]
-    if max_residual <= 0:
-        return kept
-    active = [p for p, v in enumerate(kept) if len(v) >= 3]
-    while active:
-        r = leave_one_out_residuals(cameras, rays, [kept[p] for p in active], min_score)  # (A, out, view)
-        left_out = np.diagonal(r, axis1=1, axis2=2)  # (A, K)
-        spread = np.where(np.eye(r.shape[1], dtype=bool) | np.isnan(r), -np.inf, r).max(axis=2)  # worst of the rest
-        candidate = np.isfinite(left_out) & np.isfinite(spread)
-        worst = np.argmin(np.where(candidate, spread, np.inf), axis=1)  # (A,)
-        out, rest = (np.take_along_axis(x, worst[:, None], axis=1)[:, 0] for x in (left_out, spread))
-        drop = candidate.any(axis=1) & (out > max_residual) & (rest < out)
-        for row in np.flatnonzero(drop):
-            del kept[active[row]][worst[row]]
-        active = [active[row] for row in np.flatnonzero(drop) if len(kept[active[row]]) >= 3]
-    return kept
+    if max_residual <= 0 or not any(len(v) >= 3 for v in people):
+        return [list(v) for v in people]
+    idx = np.full((len(people), max(len(v) for v in people)), -1, dtype=np.int64)
+    for p, views in enumerate(people):
+        idx[p, :len(views)] = views
+    lengths = np.array([len(v) for v in people], dtype=np.int64)
+    _leave_out_contradicted(*_ray_arrays(rays), idx, lengths, float(min_score), float(max_residual),
+                            *_rig_arrays(tuple(cameras)))
+    return [row[:n] for row, n in zip(idx.tolist(), lengths.tolist())]
