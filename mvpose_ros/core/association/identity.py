@@ -66,16 +66,16 @@ class IdentityKeeper:
             cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6),
                               np.full((len(members), len(members)), self.max_jump + 1.0)])
             rows, cols = linear_sum_assignment(cost)
-            for r, c in zip(rows, cols):
+            for r, c in zip(rows.tolist(), cols.tolist()):
                 if c < len(known_ids) and allowed[r, c]:
                     ids[r] = known_ids[c]
+        most = max(self.max_age, 1)
         for i, m in enumerate(members):
             if ids[i] < 0:
                 ids[i] = self._next_id
                 self._next_id += 1
             before = self._known[ids[i]].members if ids[i] in self._known else {}
-            self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, max(self.max_age, 1)) for t in m}, centres[i],
-                                         frame)
+            self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, most) for t in m}, centres[i], frame)
         return ids
 
     def state(self) -> dict[str, Any]:

@@ -55,16 +55,19 @@ class ViewRays:
     @classmethod
     def of(cls, cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]]) -> ViewRays:
         """The rays of people[c], camera c's skeletons (one back-projection per camera)."""
-        owner = np.repeat(np.arange(len(cameras)), [len(p) for p in people])
+        counts = [len(p) for p in people]
+        owner = np.repeat(np.arange(len(cameras)), counts)
         if len(owner) == 0:
             return cls(np.zeros((0, 0, 3)), owner, np.zeros((0, 3)), np.zeros((0, 0, 3)))
         kp = np.stack([p.keypoints for ps in people for p in ps])  # (N, J, 3)
         dirs = np.empty(kp.shape)
         origins = np.empty((len(kp), 3))
-        for c, cam in enumerate(cameras):
-            if people[c]:
-                dirs[owner == c] = cam.directions(kp[owner == c, :, :2])
-                origins[owner == c] = cam.centre
+        end = 0
+        for cam, count in zip(cameras, counts):  # each camera's skeletons are one block of rows
+            start, end = end, end + count
+            if count:
+                dirs[start:end] = cam.directions(kp[start:end, :, :2])
+                origins[start:end] = cam.centre
         return cls(kp, owner, origins, dirs)
 
 
