@@ -5,6 +5,7 @@ into people seen by at least two cameras, each with a stable id.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -130,13 +131,14 @@ class Associator:
                 tracker.update(skeletons)
         rays = ViewRays.of(self.cameras, present)
         clusters = cluster_views(self.cameras, present, self.config.matching, rays)
-        first = np.concatenate([[0], np.cumsum([len(p) for p in present])])
+        first = [0, *itertools.accumulate(len(p) for p in present)]
         rows = consistent_views(self.cameras, rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
                                 self.config.matching.min_score, self.config.max_view_residual)
         skeleton = [p for ps in present for p in ps]  # by row of rays
-        views = [{int(rays.owner[r]): skeleton[r] for r in rs} for rs in rows]
+        owner = rays.owner.tolist()
+        views = [{owner[r]: skeleton[r] for r in rs} for rs in rows]
         centres = rough_centres(rays, rows, self.config.matching.min_score)
-        keep = [i for i in range(len(views)) if np.all(np.isfinite(centres[i]))]
+        keep = np.flatnonzero(np.isfinite(centres).all(axis=1)).tolist()
         views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)
         members = [{(c, p.track_id) for c, p in v.items()} for v in views]
         ids = self._ids.assign(frame, members, centres)
