@@ -85,17 +85,18 @@ def _pairwise_sum(values, start, n):
         for i in range(start, start + n):
             total += values[i]
         return total
-    if n <= 128:
-        r = values[start:start + 8].copy()
+    if n <= 128:  # eight running sums (scalars: a scratch array per call cost more than the sum)
+        r0, r1, r2, r3, r4, r5, r6, r7 = values[start:start + 8]
         i = 8
         while i < n - n % 8:
-            for k in range(8):
-                r[k] += values[start + i + k]
+            at = start + i
+            r0, r1, r2, r3 = r0 + values[at], r1 + values[at + 1], r2 + values[at + 2], r3 + values[at + 3]
+            r4, r5, r6, r7 = r4 + values[at + 4], r5 + values[at + 5], r6 + values[at + 6], r7 + values[at + 7]
             i += 8
-        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
         for k in range(i, n):
             total += values[start + k]
-        return 0.0 + total
+        return total
     half = n // 2
     half -= half % 8
     return _pairwise_sum(values, start, half) + _pairwise_sum(values, start + half, n - half)
@@ -121,37 +122,42 @@ def _mean_line_distances(origins, dirs, seen, owner, min_shared):
     that count, owner (N,) camera. Two lines with moments m = o x d are |d_a . m_b + d_b . m_a| /
     |d_a x d_b| apart; the mean is over the joints both see."""
     n, n_joints = seen.shape
-    moments = np.empty((n, n_joints, 3))
+    # component-major copies (x, y, z; skeleton; joint): a pair's joints then sit side by side and
+    # its loop, without branches, runs on vectors
+    d = np.empty((3, n, n_joints))
+    m = np.empty((3, n, n_joints))
     for a in range(n):
-        o = origins[a]
+        ox, oy, oz = origins[a]
         for j in range(n_joints):
-            d = dirs[a, j]
-            moments[a, j, 0] = o[1] * d[2] - o[2] * d[1]
-            moments[a, j, 1] = o[2] * d[0] - o[0] * d[2]
-            moments[a, j, 2] = o[0] * d[1] - o[1] * d[0]
+            dx, dy, dz = dirs[a, j]
+            d[0, a, j], d[1, a, j], d[2, a, j] = dx, dy, dz
+            m[0, a, j], m[1, a, j], m[2, a, j] = oy * dz - oz * dy, oz * dx - ox * dz, ox * dy - oy * dx
     out = np.full((n, n), np.inf)
-    per_joint = np.zeros(n_joints)
+    per_joint = np.empty(n_joints)
     for a in range(n):
         for b in range(a + 1, n):
             if owner[a] == owner[b]:
                 continue
             shared = 0
             for j in range(n_joints):
-                per_joint[j] = 0.0
-                if not (seen[a, j] and seen[b, j]):
-                    continue
-                shared += 1
-                da, db, ma, mb = dirs[a, j], dirs[b, j], moments[a, j], moments[b, j]
-                recip = ((da[0] * mb[0] + da[1] * mb[1] + da[2] * mb[2])
-                         + (db[0] * ma[0] + db[1] * ma[1] + db[2] * ma[2]))
-                cos = da[0] * db[0] + da[1] * db[1] + da[2] * db[2]
+                shared += seen[a, j] and seen[b, j]
+            if shared < min_shared:
+                continue
+            near = False
+            for j in range(n_joints):
+                recip = ((d[0, a, j] * m[0, b, j] + d[1, a, j] * m[1, b, j] + d[2, a, j] * m[2, b, j])
+                         + (d[0, b, j] * m[0, a, j] + d[1, b, j] * m[1, a, j] + d[2, b, j] * m[2, a, j]))
+                cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
                 sin = np.sqrt(max(1.0 - cos * cos, 0.0))
-                if sin >= _NEAR_PARALLEL or sin != sin:
-                    per_joint[j] = abs(recip) / sin
-                else:
-                    per_joint[j] = _near_parallel_distance(origins[a], da, origins[b], db)
-            if shared >= min_shared:
-                out[a, b] = out[b, a] = _pairwise_sum(per_joint, 0, n_joints) / shared
+                both = seen[a, j] and seen[b, j]
+                near |= both and sin < _NEAR_PARALLEL
+                per_joint[j] = abs(recip) / sin if both else 0.0
+            if near:  # rare: those joints again, by the formula that does not divide by the sine
+                for j in range(n_joints):
+                    cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
+                    if seen[a, j] and seen[b, j] and np.sqrt(max(1.0 - cos * cos, 0.0)) < _NEAR_PARALLEL:
+                        per_joint[j] = _near_parallel_distance(origins[a], dirs[a, j], origins[b], dirs[b, j])
+            out[a, b] = out[b, a] = _pairwise_sum(per_joint, 0, n_joints) / shared
     return out
 
 
