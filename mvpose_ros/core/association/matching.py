@@ -140,7 +140,7 @@ def _mean_line_distances(origins, dirs, seen, owner, min_shared):
                 continue
             shared = 0
             for j in range(n_joints):
-                shared += seen[a, j] and seen[b, j]
+                shared += seen[a, j] & seen[b, j]
             if shared < min_shared:
                 continue
             near = False
@@ -149,8 +149,8 @@ def _mean_line_distances(origins, dirs, seen, owner, min_shared):
                          + (d[0, b, j] * m[0, a, j] + d[1, b, j] * m[1, a, j] + d[2, b, j] * m[2, a, j]))
                 cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
                 sin = np.sqrt(max(1.0 - cos * cos, 0.0))
-                both = seen[a, j] and seen[b, j]
-                near |= both and sin < _NEAR_PARALLEL
+                both = seen[a, j] & seen[b, j]  # & not and: no branch
+                near |= both & (sin < _NEAR_PARALLEL)
                 per_joint[j] = abs(recip) / sin if both else 0.0
             if near:  # rare: those joints again, by the formula that does not divide by the sine
                 for j in range(n_joints):
