@@ -10,13 +10,13 @@ import json
 import numpy as np
 import pytest
 
-from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.association.associator import AssociationConfig, Associator, rough_centres
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, TOP_HEAD
-from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, ray_ray_distance
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
 from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.association.matching import MatchingConfig, all_view_distances, cluster_views
+from mvpose_ros.core.association.matching import TIE_M, MatchingConfig, ViewRays, all_view_distances, cluster_views
 from mvpose_ros.core.types import Person2D
 
 SHELF = dataset_dir('shelf')
@@ -122,6 +122,118 @@ def test_view_distance_needs_enough_shared_joints(rig, poses):
     low.keypoints[3:, 2] = config.min_score / 2  # detected, but below the score that counts
     assert view_distance(rig[0], [a], rig[1], [low], config)[0, 0] == np.inf
     assert view_distance(rig[0], [], rig[1], [b], config).shape == (0, 1)
+
+
+def _random_rays(rng: np.random.Generator, per_camera: list[int], n_joints: int = 16) -> ViewRays:
+    """Skeletons of random unit rays from cameras a few metres apart; about a third of the
+    keypoints unseen, and the first two skeletons of different cameras given parallel rays."""
+    owner = np.repeat(np.arange(len(per_camera)), per_camera)
+    centres = rng.normal(0.0, 3.0, (len(per_camera), 3))
+    dirs = rng.normal(size=(len(owner), n_joints, 3))
+    cameras = np.unique(owner)
+    if len(cameras) >= 2:
+        first, second = (np.flatnonzero(owner == c)[0] for c in cameras[:2])
+        dirs[second] = dirs[first]
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    scores = np.where(rng.random((len(owner), n_joints)) < 0.35, 0.0, rng.uniform(0.2, 1.0, (len(owner), n_joints)))
+    keypoints = np.concatenate([rng.uniform(0, 1000, (len(owner), n_joints, 2)), scores[..., None]], axis=-1)
+    return ViewRays(keypoints, owner, centres[owner], dirs)
+
+
+def _view_distances_by_pairs(rays: ViewRays, config: MatchingConfig) -> np.ndarray:
+    """all_view_distances written pair by pair with camera.ray_ray_distance."""
+    n = len(rays.owner)
+    out = np.full((n, n), np.inf)
+    seen = rays.keypoints[..., 2] > config.min_score
+    for a in range(n):
+        for b in range(n):
+            shared = seen[a] & seen[b]
+            if rays.owner[a] != rays.owner[b] and shared.sum() >= config.min_shared:
+                out[a, b] = ray_ray_distance(rays.origins[a], rays.dirs[a, shared], rays.origins[b],
+                                             rays.dirs[b, shared]).mean()
+    return out
+
+
+@pytest.mark.parametrize('per_camera', [[3, 4, 2, 5, 3], [0, 3, 0, 2, 0], [4], [1, 1], [0, 0, 0], []])
+def test_all_view_distances_equal_each_pairs_ray_distances(per_camera):
+    rng = np.random.default_rng(len(per_camera) + sum(per_camera))
+    rays = _random_rays(rng, per_camera)
+    config = MatchingConfig(min_shared=4)
+    dist = all_view_distances([None] * len(per_camera), [[None] * k for k in per_camera], config, rays)
+    expected = _view_distances_by_pairs(rays, config)
+    assert dist.shape == (sum(per_camera),) * 2
+    np.testing.assert_array_equal(np.isinf(dist), np.isinf(expected))
+    np.testing.assert_allclose(dist[np.isfinite(dist)], expected[np.isfinite(expected)], rtol=1e-9, atol=1e-12)
+
+
+def _greedy_by_lists(dist: np.ndarray, owner: np.ndarray, max_distance: float) -> list[list[int]]:
+    """cluster_views' clustering written with Python lists: edges closest first (ties in index
+    order), one view per camera, a group joins another when their views are close on average."""
+    a, b = np.nonzero(np.triu(dist <= max_distance, 1))
+    order = np.argsort(np.round(dist[a, b] / TIE_M), kind='stable')
+    cluster_of: dict[int, int] = {}
+    clusters: list[list[int]] = []
+    for u, v in zip(a[order], b[order]):
+        cu, cv = cluster_of.get(u), cluster_of.get(v)
+        if cu is not None and cu == cv:
+            continue
+        x = clusters[cu] if cu is not None else [u]
+        y = clusters[cv] if cv is not None else [v]
+        if set(owner[x]) & set(owner[y]):
+            continue
+        cross = dist[np.ix_(x, y)]
+        if len(x) + len(y) > 2 and not np.mean(cross[np.isfinite(cross)]) <= max_distance:
+            continue
+        target = cu if cu is not None else cv if cv is not None else len(clusters)
+        if target == len(clusters):
+            clusters.append([])
+        clusters[target] = x + y
+        if cu is not None and cv is not None:
+            clusters[cv] = []
+        for w in x + y:
+            cluster_of[w] = target
+    return [[int(w) for w in c] for c in clusters if c]
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_cluster_views_equals_the_greedy_clustering_written_with_lists(monkeypatch, seed):
+    """Random distances, a quarter of them tied exactly; the same clusters, views in the same order."""
+    rng = np.random.default_rng(seed)
+    per_camera = list(rng.integers(0, 6, 5))
+    owner = np.repeat(np.arange(5), per_camera)
+    n = len(owner)
+    d = rng.uniform(0.0, 0.3, (n, n))
+    d = np.where(rng.random((n, n)) < 0.25, 0.05, d)
+    d = np.minimum(d, d.T)
+    d[owner[:, None] == owner[None]] = np.inf
+    d[rng.random((n, n)) < 0.1] = np.inf
+    d = np.minimum(d, d.T)
+    from mvpose_ros.core.association import matching
+    monkeypatch.setattr(matching, 'all_view_distances', lambda *_: d)
+    people = [[object()] * k for k in per_camera]
+    first = np.concatenate([[0], np.cumsum(per_camera)])
+    clusters = cluster_views([None] * 5, people, MatchingConfig(max_distance=0.15))
+    assert [[first[c] + i for c, i in cl.items()] for cl in clusters] == _greedy_by_lists(d, owner, 0.15)
+
+
+def test_rough_centres_equal_the_mean_of_each_persons_triangulated_joints():
+    """Random rays of nine cameras (sums of eight lines and more go in numpy's pairwise order);
+    people of one to nine views, one whose joints no two views see."""
+    rng = np.random.default_rng(3)
+    rays = _random_rays(rng, [3] * 9)
+    people = [[0, 4, 7, 10, 13, 16, 19, 22, 25], [1, 5], [2, 8, 11, 14, 17, 20, 23, 26], [6], [9, 12, 15]]
+    even = np.arange(16) % 2 == 0
+    rays.keypoints[9, :, 2], rays.keypoints[12, :, 2], rays.keypoints[15, :, 2] = 0.9 * even, 0.9 * ~even, 0.0
+    expected = []
+    for views in people:
+        seen = rays.keypoints[views, :, 2].T > 0.1  # (J, K)
+        points = closest_point_to_rays(np.broadcast_to(rays.origins[views], seen.shape + (3,)),
+                                       np.where(seen[..., None], rays.dirs[views].transpose(1, 0, 2), 0.0), seen)
+        twice = seen.sum(axis=1) >= 2
+        expected.append(points[twice].mean(axis=0) if twice.any() else np.full(3, np.nan))
+    np.testing.assert_allclose(rough_centres(rays, people, 0.1), expected, rtol=1e-12, equal_nan=True)
+    assert np.isnan(rough_centres(rays, people, 0.1)[4]).all()
+    assert rough_centres(rays, [], 0.1).shape == (0, 3)
 
 
 @pytest.mark.parametrize('seed', range(3))

@@ -7,7 +7,7 @@ import pytest
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.types import Person2D
-from mvpose_ros.core.association.tracking import IouTracker, box_iou
+from mvpose_ros.core.association.tracking import IouTracker, box_iou, keypoint_boxes
 
 EMPTY_MAPS = PersonHeatmap(np.zeros((NUM_INFERENCE_JOINTS, 1, 1), np.float32), np.zeros(2), 1.0)
 
@@ -49,6 +49,44 @@ def test_box_iou_is_pairwise_and_degenerate_boxes_give_zero():
     iou = box_iou(a, b)
     np.testing.assert_allclose(iou, [[1, 0], [1 / 7, 0], [0, 0]], atol=1e-12)
     assert box_iou(np.zeros((0, 4)), b).shape == (0, 2)
+
+
+def _iou_by_arrays(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    lo = np.maximum(a[:, None, :2], b[None, :, :2])
+    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
+    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=-1)
+    union = np.prod(a[:, 2:] - a[:, :2], axis=-1)[:, None] + np.prod(b[:, 2:] - b[:, :2], axis=-1)[None] - inter
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(union > 0, inter / union, 0.0)
+
+
+@pytest.mark.parametrize('n, k', [(6, 7), (1, 1), (0, 3), (3, 0)])
+def test_box_iou_equals_the_array_formulation(n, k):
+    """Random boxes, some sharing edges, some points, some NaN (a person with no keypoint)."""
+    rng = np.random.default_rng(n * 10 + k)
+    corners = rng.integers(0, 20, (n + k, 2, 2)).astype(float)
+    boxes = np.concatenate([corners.min(axis=1), corners.max(axis=1)], axis=1)
+    boxes[rng.random(n + k) < 0.2] = np.nan
+    a, b = boxes[:n], boxes[n:]
+    np.testing.assert_array_equal(box_iou(a, b), _iou_by_arrays(a, b))
+
+
+def test_keypoint_boxes_equal_each_persons_bbox():
+    """Random keypoints, a third undetected, one person with none detected, one with a NaN on a
+    detected keypoint (numpy's min and max give NaN there)."""
+    rng = np.random.default_rng(0)
+    kp = np.concatenate([rng.uniform(0, 1000, (6, NUM_INFERENCE_JOINTS, 2)),
+                         np.where(rng.random((6, NUM_INFERENCE_JOINTS, 1)) < 0.3, 0.0, 0.7)], axis=-1)
+    kp[kp[..., 2] == 0, :2] = np.nan
+    kp[1, :, 2] = 0.0
+    kp[2, 3] = (np.nan, 5.0, 0.9)
+    detected = (kp[..., 2] > 0)[..., None]
+    lo = np.where(detected, kp[..., :2], np.inf).min(axis=1)
+    hi = np.where(detected, kp[..., :2], -np.inf).max(axis=1)
+    expected = np.where(detected.any(axis=1), np.concatenate([lo, hi], axis=-1), np.nan)
+    np.testing.assert_array_equal(keypoint_boxes(kp), expected)
+    np.testing.assert_array_equal(keypoint_boxes(kp[[0, 3]]), [Person2D(k, EMPTY_MAPS).bbox() for k in kp[[0, 3]]])
+    assert keypoint_boxes(np.zeros((0, NUM_INFERENCE_JOINTS, 3))).shape == (0, 4)
 
 
 def test_bbox_uses_detected_keypoints_only():

@@ -16,8 +16,9 @@ from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.association.matching import ViewRays
 from mvpose_ros.core.association.view_consistency import consistent_views, leave_one_out_residuals
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
-from mvpose_ros.core.geometry.camera import closest_point_to_rays
+from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, line_terms, solve_line_terms
 from mvpose_ros.core.stage import Stage3D, StageConfig
+from mvpose_ros.core.types import Person2D
 from test_matching import _inference_points, _skeleton
 
 SHELF = dataset_dir('shelf')
@@ -63,6 +64,118 @@ def test_residuals_equal_a_triangulation_without_each_view(shelf_rig, pose):
             error = np.linalg.norm(rig[v].project(points) - kp[v, :, :2], axis=1)
             size = np.linalg.norm(kp[v, :, :2].max(axis=0) - kp[v, :, :2].min(axis=0))
             assert got[out, v] == pytest.approx(np.median(error) / size, rel=1e-6)
+
+
+def _residuals_by_arrays(cameras, rays, people, min_score):
+    """leave_one_out_residuals written with numpy arrays: line terms of every view summed, minus
+    each view's own, solved; each view's keypoints against those joints projected."""
+    width = max(len(v) for v in people)
+    out = np.full((len(people), width, width), np.nan)
+    for p, views in enumerate(people):
+        seen = np.zeros((width, rays.keypoints.shape[1]), dtype=bool)
+        seen[:len(views)] = rays.keypoints[views, :, 2] > min_score
+        terms = np.zeros((9, width) + seen.shape[1:])
+        terms[:, :len(views)] = line_terms(rays.origins[views][:, None], rays.dirs[views])
+        terms *= seen
+        points = solve_line_terms(terms.sum(axis=1, keepdims=True) - terms, width)  # (out, J, 3)
+        points[seen.sum(axis=0) - seen < 2] = np.nan
+        for v, row in enumerate(views):
+            kp = rays.keypoints[row]
+            error = np.linalg.norm(cameras[rays.owner[row]].project(points) - kp[:, :2], axis=-1)  # (out, J)
+            error = np.where(seen[v] & np.isfinite(error), error, np.nan)
+            box = kp[seen[v], :2]
+            size = np.hypot(*(box.max(axis=0) - box.min(axis=0))) if len(box) else np.nan
+            finite = np.isfinite(error).any(axis=1)
+            out[p, finite, v] = np.nanmedian(error[finite], axis=1) / (size if size > 0 else np.nan)
+    return out
+
+
+def _distorted_rig(rng):
+    """Three cameras a few metres from the origin looking at it, with lens distortion."""
+    rig = []
+    for c, angle in enumerate((0.0, 2.0, 4.0)):
+        centre = np.array([4.0 * np.cos(angle), 4.0 * np.sin(angle), 1.5])
+        forward = -centre / np.linalg.norm(centre)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        R = np.stack([right, np.cross(forward, right), forward])
+        K = np.array([[800.0, 0.0, 500.0], [0.0, 800.0, 400.0], [0.0, 0.0, 1.0]])
+        rig.append(Camera(str(c), K, R, -R @ centre, rng.normal(0.0, 0.05, 5), 1000, 800))
+    return rig
+
+
+def _random_people(rng, rig, views_per_person, noise_px=5.0, shifted=0.0):
+    """People of the given numbers of views (each camera once) at random joints, seen with
+    noise_px of noise; some joints unseen, some views with one joint only, a share `shifted` of
+    the views drawn about 0.5 m off, each its own way. Their rays and each person's rows of them."""
+    people = []
+    for n_views in views_per_person:
+        joints = rng.normal([0.0, 0.0, 1.0], 0.4, (16, 3))
+        views = []
+        for c in rng.choice(len(rig), min(n_views, len(rig)), replace=False):
+            moved = joints + (rng.random() < shifted) * rng.choice([-0.3, 0.3], 3)
+            uv = rig[c].project(moved) + rng.normal(0.0, noise_px, (16, 2))
+            score = np.where(rng.random(16) < 0.3, 0.0, 0.9)
+            if rng.random() < 0.2:
+                score[1:] = 0.0
+            views.append((c, np.column_stack([uv, score])))
+        people.append(views)
+    by_camera = [[kp for views in people for c, kp in views if c == cam] for cam in range(len(rig))]
+    rays = ViewRays.of(rig, [[Person2D(kp, None) for kp in kps] for kps in by_camera])
+    first = np.concatenate([[0], np.cumsum([len(k) for k in by_camera])])
+    taken = [0] * len(rig)
+    rows = []
+    for views in people:
+        rows.append([])
+        for c, _ in views:
+            rows[-1].append(int(first[c] + taken[c]))
+            taken[c] += 1
+    return rays, rows
+
+
+@pytest.mark.parametrize('distorted', [False, True])
+def test_residuals_equal_the_array_formulation_on_random_people(shelf_rig, distorted):
+    """Random joints seen by random views (some joints by fewer than three, some views by one
+    joint), people of one to five views, on the Shelf rig and a distorted one."""
+    rng = np.random.default_rng(5)
+    rig = _distorted_rig(rng) if distorted else shelf_rig
+    rays, rows = _random_people(rng, rig, (5, 2, 3, 4, 3, 1))
+    got = leave_one_out_residuals(rig, rays, rows, MIN_SCORE)
+    expected = _residuals_by_arrays(rig, rays, rows, MIN_SCORE)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, equal_nan=True)
+    assert leave_one_out_residuals(rig, rays, [], MIN_SCORE).shape == (0, 0, 0)
+
+
+def _consistent_by_rounds(cameras, rays, people, min_score, max_residual):
+    """consistent_views written as rounds over every person still checked, on
+    leave_one_out_residuals of them all at once."""
+    kept = [list(v) for v in people]
+    active = [p for p, v in enumerate(kept) if len(v) >= 3]
+    while active:
+        r = leave_one_out_residuals(cameras, rays, [kept[p] for p in active], min_score)
+        left_out = np.diagonal(r, axis1=1, axis2=2)
+        spread = np.where(np.eye(r.shape[1], dtype=bool) | np.isnan(r), -np.inf, r).max(axis=2)
+        candidate = np.isfinite(left_out) & np.isfinite(spread)
+        worst = np.argmin(np.where(candidate, spread, np.inf), axis=1)
+        out, rest = left_out[np.arange(len(active)), worst], spread[np.arange(len(active)), worst]
+        drop = candidate.any(axis=1) & (out > max_residual) & (rest < out)
+        for row in np.flatnonzero(drop):
+            del kept[active[row]][worst[row]]
+        active = [active[row] for row in np.flatnonzero(drop) if len(kept[active[row]]) >= 3]
+    return kept
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_consistent_views_equal_the_rounds_on_random_people(shelf_rig, seed):
+    """Random people of two to five views, a third of the views drawn off (some people lose two:
+    more than one round), with little noise; and people without any view."""
+    rng = np.random.default_rng(seed)
+    rays, rows = _random_people(rng, shelf_rig, (5, 5, 4, 3, 2, 5, 4, 3), noise_px=1.0, shifted=0.35)
+    kept = consistent_views(shelf_rig, rays, rows, MIN_SCORE, THRESHOLD)
+    assert kept == _consistent_by_rounds(shelf_rig, rays, rows, MIN_SCORE, THRESHOLD)
+    assert kept != rows
+    assert consistent_views(shelf_rig, rays, rows + [[]], MIN_SCORE, THRESHOLD) == kept + [[]]
+    assert consistent_views(shelf_rig, rays, [], MIN_SCORE, THRESHOLD) == []
 
 
 @pytest.mark.parametrize('cameras', [(0, 1, 2, 3, 4), (0, 1, 2, 4), (1, 2, 3)])

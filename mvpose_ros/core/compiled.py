@@ -21,6 +21,10 @@ import numba
 
 # Every module that defines kernels (test_compiled checks that none is missing).
 KERNEL_MODULES: tuple[str, ...] = (
+    'mvpose_ros.core.association.associator',
+    'mvpose_ros.core.association.matching',
+    'mvpose_ros.core.association.tracking',
+    'mvpose_ros.core.association.view_consistency',
     'mvpose_ros.core.detection.grouping',
     'mvpose_ros.core.detection.openpose_detector',
     'mvpose_ros.core.heatmap',

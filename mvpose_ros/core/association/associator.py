@@ -5,17 +5,19 @@ into people seen by at least two cameras, each with a stable id.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
+from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
+from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, _pairwise_sum, cluster_views
 from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker
-from mvpose_ros.core.association.view_consistency import consistent_views
+from mvpose_ros.core.association.view_consistency import _line_terms, _solve_line_terms, consistent_views
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,47 @@ class PersonObservation:
     centre: np.ndarray
 
 
+@kernel('float64[:, ::1](float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], float64)')
+def _rough_centres(keypoints, origins, dirs, idx, min_score):
+    """rough_centres of people's views idx (P, K) (-1: padding) of the rays of ViewRays, with the
+    arithmetic of camera.closest_point_to_rays (directions normalised again, each term summed
+    over the K lines in numpy's pairwise order), so the same bits."""
+    n_people, width = idx.shape
+    n_joints = keypoints.shape[1]
+    out = np.empty((n_people, 3))
+    direction = np.empty(3)
+    terms = np.zeros((width, 9))  # each line's share (0: not seen)
+    column = np.empty(width)
+    summed = np.empty(9)
+    point = np.empty(3)
+    for p in range(n_people):
+        total = np.zeros(3)
+        located = 0
+        for j in range(n_joints):
+            terms[:] = 0.0
+            seen = 0
+            for k in range(width):
+                row = idx[p, k]
+                if row >= 0 and keypoints[row, j, 2] > min_score:
+                    d = dirs[row, j]
+                    norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                    for i in range(3):
+                        direction[i] = d[i] / norm
+                    _line_terms(origins[row], direction, terms[k])
+                    seen += 1
+            if seen < 2:
+                continue
+            for i in range(9):
+                column[:] = terms[:, i]
+                summed[i] = _pairwise_sum(column, 0, width)
+            _solve_line_terms(summed, width, point)
+            for i in range(3):
+                total[i] += point[i]
+            located += 1
+        out[p] = total / (located if located else np.nan)
+    return out
+
+
 def rough_centres(rays: ViewRays, people: Sequence[Sequence[int]], min_score: float) -> np.ndarray:
     """(P, 3) per person (the indices in `rays` of its views): the mean of the joints triangulated
     from the keypoints of every view, metres; NaN where no joint is seen twice. All people in one
@@ -55,20 +98,12 @@ def rough_centres(rays: ViewRays, people: Sequence[Sequence[int]], min_score: fl
     width = max((len(v) for v in people), default=0)
     if width == 0:
         return np.full((len(people), 3), np.nan)
-    idx = np.full((len(people), width), -1)
+    idx = np.full((len(people), width), -1, dtype=np.int64)
     for p, views in enumerate(people):
         idx[p, :len(views)] = views
-    used = idx >= 0  # (P, K)
-    n_j = rays.keypoints.shape[1]
-    origins = np.broadcast_to(np.where(used[..., None], rays.origins[idx], 0.0)[:, None], (len(people), n_j, width, 3))
-    dirs = np.where(used[:, :, None, None], rays.dirs[idx], 0.0).transpose(0, 2, 1, 3)  # (P, J, K, 3)
-    seen = (used[:, :, None] & (rays.keypoints[idx, :, 2] > min_score)).transpose(0, 2, 1)  # (P, J, K)
-    twice = seen.sum(axis=-1) >= 2  # (P, J)
-    points = closest_point_to_rays(origins, dirs, seen)  # (P, J, 3)
-    points[~twice] = np.nan
-    with np.errstate(invalid='ignore'):
-        total = np.where(twice[..., None], points, 0.0).sum(axis=1)
-        return total / np.where(twice.any(axis=1), twice.sum(axis=1), np.nan)[:, None]
+    return _rough_centres(np.ascontiguousarray(rays.keypoints, dtype=np.float64),
+                          np.ascontiguousarray(rays.origins, dtype=np.float64),
+                          np.ascontiguousarray(rays.dirs, dtype=np.float64), idx, float(min_score))
 
 
 class Associator:
@@ -96,13 +131,14 @@ class Associator:
                 tracker.update(skeletons)
         rays = ViewRays.of(self.cameras, present)
         clusters = cluster_views(self.cameras, present, self.config.matching, rays)
-        first = np.concatenate([[0], np.cumsum([len(p) for p in present])])
+        first = [0, *itertools.accumulate(len(p) for p in present)]
         rows = consistent_views(self.cameras, rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
                                 self.config.matching.min_score, self.config.max_view_residual)
         skeleton = [p for ps in present for p in ps]  # by row of rays
-        views = [{int(rays.owner[r]): skeleton[r] for r in rs} for rs in rows]
+        owner = rays.owner.tolist()
+        views = [{owner[r]: skeleton[r] for r in rs} for rs in rows]
         centres = rough_centres(rays, rows, self.config.matching.min_score)
-        keep = [i for i in range(len(views)) if np.all(np.isfinite(centres[i]))]
+        keep = np.flatnonzero(np.isfinite(centres).all(axis=1)).tolist()
         views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)
         members = [{(c, p.track_id) for c, p in v.items()} for v in views]
         ids = self._ids.assign(frame, members, centres)

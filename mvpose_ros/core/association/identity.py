@@ -47,8 +47,16 @@ class IdentityKeeper:
         known_ids = list(self._known)
         ids = [-1] * len(members)
         if members and known_ids:
-            shared = np.array([[sum(self._known[k].members.get(t, 0) for t in m) for k in known_ids]
-                               for m in members])
+            # per (camera, track) the known ids it was part of: a look-up per track, not per pair of people
+            votes: dict[tuple[int, int], list[tuple[int, int]]] = {}
+            for col, k in enumerate(known_ids):
+                for t, frames in self._known[k].members.items():
+                    votes.setdefault(t, []).append((col, frames))
+            shared = np.zeros((len(members), len(known_ids)), dtype=int)
+            for row, m in enumerate(members):
+                for t in m:
+                    for col, frames in votes.get(t, ()):
+                        shared[row, col] += frames
             jump = np.linalg.norm(centres[:, None] - np.array([self._known[k].centre for k in known_ids])[None],
                                   axis=-1)
             allowed = (shared > 0) | (jump <= self.max_jump)
@@ -58,16 +66,16 @@ class IdentityKeeper:
             cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6),
                               np.full((len(members), len(members)), self.max_jump + 1.0)])
             rows, cols = linear_sum_assignment(cost)
-            for r, c in zip(rows, cols):
+            for r, c in zip(rows.tolist(), cols.tolist()):
                 if c < len(known_ids) and allowed[r, c]:
                     ids[r] = known_ids[c]
+        most = max(self.max_age, 1)
         for i, m in enumerate(members):
             if ids[i] < 0:
                 ids[i] = self._next_id
                 self._next_id += 1
             before = self._known[ids[i]].members if ids[i] in self._known else {}
-            self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, max(self.max_age, 1)) for t in m}, centres[i],
-                                         frame)
+            self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, most) for t in m}, centres[i], frame)
         return ids
 
     def state(self) -> dict[str, Any]:

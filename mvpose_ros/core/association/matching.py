@@ -7,9 +7,9 @@ most one skeleton per camera in a person, and a view joins a person (or two pers
 when it matches that person's views on average: one close pair must not chain two people
 standing near each other into one (single linkage did, at Shelf frame 590).
 
-Every distance of a frame comes from two batched matrix products per joint over all skeletons'
-rays (Pluecker coordinates), so matching all pairs stays a small share of association even for
-crowds of a hundred skeletons.
+Every distance of a frame comes from one compiled pass over all pairs of skeletons' rays
+(Pluecker coordinates), and the greedy clustering is compiled too, so matching all pairs stays a
+small share of association even for crowds of a hundred skeletons.
 """
 from __future__ import annotations
 
@@ -18,7 +18,8 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.camera import Camera, ray_ray_distance
+from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import Person2D
 
 
@@ -54,40 +55,207 @@ class ViewRays:
     @classmethod
     def of(cls, cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]]) -> ViewRays:
         """The rays of people[c], camera c's skeletons (one back-projection per camera)."""
-        owner = np.repeat(np.arange(len(cameras)), [len(p) for p in people])
+        counts = [len(p) for p in people]
+        owner = np.repeat(np.arange(len(cameras)), counts)
         if len(owner) == 0:
             return cls(np.zeros((0, 0, 3)), owner, np.zeros((0, 3)), np.zeros((0, 0, 3)))
         kp = np.stack([p.keypoints for ps in people for p in ps])  # (N, J, 3)
         dirs = np.empty(kp.shape)
         origins = np.empty((len(kp), 3))
-        for c, cam in enumerate(cameras):
-            if people[c]:
-                dirs[owner == c] = cam.directions(kp[owner == c, :, :2])
-                origins[owner == c] = cam.centre
+        end = 0
+        for cam, count in zip(cameras, counts):  # each camera's skeletons are one block of rows
+            start, end = end, end + count
+            if count:
+                dirs[start:end] = cam.directions(kp[start:end, :, :2])
+                origins[start:end] = cam.centre
         return cls(kp, owner, origins, dirs)
 
 
 # Below this sine of the angle between two rays, their distance is taken from the parallel-safe
-# formula (camera.ray_ray_distance) instead of the one that divides by the sine.
+# formula (as camera.ray_ray_distance) instead of the one that divides by the sine.
 _NEAR_PARALLEL = 1e-6
 
 
-def _line_distances(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    """(N, N, J) distance between the lines of every two skeletons' keypoints of the same joint:
-    origins (N, 3), unit dirs (N, J, 3). With moments m = o x d, two lines are
-    |d_a . m_b + d_b . m_a| / |d_a x d_b| apart, so all pairs take two matrix products per joint."""
-    d = np.ascontiguousarray(dirs.transpose(1, 0, 2))  # (J, N, 3)
-    m = np.cross(origins[None], d)  # (J, N, 3)
-    with np.errstate(invalid='ignore'):
-        recip = d @ m.transpose(0, 2, 1)  # (J, N, N) d_a . m_b
-        cos = d @ d.transpose(0, 2, 1)
-        sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
-        dist = np.abs(recip + recip.transpose(0, 2, 1)) / np.where(sin < _NEAR_PARALLEL, 1.0, sin)
-        near = np.argwhere(sin < _NEAR_PARALLEL)  # (K, 3) joint, a, b: rare
-    if len(near):
-        j, a, b = near.T
-        dist[j, a, b] = ray_ray_distance(origins[a], dirs[a, j], origins[b], dirs[b, j])
-    return np.ascontiguousarray(dist.transpose(1, 2, 0))
+@kernel('float64(float64[::1], int64, int64)')
+def _pairwise_sum(values, start, n):
+    """values[start:start + n] summed in numpy's pairwise order (add.reduce over a contiguous
+    axis), so that means equal the numpy formulation's to the last bit."""
+    if n < 8:
+        total = 0.0
+        for i in range(start, start + n):
+            total += values[i]
+        return total
+    if n <= 128:  # eight running sums (scalars: a scratch array per call cost more than the sum)
+        r0, r1, r2, r3, r4, r5, r6, r7 = values[start:start + 8]
+        i = 8
+        while i < n - n % 8:
+            at = start + i
+            r0, r1, r2, r3 = r0 + values[at], r1 + values[at + 1], r2 + values[at + 2], r3 + values[at + 3]
+            r4, r5, r6, r7 = r4 + values[at + 4], r5 + values[at + 5], r6 + values[at + 6], r7 + values[at + 7]
+            i += 8
+        total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        for k in range(i, n):
+            total += values[start + k]
+        return total
+    half = n // 2
+    half -= half % 8
+    return _pairwise_sum(values, start, half) + _pairwise_sum(values, start + half, n - half)
+
+
+@kernel('float64(float64[::1], float64[::1], float64[::1], float64[::1])')
+def _near_parallel_distance(o1, d1, o2, d2):
+    """camera.ray_ray_distance of two lines (origins o, directions d (3,)) at most a little off parallel."""
+    u = d1 / np.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+    v = d2 / np.sqrt(d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2])
+    gap = o2 - o1
+    normal = np.cross(u, v)
+    normal_norm = np.sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2])
+    if normal_norm < 1e-9:  # parallel: from o2 to line 1
+        side = np.cross(gap, u)
+        return np.sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2])
+    return abs(gap[0] * normal[0] + gap[1] * normal[1] + gap[2] * normal[2]) / normal_norm
+
+
+@kernel('float64[:, ::1](float64[:, ::1], float64[:, :, ::1], boolean[:, ::1], int64[::1], int64)')
+def _mean_line_distances(origins, dirs, seen, owner, min_shared):
+    """all_view_distances of the rays: origins (N, 3), unit dirs (N, J, 3), seen (N, J) keypoints
+    that count, owner (N,) camera. Two lines with moments m = o x d are |d_a . m_b + d_b . m_a| /
+    |d_a x d_b| apart; the mean is over the joints both see."""
+    n, n_joints = seen.shape
+    # component-major copies (x, y, z; skeleton; joint): a pair's joints then sit side by side and
+    # its loop, without branches, runs on vectors
+    d = np.empty((3, n, n_joints))
+    m = np.empty((3, n, n_joints))
+    for a in range(n):
+        ox, oy, oz = origins[a]
+        for j in range(n_joints):
+            dx, dy, dz = dirs[a, j]
+            d[0, a, j], d[1, a, j], d[2, a, j] = dx, dy, dz
+            m[0, a, j], m[1, a, j], m[2, a, j] = oy * dz - oz * dy, oz * dx - ox * dz, ox * dy - oy * dx
+    out = np.full((n, n), np.inf)
+    per_joint = np.empty(n_joints)
+    for a in range(n):
+        for b in range(a + 1, n):
+            if owner[a] == owner[b]:
+                continue
+            shared = 0
+            for j in range(n_joints):
+                shared += seen[a, j] & seen[b, j]
+            if shared < min_shared:
+                continue
+            near = False
+            for j in range(n_joints):
+                recip = ((d[0, a, j] * m[0, b, j] + d[1, a, j] * m[1, b, j] + d[2, a, j] * m[2, b, j])
+                         + (d[0, b, j] * m[0, a, j] + d[1, b, j] * m[1, a, j] + d[2, b, j] * m[2, a, j]))
+                cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
+                sin = np.sqrt(max(1.0 - cos * cos, 0.0))
+                both = seen[a, j] & seen[b, j]  # & not and: no branch
+                near |= both & (sin < _NEAR_PARALLEL)
+                per_joint[j] = abs(recip) / sin if both else 0.0
+            if near:  # rare: those joints again, by the formula that does not divide by the sine
+                for j in range(n_joints):
+                    cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
+                    if seen[a, j] and seen[b, j] and np.sqrt(max(1.0 - cos * cos, 0.0)) < _NEAR_PARALLEL:
+                        per_joint[j] = _near_parallel_distance(origins[a], dirs[a, j], origins[b], dirs[b, j])
+            out[a, b] = out[b, a] = _pairwise_sum(per_joint, 0, n_joints) / shared
+    return out
+
+
+@kernel('Tuple((int64[::1], int64[::1]))(float64[:, ::1], int64[::1], float64)')
+def _greedy_clusters(dist, owner, max_distance):
+    """cluster_views' clustering of the views seen by cameras owner (N,) at mean distances dist
+    (N, N): the views of every cluster in order, clusters in order of creation, and each
+    cluster's size."""
+    n = len(owner)
+    a_edge, b_edge = [], []
+    for a in range(n):
+        for b in range(a + 1, n):
+            if dist[a, b] <= max_distance:
+                a_edge.append(a)
+                b_edge.append(b)
+    # closest first; distances within TIE_M of each other are rounding noise (views of one point
+    # projected exactly, as in a synthetic scene), so they keep index order whatever the arithmetic
+    key = np.empty(len(a_edge))
+    for e in range(len(a_edge)):
+        key[e] = dist[a_edge[e], b_edge[e]] / TIE_M
+    order = np.argsort(np.round(key), kind='mergesort')
+    cluster = np.full(n, -1)
+    head = np.full(n, -1)  # per cluster, its first view; then each view's next in nxt (-1: last)
+    tail = np.full(n, -1)
+    nxt = np.full(n, -1)
+    size = np.zeros(n, dtype=np.int64)
+    n_cameras = owner.max() + 1 if n else 0
+    cameras = np.zeros((n, n_cameras), dtype=np.bool_)  # per cluster, its cameras
+    n_clusters = 0
+    cross = np.empty(n * n)
+    for e in order:
+        u, v = a_edge[e], b_edge[e]
+        cu, cv = cluster[u], cluster[v]
+        if cu >= 0 and cu == cv:
+            continue
+        if cu >= 0 and cv >= 0:
+            clash = np.any(cameras[cu] & cameras[cv])
+        elif cu >= 0:
+            clash = cameras[cu, owner[v]]
+        elif cv >= 0:
+            clash = cameras[cv, owner[u]]
+        else:
+            clash = owner[u] == owner[v]
+        if clash:  # a camera sees each view of a person once
+            continue
+        if cu >= 0 or cv >= 0:  # linked: close on average (two single views are, being an edge)
+            count = 0
+            x = head[cu] if cu >= 0 else u  # a view in no cluster has no next
+            while x >= 0:
+                y = head[cv] if cv >= 0 else v
+                while y >= 0:
+                    if np.isfinite(dist[x, y]):
+                        cross[count] = dist[x, y]
+                        count += 1
+                    y = nxt[y]
+                x = nxt[x]
+            if not _pairwise_sum(cross, 0, count) / count <= max_distance:
+                continue
+        if cu < 0 and cv < 0:
+            target = n_clusters
+            n_clusters += 1
+            head[target], nxt[u], tail[target] = u, v, v
+            size[target] = 2
+            cameras[target, owner[u]] = cameras[target, owner[v]] = True
+        elif cu < 0:  # u joins v's cluster, in front
+            target = cv
+            nxt[u], head[target] = head[target], u
+            size[target] += 1
+            cameras[target, owner[u]] = True
+        else:  # v or v's cluster joins u's, behind
+            target = cu
+            first, last = (head[cv], tail[cv]) if cv >= 0 else (v, v)
+            nxt[tail[target]], tail[target] = first, last
+            if cv >= 0:
+                size[target] += size[cv]
+                cameras[target] |= cameras[cv]
+                size[cv], head[cv], tail[cv] = 0, -1, -1
+                cameras[cv] = False
+            else:
+                size[target] += 1
+                cameras[target, owner[v]] = True
+        w = head[target]
+        while w >= 0:
+            cluster[w] = target
+            w = nxt[w]
+    members = np.empty(n, dtype=np.int64)
+    sizes = np.empty(n_clusters, dtype=np.int64)
+    count = kept = 0
+    for c in range(n_clusters):
+        if size[c]:
+            w = head[c]
+            while w >= 0:
+                members[count] = w
+                count += 1
+                w = nxt[w]
+            sizes[kept] = size[c]
+            kept += 1
+    return members[:count], sizes[:kept]
 
 
 def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
@@ -96,15 +264,12 @@ def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Pers
     skeletons in camera order; inf within a camera and where too few joints are shared. rays: the
     skeletons' ViewRays, when already made."""
     rays = rays or ViewRays.of(cameras, people)
-    owner, kp = rays.owner, rays.keypoints
-    if len(owner) == 0:
+    if len(rays.owner) == 0:
         return np.zeros((0, 0))
-    dist = _line_distances(rays.origins, rays.dirs)
-    seen = kp[..., 2] > config.min_score
-    shared = seen[:, None] & seen[None]
-    n = shared.sum(-1)
-    mean = np.where(shared, dist, 0.0).sum(-1) / np.maximum(n, 1)
-    return np.where((n >= config.min_shared) & (owner[:, None] != owner[None]), mean, np.inf)
+    seen = np.ascontiguousarray(rays.keypoints[..., 2] > config.min_score)
+    return _mean_line_distances(np.ascontiguousarray(rays.origins, dtype=np.float64),
+                                np.ascontiguousarray(rays.dirs, dtype=np.float64), seen,
+                                rays.owner.astype(np.int64), config.min_shared)
 
 
 def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
@@ -116,46 +281,8 @@ def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]
     """
     dist = all_view_distances(cameras, people, config, rays)
     view = [(c, i) for c, ps in enumerate(people) for i in range(len(ps))]
-    a, b = np.nonzero(np.triu(dist <= config.max_distance, 1))
-    # closest first; distances within TIE_M of each other are rounding noise (views of one point
-    # projected exactly, as in a synthetic scene), so they keep index order whatever the arithmetic
-    order = np.argsort(np.round(dist[a, b] / TIE_M), kind='stable')
-    owner: dict[int, int] = {}  # view (row of dist) -> its cluster
-    clusters: list[list[int]] = []
-    camera_bits: list[int] = []  # per cluster, bit c set when it has a view of camera c
-
-    def linked(x: list[int], y: list[int]) -> bool:
-        """The two groups of views are one person: close on average (their cameras differ). Two
-        single views are, being an edge (closer than max_distance) of different cameras."""
-        if len(x) == 1 and len(y) == 1:
-            return True
-        cross = dist[np.ix_(x, y)]
-        return bool(np.mean(cross[np.isfinite(cross)]) <= config.max_distance)
-
-    for e in order:
-        u, v = int(a[e]), int(b[e])
-        cu, cv = owner.get(u), owner.get(v)
-        if cu is not None and cu == cv:
-            continue
-        bits_u = camera_bits[cu] if cu is not None else 1 << view[u][0]
-        bits_v = camera_bits[cv] if cv is not None else 1 << view[v][0]
-        if bits_u & bits_v:  # a camera sees each view of a person once
-            continue
-        x = clusters[cu] if cu is not None else [u]
-        y = clusters[cv] if cv is not None else [v]
-        if not linked(x, y):
-            continue
-        merged = x + y
-        target = cu if cu is not None else cv if cv is not None else len(clusters)
-        if target == len(clusters):
-            clusters.append(merged)
-            camera_bits.append(bits_u | bits_v)
-        else:
-            clusters[target] = merged
-            camera_bits[target] = bits_u | bits_v
-        if cu is not None and cv is not None:
-            clusters[cv] = []
-            camera_bits[cv] = 0
-        for w in merged:
-            owner[w] = target
-    return [{view[w][0]: view[w][1] for w in c} for c in clusters if len(c) >= 2]
+    owner = np.array([c for c, _ in view], dtype=np.int64)
+    members, sizes = _greedy_clusters(dist, owner, float(config.max_distance))
+    ends = np.cumsum(sizes).tolist()
+    members = members.tolist()
+    return [{view[w][0]: view[w][1] for w in members[end - size:end]} for size, end in zip(sizes.tolist(), ends)]

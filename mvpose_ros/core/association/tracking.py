@@ -6,28 +6,61 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.types import Person2D
+
+
+@kernel('float64[:, ::1](float64[:, ::1], float64[:, ::1])')
+def _box_iou(a, b):
+    """box_iou of C-contiguous float boxes; a NaN anywhere in a pair gives 0, as in numpy's
+    formulation (its union is NaN, not > 0)."""
+    out = np.zeros((len(a), len(b)))
+    for i in range(len(a)):
+        area_a = (a[i, 2] - a[i, 0]) * (a[i, 3] - a[i, 1])
+        for k in range(len(b)):
+            if np.isnan(a[i, 0] + a[i, 1] + a[i, 2] + a[i, 3] + b[k, 0] + b[k, 1] + b[k, 2] + b[k, 3]):
+                continue
+            w = min(a[i, 2], b[k, 2]) - max(a[i, 0], b[k, 0])
+            h = min(a[i, 3], b[k, 3]) - max(a[i, 1], b[k, 1])
+            inter = (w if w > 0 else 0.0) * (h if h > 0 else 0.0)
+            union = area_a + (b[k, 2] - b[k, 0]) * (b[k, 3] - b[k, 1]) - inter
+            if union > 0:
+                out[i, k] = inter / union
+    return out
 
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pairwise IoU of boxes (N, 4) and (K, 4) as u0, v0, u1, v1 -> (N, K)."""
-    lo = np.maximum(a[:, None, :2], b[None, :, :2])
-    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=-1)
-    area_a = np.prod(a[:, 2:] - a[:, :2], axis=-1)
-    area_b = np.prod(b[:, 2:] - b[:, :2], axis=-1)
-    union = area_a[:, None] + area_b[None, :] - inter
-    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+    return _box_iou(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4),
+                    np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4))
+
+
+@kernel('float64[:, ::1](float64[:, :, ::1])')
+def _keypoint_boxes(keypoints):
+    """keypoint_boxes of C-contiguous keypoints; a detected keypoint with a NaN coordinate makes
+    that side NaN, as numpy's min and max do."""
+    out = np.full((len(keypoints), 4), np.nan)
+    for p in range(len(keypoints)):
+        lo_u = lo_v = np.inf
+        hi_u = hi_v = -np.inf
+        detected = False
+        for j in range(keypoints.shape[1]):
+            u, v = keypoints[p, j, 0], keypoints[p, j, 1]
+            if keypoints[p, j, 2] > 0:
+                detected = True
+                lo_u = u if u != u or u < lo_u else lo_u  # once NaN, stays NaN
+                lo_v = v if v != v or v < lo_v else lo_v
+                hi_u = u if u != u or u > hi_u else hi_u
+                hi_v = v if v != v or v > hi_v else hi_v
+        if detected:
+            out[p, 0], out[p, 1], out[p, 2], out[p, 3] = lo_u, lo_v, hi_u, hi_v
+    return out
 
 
 def keypoint_boxes(keypoints: np.ndarray) -> np.ndarray:
     """(P, 4) u_min, v_min, u_max, v_max over each person's detected keypoints (P, J, 3) (score
     > 0), as Person2D.bbox; NaN for a person with none."""
-    detected = (keypoints[..., 2] > 0)[..., None]
-    with np.errstate(invalid='ignore'):
-        lo = np.where(detected, keypoints[..., :2], np.inf).min(axis=1)
-        hi = np.where(detected, keypoints[..., :2], -np.inf).max(axis=1)
-    return np.where(detected.any(axis=1), np.concatenate([lo, hi], axis=-1), np.nan)
+    return _keypoint_boxes(np.ascontiguousarray(keypoints, dtype=np.float64))
 
 
 class IouTracker:
@@ -36,21 +69,22 @@ class IouTracker:
     def __init__(self, min_iou: float = 0.7) -> None:
         self.min_iou = min_iou
         self._boxes = np.zeros((0, 4))
-        self._ids = np.zeros(0, dtype=int)
+        self._ids: list[int] = []
         self._next_id = 0
 
     def update(self, people: Sequence[Person2D]) -> None:
         """Set `track_id` on each person of the new frame (one-to-one, highest total IoU)."""
         boxes = keypoint_boxes(np.array([p.keypoints for p in people])) if len(people) else np.zeros((0, 4))
-        ids = np.full(len(people), -1)
+        ids = [-1] * len(people)
         if len(people) and len(self._ids):
             iou = box_iou(boxes, self._boxes)
             rows, cols = linear_sum_assignment(-iou)
-            keep = iou[rows, cols] >= self.min_iou
-            ids[rows[keep]] = self._ids[cols[keep]]
-        fresh = ids < 0
-        ids[fresh] = self._next_id + np.arange(fresh.sum())
-        self._next_id += int(fresh.sum())
-        for person, track_id in zip(people, ids):
-            person.track_id = int(track_id)
+            for r, c in zip(rows.tolist(), cols.tolist()):
+                if iou[r, c] >= self.min_iou:
+                    ids[r] = self._ids[c]
+        for i, person in enumerate(people):
+            if ids[i] < 0:  # fresh ids in list order
+                ids[i] = self._next_id
+                self._next_id += 1
+            person.track_id = ids[i]
         self._boxes, self._ids = boxes, ids

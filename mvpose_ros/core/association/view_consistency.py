@@ -18,12 +18,194 @@ too. The check repeats while three or more views remain.
 """
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import numpy as np
 
 from mvpose_ros.core.association.matching import ViewRays
-from mvpose_ros.core.geometry.camera import Camera, line_terms, solve_line_terms
+from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.geometry.camera import Camera
+
+_NO_CAMERA = Camera('none', np.eye(3), np.eye(3), np.zeros(3), np.zeros(5), 1, 1)
+
+
+@kernel('void(float64[::1], float64[::1], float64[::1])')
+def _line_terms(origin, direction, out):
+    """camera.line_terms of one line (origin, unit direction (3,)) into out (9,): I - d d^T as
+    xx, xy, xz, yy, yz, zz, then o - d (d . o); the same arithmetic, so the same bits."""
+    dx, dy, dz = direction[0], direction[1], direction[2]
+    along = dx * origin[0] + dy * origin[1] + dz * origin[2]
+    out[0] = -(dx * dx) + 1.0
+    out[1] = -(dx * dy)
+    out[2] = -(dx * dz)
+    out[3] = -(dy * dy) + 1.0
+    out[4] = -(dy * dz)
+    out[5] = -(dz * dz) + 1.0
+    out[6] = origin[0] - dx * along
+    out[7] = origin[1] - dy * along
+    out[8] = origin[2] - dz * along
+
+
+@kernel('void(float64[::1], int64, float64[::1])')
+def _solve_line_terms(terms, n_lines, out):
+    """camera.solve_line_terms of summed terms (9,) into out (3,): the closest point by Cramer's
+    rule, NaN where degenerate (n_lines: the most lines in any sum of the call)."""
+    a00, a01, a02, a11, a12, a22, b0, b1, b2 = (terms[0], terms[1], terms[2], terms[3], terms[4], terms[5],
+                                                terms[6], terms[7], terms[8])
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if not (np.isfinite(det) and np.isfinite(b0 + b1 + b2) and abs(det) > 1e-12 * n_lines ** 3):
+        out[:] = np.nan
+        return
+    inv = 1.0 / det
+    out[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv
+    out[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv
+    out[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
+
+
+@kernel('float64(float64[::1])')
+def _median(values):
+    """The median of values (sorted in place); NaN when there are none. By insertion: for the few
+    joints of a skeleton, numba's sort costs ten times as much (it allocates its stack)."""
+    n = len(values)
+    if n == 0:
+        return np.nan
+    for i in range(1, n):
+        x = values[i]
+        k = i
+        while k > 0 and values[k - 1] > x:
+            values[k] = values[k - 1]
+            k -= 1
+        values[k] = x
+    return 0.5 * (values[(n - 1) // 2] + values[n // 2])
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[::1], int64, float64, '
+        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1], float64[:, ::1])')
+def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, R, t, K, dist, distorted, out):
+    """leave_one_out_residuals of one person into out[:width, :width], its views the rows
+    views[:width] of the rays of ViewRays (-1: padding), and the rig's R (C, 3, 3), t (C, 3),
+    K (C, 3, 3), dist (C, 5) and whether each has distortion (C,). width: the most views of any
+    person of the call (it scales the singularity threshold)."""
+    n_joints = keypoints.shape[1]
+    seen = np.zeros((width, n_joints), dtype=np.bool_)
+    terms = np.zeros((width, n_joints, 9))
+    total = np.zeros((n_joints, 9))
+    without = np.empty(9)
+    points = np.empty((n_joints, 3))
+    size = np.full(width, np.nan)
+    error = np.empty(n_joints)
+    for k in range(width):
+        row = views[k]
+        if row < 0:
+            continue
+        lo_u = lo_v = np.inf
+        hi_u = hi_v = -np.inf
+        for j in range(n_joints):
+            if keypoints[row, j, 2] > min_score:
+                seen[k, j] = True
+                _line_terms(origins[row], dirs[row, j], terms[k, j])
+                for i in range(9):
+                    total[j, i] += terms[k, j, i]
+                u, v = keypoints[row, j, 0], keypoints[row, j, 1]
+                if u == u:  # NaN skipped, as fmin / fmax do
+                    lo_u, hi_u = min(lo_u, u), max(hi_u, u)
+                if v == v:
+                    lo_v, hi_v = min(lo_v, v), max(hi_v, v)
+        if hi_u >= lo_u and hi_v >= lo_v:
+            extent = np.hypot(hi_u - lo_u, hi_v - lo_v)
+            if extent > 0:
+                size[k] = extent
+    for left_out in range(width):  # a padding one leaves nothing out
+        for j in range(n_joints):
+            others = 0  # views seeing joint j besides left_out
+            for k in range(width):
+                if seen[k, j] and k != left_out:
+                    others += 1
+            if others < 2:
+                points[j] = np.nan
+            else:
+                for i in range(9):
+                    without[i] = total[j, i] - terms[left_out, j, i]
+                _solve_line_terms(without, width, points[j])
+        for k in range(width):
+            row = views[k]
+            if row < 0:
+                out[left_out, k] = np.nan
+                continue
+            c = owner[row]
+            n = 0
+            for j in range(n_joints):
+                if seen[k, j]:
+                    # Camera.project, the same arithmetic so the same bits (written out here: a
+                    # call per joint cost three times the projection)
+                    x, y, z = points[j, 0], points[j, 1], points[j, 2]
+                    depth = R[c, 2, 0] * x + R[c, 2, 1] * y + R[c, 2, 2] * z + t[c, 2]
+                    inv = 1.0 / depth if depth > 0 else np.nan
+                    xn = (R[c, 0, 0] * x + R[c, 0, 1] * y + R[c, 0, 2] * z + t[c, 0]) * inv
+                    yn = (R[c, 1, 0] * x + R[c, 1, 1] * y + R[c, 1, 2] * z + t[c, 1]) * inv
+                    if distorted[c]:
+                        k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
+                        r2 = xn * xn + yn * yn
+                        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
+                                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
+                    du = K[c, 0, 0] * xn + K[c, 0, 1] * yn + K[c, 0, 2] - keypoints[row, j, 0]
+                    dv = K[c, 1, 0] * xn + K[c, 1, 1] * yn + K[c, 1, 2] - keypoints[row, j, 1]
+                    e = np.sqrt(du * du + dv * dv)
+                    if np.isfinite(e):
+                        error[n] = e
+                        n += 1
+            out[left_out, k] = _median(error[:n]) / size[k]
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], float64, '
+        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1], float64[:, :, ::1])')
+def _residuals(keypoints, owner, origins, dirs, idx, min_score, R, t, K, dist, distorted, out):
+    """leave_one_out_residuals into out (P, K, K) of people's views idx (P, K) (-1: padding)."""
+    for p in range(len(idx)):
+        _person_residuals(keypoints, owner, origins, dirs, idx[p], idx.shape[1], min_score, R, t, K, dist, distorted,
+                          out[p])
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], int64[::1], '
+        'float64, float64, float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1])')
+def _leave_out_contradicted(keypoints, owner, origins, dirs, idx, lengths, min_score, max_residual, R, t, K, dist,
+                            distorted):
+    """consistent_views on people's views idx (P, K) (-1: padding), lengths (P,) views each: both
+    updated in place. Each round decides for every person still checked at once, with the
+    residuals of a batch as wide as its widest person (as leave_one_out_residuals of them)."""
+    n_people, most = idx.shape
+    r = np.empty((most, most))
+    left_out = np.empty(most)
+    spread = np.empty(most)
+    active = lengths >= 3
+    while active.any():
+        width = 0
+        for p in range(n_people):
+            if active[p]:
+                width = max(width, lengths[p])
+        for p in range(n_people):
+            if not active[p]:
+                continue
+            _person_residuals(keypoints, owner, origins, dirs, idx[p], width, min_score, R, t, K, dist, distorted, r)
+            worst = -1  # the view whose leaving out leaves the others most consistent
+            for k in range(width):
+                left_out[k] = r[k, k]
+                spread[k] = -np.inf  # worst residual of the rest
+                for v in range(width):
+                    if v != k and not np.isnan(r[k, v]):
+                        spread[k] = max(spread[k], r[k, v])
+                if np.isfinite(left_out[k]) and np.isfinite(spread[k]) and (worst < 0 or spread[k] < spread[worst]):
+                    worst = k
+            active[p] = False
+            if worst >= 0 and left_out[worst] > max_residual and spread[worst] < left_out[worst]:
+                idx[p, worst:most - 1] = idx[p, worst + 1:].copy()
+                idx[p, most - 1] = -1
+                lengths[p] -= 1
+                active[p] = lengths[p] >= 3
 
 
 def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: Sequence[Sequence[int]],
@@ -34,60 +216,41 @@ def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: S
     the joint triangulated from the views other than `out`, divided by view v's size (its keypoints'
     box diagonal); NaN for padding and where no such joint is seen twice without `out`."""
     width = max((len(v) for v in people), default=0)
+    out = np.empty((len(people), width, width))
     if width == 0:
-        return np.zeros((len(people), 0, 0))
-    idx = np.full((len(people), width), -1)
+        return out
+    idx = np.full((len(people), width), -1, dtype=np.int64)
     for p, views in enumerate(people):
         idx[p, :len(views)] = views
-    used = idx >= 0  # (P, K)
-    kp = np.where(used[..., None, None], rays.keypoints[idx], np.nan)  # (P, K, J, 3)
-    seen = used[..., None] & (kp[..., 2] > min_score)  # (P, K, J)
-    # every line's share of the closest-point system once; without `out` = all minus its own
-    terms = line_terms(rays.origins[idx][:, :, None], np.where(seen[..., None], rays.dirs[idx], 0.0))  # (9, P, K, J)
-    terms *= seen
-    points = solve_line_terms(terms.sum(axis=2, keepdims=True) - terms, width)  # (P, out, J, 3)
-    points[seen.sum(axis=1, keepdims=True) - seen < 2] = np.nan
-    camera = np.where(used, rays.owner[np.maximum(idx, 0)], -1)  # (P, K)
-    pixels = np.full((len(people), width, width, seen.shape[2], 2), np.nan)  # (P, out, view, J, 2)
-    for c, cam in enumerate(cameras):
-        p, v = np.nonzero(camera == c)
-        if len(p):
-            pixels[p, :, v] = cam.project(points[p])
-    error = np.linalg.norm(pixels - kp[:, None, ..., :2], axis=-1)  # (P, out, view, J)
-    error = np.where(seen[:, None] & np.isfinite(error), error, np.inf)
-    extent = [np.fmax.reduce(x, axis=-1) - np.fmin.reduce(x, axis=-1)
-              for x in np.where(seen, np.moveaxis(kp[..., :2], -1, 0), np.nan)]  # u, v: (P, K) each
-    size = np.hypot(*extent)
-    return _median(error) / np.where(size > 0, size, np.nan)[:, None]
+    _residuals(*_ray_arrays(rays), idx, float(min_score), *_rig_arrays(tuple(cameras)), out)
+    return out
 
 
-def _median(values: np.ndarray) -> np.ndarray:
-    """Median over the last axis of the finite values (inf marks a missing one); NaN where none is.
-    nanmedian goes through masked arrays: slower than the whole residual computation here."""
-    ordered = np.sort(values, axis=-1)
-    n = np.isfinite(ordered).sum(axis=-1)
-    lo = np.take_along_axis(ordered, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
-    hi = np.take_along_axis(ordered, (n // 2)[..., None], axis=-1)[..., 0]
-    return np.where(n > 0, 0.5 * (lo + hi), np.nan)
+def _ray_arrays(rays: ViewRays) -> tuple[np.ndarray, ...]:
+    """keypoints, owner, origins and dirs of rays as the kernels take them."""
+    return (np.ascontiguousarray(rays.keypoints, dtype=np.float64), rays.owner.astype(np.int64),
+            np.ascontiguousarray(rays.origins, dtype=np.float64), np.ascontiguousarray(rays.dirs, dtype=np.float64))
+
+
+@functools.lru_cache(maxsize=8)
+def _rig_arrays(cameras: tuple[Camera | None, ...]) -> tuple[np.ndarray, ...]:
+    """R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5) and has_distortion (C,) of a rig, made once
+    per rig (a camera not known yet, None, has no views: any values do)."""
+    rig = [cam if cam is not None else _NO_CAMERA for cam in cameras]
+    return (np.stack([cam.R for cam in rig]), np.stack([cam.t for cam in rig]), np.stack([cam.K for cam in rig]),
+            np.stack([cam.dist for cam in rig]), np.array([cam.has_distortion for cam in rig]))
 
 
 def consistent_views(cameras: Sequence[Camera], rays: ViewRays, people: Sequence[Sequence[int]],
                      min_score: float, max_residual: float) -> list[list[int]]:
     """people[p] (rows of `rays`, one per camera) without the views the others contradict (module
     docstring); each keeps at least two. max_residual <= 0 keeps every view."""
-    kept = [list(v) for v in people]
-    if max_residual <= 0:
-        return kept
-    active = [p for p, v in enumerate(kept) if len(v) >= 3]
-    while active:
-        r = leave_one_out_residuals(cameras, rays, [kept[p] for p in active], min_score)  # (A, out, view)
-        left_out = np.diagonal(r, axis1=1, axis2=2)  # (A, K)
-        spread = np.where(np.eye(r.shape[1], dtype=bool) | np.isnan(r), -np.inf, r).max(axis=2)  # worst of the rest
-        candidate = np.isfinite(left_out) & np.isfinite(spread)
-        worst = np.argmin(np.where(candidate, spread, np.inf), axis=1)  # (A,)
-        out, rest = (np.take_along_axis(x, worst[:, None], axis=1)[:, 0] for x in (left_out, spread))
-        drop = candidate.any(axis=1) & (out > max_residual) & (rest < out)
-        for row in np.flatnonzero(drop):
-            del kept[active[row]][worst[row]]
-        active = [active[row] for row in np.flatnonzero(drop) if len(kept[active[row]]) >= 3]
-    return kept
+    if max_residual <= 0 or not any(len(v) >= 3 for v in people):
+        return [list(v) for v in people]
+    idx = np.full((len(people), max(len(v) for v in people)), -1, dtype=np.int64)
+    for p, views in enumerate(people):
+        idx[p, :len(views)] = views
+    lengths = np.array([len(v) for v in people], dtype=np.int64)
+    _leave_out_contradicted(*_ray_arrays(rays), idx, lengths, float(min_score), float(max_residual),
+                            *_rig_arrays(tuple(cameras)))
+    return [row[:n] for row, n in zip(idx.tolist(), lengths.tolist())]
