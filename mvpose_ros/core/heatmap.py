@@ -189,24 +189,25 @@ def _peak(values, start, rows, cols, origin, stride, out):
 def _lookup(values, start, rows, cols, origin, stride, uv, per_map, out):
     # uv (N * J * K, 2): K pixels per map; the same arithmetic, in the same order, as numpy's
     # bilinear interpolation on whole arrays
-    for i in range(len(out)):
-        m = i // per_map
+    for m in range(len(start)):
         inv = 1.0 / stride[m]
-        c = (uv[i, 0] - origin[m, 0]) * inv
-        r = (uv[i, 1] - origin[m, 1]) * inv
         h, w = rows[m], cols[m]
-        if not (c >= 0 and c <= w - 1 and r >= 0 and r <= h - 1):  # False for NaN
-            out[i] = 0.0
-            continue
-        c0 = min(np.int64(c), max(w - 2, 0))
-        r0 = min(np.int64(r), max(h - 2, 0))
-        fc, fr = c - c0, r - r0
-        base = start[m] + r0 * w + c0
-        right = min(c0 + 1, w - 1) - c0
-        down = (min(r0 + 1, h - 1) - r0) * w
-        top = values[base] * (1 - fc) + values[base + right] * fc
-        bottom = values[base + down] * (1 - fc) + values[base + down + right] * fc
-        out[i] = top * (1 - fr) + bottom * fr
+        last_c, last_r = max(w - 2, 0), max(h - 2, 0)
+        for i in range(m * per_map, (m + 1) * per_map):
+            c = (uv[i, 0] - origin[m, 0]) * inv
+            r = (uv[i, 1] - origin[m, 1]) * inv
+            if not (c >= 0 and c <= w - 1 and r >= 0 and r <= h - 1):  # False for NaN
+                out[i] = 0.0
+                continue
+            c0 = min(int(c), last_c)
+            r0 = min(int(r), last_r)
+            fc, fr = c - c0, r - r0
+            base = start[m] + r0 * w + c0
+            right = min(c0 + 1, w - 1) - c0
+            down = (min(r0 + 1, h - 1) - r0) * w
+            top = values[base] * (1 - fc) + values[base + right] * fc
+            bottom = values[base + down] * (1 - fc) + values[base + down + right] * fc
+            out[i] = top * (1 - fr) + bottom * fr
 
 
 def render_heatmap(centres: list[np.ndarray], stride: float, sigma: float) -> PersonHeatmap:
