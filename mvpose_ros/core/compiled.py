@@ -21,7 +21,8 @@ import numba
 
 # Every module that defines kernels (test_compiled checks that none is missing).
 KERNEL_MODULES: tuple[str, ...] = ('mvpose_ros.core.geometry.camera', 'mvpose_ros.core.heatmap',
-                                   'mvpose_ros.core.inference.factors')
+                                   'mvpose_ros.core.inference.factors',
+                                   'mvpose_ros.core.inference.hypotheses')
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:

@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
 from mvpose_ros.core.geometry.camera import Camera, line_terms, rig_directions, solve_line_terms
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
@@ -73,48 +74,32 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     if n_views == 0:
         return []
     n_people, n_maps = len(people), n_views * n_joints
-    counts = np.array([len(v) for v in people], dtype=np.intp)
-    first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
-    owner = np.repeat(np.arange(n_people), counts)  # (V,) each view's person
+    counts = np.array([len(v) for v in people], dtype=np.int64)
+    first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator: one
     # call per person gives the same stream as a call per array
-    u = np.empty((n_views, n_joints, m))
-    jitter = np.empty((n_views, n_joints, m, 2))
+    draws = np.empty((n_views, 3 * n_joints * m))
     for p, rng in enumerate(rngs):
-        lo, hi = first_view[p], first_view[p + 1]
-        draws = rng.random((hi - lo, 3 * n_joints * m))
-        u[lo:hi] = draws[:, :n_joints * m].reshape(-1, n_joints, m)
-        jitter[lo:hi] = draws[:, n_joints * m:].reshape(-1, n_joints, m, 2)
+        rng.random(out=draws[first_view[p]:first_view[p + 1]])
     peaks = stack.peak()  # (V, J, 3)
 
     # each (person, joint): how many of the person's views see it, and those views in order
-    sees = np.zeros((n_people, counts.max(), n_joints), dtype=bool)
-    sees[owner, np.arange(n_views) - first_view[owner]] = peaks[..., 2] > 0
-    n_seen = sees.sum(axis=1)  # (P, J)
-    seeing = first_view[:-1, None, None] + np.argsort(~sees, axis=1, kind='stable')  # (P, K, J) views, seeing first
+    n_seen = np.empty((n_people, n_joints), dtype=np.int64)
+    seeing = np.empty((n_people, counts.max(), n_joints), dtype=np.int64)
+    _seeing(peaks, first_view, n_seen, seeing)
     width = int(n_seen.max())
     # Rays are made only for the draws a hypothesis uses (a camera of a joint seen by 5 uses ~23
-    # of its m): first every map's peak (ray v * J + j), then each map's first need[v, j] draws.
-    # The joints seen by n >= 2 views share one plan of which rays make each hypothesis.
-    need = np.zeros((n_views, n_joints), dtype=np.intp)
-    plans = []  # (plan, persons (Q,), joints (Q,), views (Q, n)) per n
-    for n in range(2, width + 1):
-        pp, pj = np.nonzero(n_seen == n)
-        if len(pp):
-            views = seeing[pp, :n, pj]
-            plan = _plan(n, m, config.peak_hypotheses, width)
-            need[views, pj[:, None]] = plan[2]
-            plans.append((plan, pp, pj, views))
-    single_p, single_j = np.nonzero(n_seen == 1)
-    single_view = seeing[single_p, 0, single_j]
-    need[single_view, single_j] = m  # every draw, for the rays of a single view (below)
-    first_draw = n_maps + np.concatenate([[0], np.cumsum(need.ravel())[:-1]]).reshape(n_views, n_joints)
-    maps = np.repeat(np.arange(n_maps), need.ravel())
-    k = np.arange(len(maps)) - (first_draw.ravel() - n_maps)[maps]  # each draw's index within its map
+    # of its m): first every map's peak (ray v * J + j), then each map's first draws, as many as
+    # the plan of its joint's number of views uses (all m for a single view: its rays, below).
+    cam_of, draw, used = _plans(m, config.peak_hypotheses, width)
+    first_draw = np.empty((n_views, n_joints), dtype=np.int64)
+    maps = np.empty(n_maps * m, dtype=np.int64)
+    u = np.empty(n_maps * m)
+    jitter = np.empty((n_maps * m, 2))
+    n_draws = _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter)
     pixels = np.concatenate([peaks[..., :2].reshape(-1, 2),
-                             stack.sample_at(maps, u.reshape(n_maps, m)[maps, k],
-                                             jitter.reshape(n_maps, m, 2)[maps, k])])  # (R, 2)
-    view = np.concatenate([np.arange(n_maps), maps]) // n_joints  # (R,)
+                             stack.sample_at(maps[:n_draws], u[:n_draws], jitter[:n_draws])])  # (R, 2)
+    view = np.concatenate([np.arange(n_maps), maps[:n_draws]]) // n_joints  # (R,)
     cameras = [cam for views in people for cam, _ in views]
     rig = list({id(c): c for c in cameras}.values())
     camera_of_view = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])  # (V,)
@@ -122,37 +107,148 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     centres = np.stack([cam.centre for cam in rig])[camera_of_view]  # (V, 3)
 
     out = np.full((n_people, n_joints, m, 3), np.nan)
-    if plans:
+    persons, joints = np.nonzero(n_seen >= 2)
+    if len(persons):
         # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
-        # shares and one solve for the whole frame; the last column is no ray at all (zeros), for
-        # the slots where a subset is padded to K cameras
-        terms = np.zeros((9, len(dirs) + 1))
-        line_terms(centres[view], dirs, out=terms[:, :-1])
-        ray = np.concatenate([_rays(plan_views[:, cam_of], plan_joints, draw, m, n_joints, first_draw)
-                              for (cam_of, draw, _), _, plan_joints, plan_views in plans])  # (Q, m, K)
-        ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
-        summed = terms[:, ray[0]]  # (9, Q, m)
-        for slot in ray[1:]:
-            summed += terms[:, slot]
-        persons = np.concatenate([plan_persons for _, plan_persons, _, _ in plans])
-        joints = np.concatenate([plan_joints for _, _, plan_joints, _ in plans])
+        # shares and one solve for the whole frame
+        summed = np.empty((9, len(persons), m))
+        _sum_terms(line_terms(centres[view], dirs), n_seen, seeing, first_draw, cam_of, draw,
+                   summed.reshape(9, -1))
         out[persons, joints] = solve_line_terms(summed, width)  # (Q, m, 3)
-
-    located = ~np.isnan(out).all(axis=(1, 2, 3))  # (P,) anyone with a joint seen twice
-    centre = np.full((n_people, 3), np.nan)
-    centre[located] = np.nanmean(out[located].reshape(-1, n_joints * m, 3), axis=1)
-    # a joint seen by a single camera: its m rays, each at a depth chosen below
-    keep = located[single_p]
-    single_p, single_j, single_view = single_p[keep], single_j[keep], single_view[keep]
-    origin = centres[single_view]  # (S, 3)
-    direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]  # (S, m, 3)
-    depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
-    if config.single_view_depth == 'limb':
-        depth = _limb_depths(depth, direction, origin, single_p, single_j, _anchors(out, config))
-    out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
-    unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
-    out[unseen_p, unseen_j] = centre[unseen_p, None]
+    # the joints seen by one camera or none, from the person's centre (mean hypothesis) and
+    # the anchors of the joints seen twice
+    located = np.empty(n_people, dtype=np.bool_)
+    _complete(out, n_seen, seeing, first_draw, dirs, centres, _anchors(out, config),
+              config.single_view_depth == 'limb', _PARENT, PRIOR_BONE_LENGTH, located)
     return [out[p] if located[p] else None for p in range(n_people)]
+
+
+_PARENT = INFERENCE_PARENT.astype(np.int64)
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], int64[:, ::1], int64[:, :, ::1])')
+def _seeing(peaks, first_view, n_seen, seeing):
+    # peaks (V, J, 3) -> per (person, joint) the number of its views with a peak, and those
+    # views (P, K, J), in order
+    for p in range(len(first_view) - 1):
+        for j in range(peaks.shape[1]):
+            n = 0
+            for v in range(first_view[p], first_view[p + 1]):
+                if peaks[v, j, 2] > 0:
+                    seeing[p, n, j] = v
+                    n += 1
+            n_seen[p, j] = n
+
+
+@kernel('int64(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], int64[:, ::1], int64[::1], '
+        'float64[::1], float64[:, ::1])')
+def _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter):
+    # how many draws each map uses (used[n, c]: of the c-th of n cameras; all m of a single
+    # view), where its rays start (after the V * J peaks), and those draws: their maps, u and
+    # jitter (from draws (V, 3 J m), u (J, m) then jitter (J, m, 2) of each view); their number
+    n_views, n_joints = first_draw.shape
+    m = draws.shape[1] // (3 * n_joints)
+    need = np.zeros((n_views, n_joints), dtype=np.int64)
+    for p in range(n_seen.shape[0]):
+        for j in range(n_joints):
+            n = n_seen[p, j]
+            if n == 1:
+                need[seeing[p, 0, j], j] = m
+            for c in range(n if n >= 2 else 0):
+                need[seeing[p, c, j], j] = used[n, c]
+    r = 0
+    for v in range(n_views):
+        for j in range(n_joints):
+            first_draw[v, j] = n_views * n_joints + r
+            for k in range(need[v, j]):
+                maps[r] = v * n_joints + j
+                u[r] = draws[v, j * m + k]
+                jitter[r, 0] = draws[v, n_joints * m + 2 * (j * m + k)]
+                jitter[r, 1] = draws[v, n_joints * m + 2 * (j * m + k) + 1]
+                r += 1
+    return r
+
+
+@kernel('void(float64[:, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, :, ::1], '
+        'float64[:, ::1])')
+def _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, out):
+    # out (9, Q * m): per joint seen by n >= 2 views (person-major) and hypothesis h, the sum of
+    # the line terms (9, R) of its rays, by its plan (cam_of[n], draw[n]: (m, K)); slots a
+    # subset leaves empty add zeros, as numpy summed a zero column
+    n_joints = n_seen.shape[1]
+    m, width = draw.shape[1], draw.shape[2]
+    q = 0
+    for p in range(n_seen.shape[0]):
+        for j in range(n_joints):
+            n = n_seen[p, j]
+            if n < 2:
+                continue
+            for h in range(m):
+                col = q * m + h
+                for slot in range(width):
+                    d = draw[n, h, slot]
+                    if d < 0:
+                        for t in range(9):
+                            out[t, col] += 0.0
+                        continue
+                    v = seeing[p, cam_of[n, h, slot], j]
+                    ray = v * n_joints + j if d == m else first_draw[v, j] + d
+                    for t in range(9):
+                        out[t, col] = terms[t, ray] if slot == 0 else out[t, col] + terms[t, ray]
+            q += 1
+
+
+@kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
+        'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[::1], boolean[::1])')
+def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, located):
+    # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
+    # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
+    # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
+    # or, with limb, where they meet the sphere of the bone's length around the parent's
+    # anchor (the nearer of the two to the centre's depth; a ray missing it: its point nearest
+    # the parent); a joint seen by none, the centre.
+    n_joints, m = out.shape[1], out.shape[2]
+    for p in range(out.shape[0]):
+        total = np.zeros(3)
+        count = np.zeros(3)
+        for j in range(n_joints):
+            for k in range(m):
+                for c in range(3):
+                    x = out[p, j, k, c]
+                    if np.isnan(x):
+                        total[c] += 0.0
+                    else:
+                        total[c] += x
+                        count[c] += 1
+        located[p] = count[0] > 0 or count[1] > 0 or count[2] > 0
+        if not located[p]:
+            continue
+        centre = total / count
+        for j in range(n_joints):
+            if n_seen[p, j] == 0:
+                for k in range(m):
+                    out[p, j, k] = centre
+            if n_seen[p, j] != 1:
+                continue
+            v = seeing[p, 0, j]
+            o = centres[v]
+            to_centre = centre - o
+            parent = parents[j]
+            anchor = anchors[p, max(parent, 0)]
+            rel = anchor - o
+            rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
+            on_limb = limb and parent >= 0 and not np.isnan(anchor[0]) and not np.isnan(lengths[j])
+            for k in range(m):
+                d = dirs[first_draw[v, j] + k]
+                # dot products summed x, z, then y: numpy's einsum, for the same bits
+                depth = (d[0] * to_centre[0] + d[2] * to_centre[2]) + d[1] * to_centre[1]
+                if on_limb:
+                    mid = (d[0] * rel[0] + d[2] * rel[2]) + d[1] * rel[1]
+                    half = np.sqrt(max(mid * mid - rel_sq + lengths[j] * lengths[j], 0.0))
+                    near, far = mid - half, mid + half
+                    depth = near if np.abs(near - depth) <= np.abs(far - depth) else far
+                for c in range(3):
+                    out[p, j, k, c] = o[c] + depth * d[c]
 
 
 def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
@@ -165,34 +261,6 @@ def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
     seen = ~np.isnan(hyp[:, :, 0, 0])
     out[seen] = np.median(hyp[seen], axis=1)
     return out
-
-
-def _limb_depths(depth: np.ndarray, direction: np.ndarray, origin: np.ndarray, persons: np.ndarray,
-                 joints: np.ndarray, anchors: np.ndarray) -> np.ndarray:
-    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (n, 3) of joints
-    `joints` (n,) of `persons` (n,) where each ray meets the sphere of its bone's length around its
-    parent's anchor (anchors (P, J, 3)); of the two, the one nearer the given depth (the person's
-    centre). A ray missing the sphere takes its point nearest the parent; a joint without a
-    located parent keeps `depth`."""
-    parent = INFERENCE_PARENT[joints]
-    length = PRIOR_BONE_LENGTH[joints]
-    anchor = anchors[persons, np.maximum(parent, 0)]  # (n, 3)
-    rel = anchor - origin
-    mid = np.einsum('nmd,nd->nm', direction, rel)  # depth of the point nearest the parent
-    half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
-    near, far = mid - half, mid + half
-    limb = np.where(np.abs(near - depth) <= np.abs(far - depth), near, far)
-    located = (parent >= 0) & ~np.isnan(anchor[:, 0]) & ~np.isnan(length)
-    return np.where(located[:, None], limb, depth)
-
-
-def _rays(views: np.ndarray, joints: np.ndarray, draw: np.ndarray, m: int, n_joints: int,
-          first_draw: np.ndarray) -> np.ndarray:
-    """Ray indices (joints, m, K) of the hypotheses of `joints` from a plan's views (m, K) and
-    draws (m, K) (draw m: the peak, ray v * J + j; -1: padding, the zero column -1)."""
-    j = joints[:, None, None]
-    ray = np.where(draw == m, views * n_joints + j, first_draw[views, j] + draw)
-    return np.where(draw < 0, -1, ray)
 
 
 @functools.lru_cache(maxsize=256)
@@ -216,3 +284,15 @@ def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray
         cam_of[i, :len(subset)] = subset
         draw[i, :len(subset)] = draws
     return cam_of, draw, np.array(used, dtype=np.intp)
+
+
+@functools.lru_cache(maxsize=64)
+def _plans(m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The _plan of every camera count n <= width, stacked: camera (width + 1, m, width) and draw
+    (width + 1, m, width) indices, draws used of each camera (width + 1, width)."""
+    cam_of = np.zeros((width + 1, m, width), dtype=np.int64)
+    draw = np.full((width + 1, m, width), -1, dtype=np.int64)
+    used = np.zeros((width + 1, width), dtype=np.int64)
+    for n in range(2, width + 1):
+        cam_of[n], draw[n], used[n, :n] = _plan(n, m, with_peaks, width)
+    return cam_of, draw, used
