@@ -111,9 +111,10 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     if len(persons):
         # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
         # shares and one solve for the whole frame
+        terms = np.empty((len(dirs), 9))  # ray after ray: a hypothesis reads its rays' terms whole
+        line_terms(centres[view], dirs, out=terms.T)
         summed = np.empty((9, len(persons), m))
-        _sum_terms(line_terms(centres[view], dirs), n_seen, seeing, first_draw, cam_of, draw,
-                   summed.reshape(9, -1))
+        _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, summed.reshape(9, -1))
         out[persons, joints] = solve_line_terms(summed, width)  # (Q, m, 3)
     # the joints seen by one camera or none, from the person's centre (mean hypothesis) and
     # the anchors of the joints seen twice
@@ -173,10 +174,11 @@ def _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter):
         'float64[:, ::1])')
 def _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, out):
     # out (9, Q * m): per joint seen by n >= 2 views (person-major) and hypothesis h, the sum of
-    # the line terms (9, R) of its rays, by its plan (cam_of[n], draw[n]: (m, K)); slots a
+    # the line terms (R, 9) of its rays, by its plan (cam_of[n], draw[n]: (m, K)); slots a
     # subset leaves empty add zeros, as numpy summed a zero column
     n_joints = n_seen.shape[1]
     m, width = draw.shape[1], draw.shape[2]
+    total = np.empty(9)
     q = 0
     for p in range(n_seen.shape[0]):
         for j in range(n_joints):
@@ -184,17 +186,18 @@ def _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, out):
             if n < 2:
                 continue
             for h in range(m):
-                col = q * m + h
                 for slot in range(width):
                     d = draw[n, h, slot]
                     if d < 0:
                         for t in range(9):
-                            out[t, col] += 0.0
+                            total[t] += 0.0
                         continue
                     v = seeing[p, cam_of[n, h, slot], j]
                     ray = v * n_joints + j if d == m else first_draw[v, j] + d
                     for t in range(9):
-                        out[t, col] = terms[t, ray] if slot == 0 else out[t, col] + terms[t, ray]
+                        total[t] = terms[ray, t] if slot == 0 else total[t] + terms[ray, t]
+                for t in range(9):
+                    out[t, q * m + h] = total[t]
             q += 1
 
 
