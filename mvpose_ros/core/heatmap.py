@@ -127,35 +127,23 @@ _STACKS = [f'{cells}[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], 
 @kernel(*(f'void({stack}, int64[::1], float64[::1], float64[:, ::1], float64[:, ::1])' for stack in _STACKS))
 def _sample(values, start, rows, cols, origin, stride, maps, u, jitter, out):
     # Only non-zero cells can be drawn: one CDF (float64, summed in cell order) over the non-zero
-    # cells of every map, each map drawing inside its own stretch [first, end) of it. The sums
-    # run over every map, the CDF itself is written out for the maps drawn from only.
+    # cells of every map, each map drawing inside its own stretch [first, end) of it. nz and cum
+    # are sized for every cell, but only their first (non-zero) entries are ever touched.
     n_maps = len(start)
+    nz = np.empty(len(values), np.int64)
+    cum = np.empty(len(values) + 1)
     first = np.empty(n_maps, np.int64)
     end = np.empty(n_maps, np.int64)
-    before = np.empty(n_maps)  # the CDF at each map's first non-zero cell
-    total, n = 0.0, 0
+    cum[0] = 0.0
+    n = 0
     for m in range(n_maps):
         first[m] = n
-        before[m] = total
         for c in range(start[m], start[m] + rows[m] * cols[m]):
             if values[c] != 0:
-                total += np.float64(values[c])
+                nz[n] = c
+                cum[n + 1] = cum[n] + np.float64(values[c])
                 n += 1
         end[m] = n
-    drawn = np.zeros(n_maps, np.bool_)
-    for m in maps:
-        drawn[m] = True
-    nz = np.empty(n, np.int64)
-    cum = np.empty(n + 1)
-    for m in range(n_maps):
-        if drawn[m]:
-            k = first[m]
-            cum[k] = before[m]
-            for c in range(start[m], start[m] + rows[m] * cols[m]):
-                if values[c] != 0:
-                    nz[k] = c
-                    cum[k + 1] = cum[k] + np.float64(values[c])
-                    k += 1
     for i in range(len(maps)):
         m = maps[i]
         lo, hi = first[m], end[m]
@@ -163,7 +151,8 @@ def _sample(values, start, rows, cols, origin, stride, maps, u, jitter, out):
             out[i, 0] = np.nan
             out[i, 1] = np.nan
             continue
-        q = cum[lo] + u[i] * (cum[hi] - cum[lo])
+        before = cum[lo]
+        q = before + u[i] * (cum[hi] - before)
         # the last cumulative sum <= q; rounding can step past the stretch, kept inside it
         a, b = lo, hi + 1
         while a < b:
