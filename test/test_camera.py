@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from mvpose_ros.core.geometry.camera import (Camera, closest_point_to_rays, line_terms, load_rig, ray_ray_distance,
-                                             rig_directions, rig_project, solve_line_terms)
+from mvpose_ros.core.geometry.camera import (Camera, closest_point_to_rays, closest_points_of_ray_sets, line_terms,
+                                             load_rig, ray_ray_distance, rig_directions, rig_project,
+                                             solve_line_terms)
 from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt, load_actors_gt_2d
 
 SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]
@@ -254,6 +255,28 @@ def test_line_terms_and_their_solve_are_numpys_arithmetic():
                                rtol=1e-9)
     assert np.isnan(x[[1, 2]]).all()
     assert solve_line_terms(np.zeros((9, 0)), 2).shape == (0, 3)
+
+
+def test_closest_points_of_ray_sets_are_line_terms_summed_and_solved():
+    rng = np.random.default_rng(8)
+    centres = rng.normal(size=(4, 3))
+    of = rng.integers(0, 4, 30)
+    dirs = rng.normal(size=(30, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    sets = rng.integers(0, 30, (12, 4))
+    sets[:4, 3] = -1  # sets of three
+    sets[4, 1:] = -1  # one ray alone: NaN
+    sets[5, 1] = sets[5, 0]  # the same ray twice, and two more
+    # numpy: every ray's terms, a zero column for padding, summed slot after slot, solved
+    terms = np.concatenate([line_terms(centres[of], dirs), np.zeros((9, 1))], axis=1)
+    summed = terms[:, sets[:, 0]]
+    for k in range(1, 4):
+        summed += terms[:, sets[:, k]]
+    expected = solve_line_terms(summed, 4)
+    points = closest_points_of_ray_sets(centres, of, dirs, sets)
+    np.testing.assert_array_equal(points, expected)
+    assert np.isnan(points[4]).all() and np.isfinite(points[np.arange(12) != 4]).all()
+    assert closest_points_of_ray_sets(centres, of, dirs, np.zeros((0, 2), int)).shape == (0, 3)
 
 
 def test_closest_point_exact_without_noise():

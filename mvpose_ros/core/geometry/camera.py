@@ -326,20 +326,28 @@ def line_terms(origins: np.ndarray, dirs: np.ndarray, out: np.ndarray | None = N
     return out
 
 
+@kernel('void(float64[::1], float64[::1], float64[::1])')
+def _ray_terms(o, d, out):
+    # one line's share (9,) of the normal equations, as numpy computed it on whole arrays
+    dx, dy, dz = d[0], d[1], d[2]
+    along = dx * o[0] + dy * o[1] + dz * o[2]
+    out[0] = -(dx * dx) + 1.0
+    out[1] = -(dx * dy)
+    out[2] = -(dx * dz)
+    out[3] = -(dy * dy) + 1.0
+    out[4] = -(dy * dz)
+    out[5] = -(dz * dz) + 1.0
+    out[6] = o[0] - dx * along
+    out[7] = o[1] - dy * along
+    out[8] = o[2] - dz * along
+
+
 @kernel('void(float64[:, ::1], float64[:, ::1], float64[:, :])')
 def _line_terms(o, d, out):
+    terms = np.empty(9)
     for n in range(len(d)):
-        dx, dy, dz = d[n, 0], d[n, 1], d[n, 2]
-        along = dx * o[n, 0] + dy * o[n, 1] + dz * o[n, 2]
-        out[0, n] = -(dx * dx) + 1.0
-        out[1, n] = -(dx * dy)
-        out[2, n] = -(dx * dz)
-        out[3, n] = -(dy * dy) + 1.0
-        out[4, n] = -(dy * dz)
-        out[5, n] = -(dz * dz) + 1.0
-        out[6, n] = o[n, 0] - dx * along
-        out[7, n] = o[n, 1] - dy * along
-        out[8, n] = o[n, 2] - dz * along
+        _ray_terms(o[n], d[n], terms)
+        out[:, n] = terms
 
 
 def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:
@@ -352,23 +360,58 @@ def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:
     return x
 
 
+@kernel('void(float64[::1], float64, float64[::1])')
+def _solve(terms, singular, out):
+    a00, a01, a02, a11, a12, a22 = terms[0], terms[1], terms[2], terms[3], terms[4], terms[5]
+    b0, b1, b2 = terms[6], terms[7], terms[8]
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if np.isfinite(det) and np.isfinite(b0 + b1 + b2) and np.abs(det) > singular:
+        inv = 1.0 / det
+        out[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv
+        out[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv
+        out[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
+    else:
+        out[:] = np.nan
+
+
 @kernel('void(float64[:, ::1], float64, float64[:, ::1])')
 def _solve_line_terms(terms, singular, out):
+    summed = np.empty(9)
     for n in range(terms.shape[1]):
-        a00, a01, a02, a11, a12, a22 = terms[0, n], terms[1, n], terms[2, n], terms[3, n], terms[4, n], terms[5, n]
-        b0, b1, b2 = terms[6, n], terms[7, n], terms[8, n]
-        c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-        c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-        det = a00 * c00 + a01 * c01 + a02 * c02
-        if np.isfinite(det) and np.isfinite(b0 + b1 + b2) and np.abs(det) > singular:
-            inv = 1.0 / det
-            out[n, 0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv
-            out[n, 1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv
-            out[n, 2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-        else:
-            out[n, 0] = np.nan
-            out[n, 1] = np.nan
-            out[n, 2] = np.nan
+        summed[:] = terms[:, n]
+        _solve(summed, singular, out[n])
+
+
+def closest_points_of_ray_sets(centres: np.ndarray, of: np.ndarray, dirs: np.ndarray, sets: np.ndarray) -> np.ndarray:
+    """(N, 3) the point closest to each of N sets of rays, as line_terms then solve_line_terms
+    (the same arithmetic, each set's terms summed in its order): set n is the rays sets[n]
+    (N, K) (-1: no ray, padding), ray r going from centres[of[r]] ((C, 3) metres, (R,)) along the
+    unit dirs[r] (R, 3). NaN where a set is degenerate; K scales the singularity threshold as
+    solve_line_terms' n_lines. Without the (9, R) terms of every ray and (9, N) of every set."""
+    sets = np.ascontiguousarray(sets, dtype=np.int64)
+    out = np.empty((len(sets), 3))
+    _closest_points(np.ascontiguousarray(centres, dtype=np.float64), np.ascontiguousarray(of, dtype=np.int64),
+                    np.ascontiguousarray(dirs, dtype=np.float64), sets, 1e-12 * sets.shape[1] ** 3, out)
+    return out
+
+
+@kernel('void(float64[:, ::1], int64[::1], float64[:, ::1], int64[:, ::1], float64, float64[:, ::1])')
+def _closest_points(centres, of, dirs, sets, singular, out):
+    terms = np.empty(9)
+    summed = np.empty(9)
+    for n in range(len(sets)):
+        for k in range(sets.shape[1]):
+            r = sets[n, k]
+            if r < 0:  # padding: numpy summed a column of zeros
+                for t in range(9):
+                    summed[t] += 0.0
+                continue
+            _ray_terms(centres[of[r]], dirs[r], terms)
+            for t in range(9):
+                summed[t] = terms[t] if k == 0 else summed[t] + terms[t]
+        _solve(summed, singular, out[n])
 
 
 def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

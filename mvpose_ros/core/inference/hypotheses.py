@@ -17,7 +17,7 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
-from mvpose_ros.core.geometry.camera import Camera, line_terms, rig_directions, solve_line_terms
+from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
@@ -103,19 +103,16 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     cameras = [cam for views in people for cam, _ in views]
     rig = list({id(c): c for c in cameras}.values())
     camera_of_view = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])  # (V,)
-    dirs = rig_directions(rig, camera_of_view[view], pixels)  # (R, 3)
+    dirs = rig_directions(rig, np.take(camera_of_view, view), pixels)  # (R, 3)
     centres = np.stack([cam.centre for cam in rig])[camera_of_view]  # (V, 3)
 
     out = np.full((n_people, n_joints, m, 3), np.nan)
     persons, joints = np.nonzero(n_seen >= 2)
     if len(persons):
-        # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
-        # shares and one solve for the whole frame
-        terms = np.empty((len(dirs), 9))  # ray after ray: a hypothesis reads its rays' terms whole
-        line_terms(centres[view], dirs, out=terms.T)
-        summed = np.empty((9, len(persons), m))
-        _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, summed.reshape(9, -1))
-        out[persons, joints] = solve_line_terms(summed, width)  # (Q, m, 3)
+        # the rays of each hypothesis, then one least-squares solve for the whole frame
+        sets = np.empty((len(persons) * m, width), dtype=np.int64)
+        _ray_sets(n_seen, seeing, first_draw, cam_of, draw, sets)
+        out[persons, joints] = closest_points_of_ray_sets(centres, view, dirs, sets).reshape(-1, m, 3)
     # the joints seen by one camera or none, from the person's centre (mean hypothesis) and
     # the anchors of the joints seen twice
     located = np.empty(n_people, dtype=np.bool_)
@@ -170,16 +167,13 @@ def _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter):
     return r
 
 
-@kernel('void(float64[:, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, :, ::1], '
-        'float64[:, ::1])')
-def _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, out):
-    # out (9, Q * m): per joint seen by n >= 2 views (person-major) and hypothesis h, the sum of
-    # the line terms (R, 9) of its rays, by its plan (cam_of[n], draw[n]: (m, K)); slots a
-    # subset leaves empty add zeros, as numpy summed a zero column
+@kernel('void(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, :, ::1], int64[:, ::1])')
+def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
+    # out (Q * m, K): per joint seen by n >= 2 views (person-major) and hypothesis h, its rays by
+    # its plan (cam_of[n], draw[n]: (m, K)): a view's peak ray, a draw's ray, or -1 (padding)
     n_joints = n_seen.shape[1]
     m, width = draw.shape[1], draw.shape[2]
-    total = np.empty(9)
-    q = 0
+    row = 0
     for p in range(n_seen.shape[0]):
         for j in range(n_joints):
             n = n_seen[p, j]
@@ -188,17 +182,9 @@ def _sum_terms(terms, n_seen, seeing, first_draw, cam_of, draw, out):
             for h in range(m):
                 for slot in range(width):
                     d = draw[n, h, slot]
-                    if d < 0:
-                        for t in range(9):
-                            total[t] += 0.0
-                        continue
                     v = seeing[p, cam_of[n, h, slot], j]
-                    ray = v * n_joints + j if d == m else first_draw[v, j] + d
-                    for t in range(9):
-                        total[t] = terms[ray, t] if slot == 0 else total[t] + terms[ray, t]
-                for t in range(9):
-                    out[t, q * m + h] = total[t]
-            q += 1
+                    out[row, slot] = -1 if d < 0 else v * n_joints + j if d == m else first_draw[v, j] + d
+                row += 1
 
 
 @kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
