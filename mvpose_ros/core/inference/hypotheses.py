@@ -76,11 +76,6 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     n_people, n_maps = len(people), n_views * n_joints
     counts = np.array([len(v) for v in people], dtype=np.int64)
     first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator: one
-    # call per person gives the same stream as a call per array
-    draws = np.empty((n_views, 3 * n_joints * m))
-    for p, rng in enumerate(rngs):
-        rng.random(out=draws[first_view[p]:first_view[p + 1]])
     peaks = stack.peak()  # (V, J, 3)
 
     # each (person, joint): how many of the person's views see it, and those views in order
@@ -92,14 +87,21 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     # of its m): first every map's peak (ray v * J + j), then each map's first draws, as many as
     # the plan of its joint's number of views uses (all m for a single view: its rays, below).
     cam_of, draw, used = _plans(m, config.peak_hypotheses, width)
+    need = np.empty((n_views, n_joints), dtype=np.int64)
     first_draw = np.empty((n_views, n_joints), dtype=np.int64)
-    maps = np.empty(n_maps * m, dtype=np.int64)
-    u = np.empty(n_maps * m)
-    jitter = np.empty((n_maps * m, 2))
-    n_draws = _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter)
-    pixels = np.concatenate([peaks[..., :2].reshape(-1, 2),
-                             stack.sample_at(maps[:n_draws], u[:n_draws], jitter[:n_draws])])  # (R, 2)
-    view = np.concatenate([np.arange(n_maps), maps[:n_draws]]) // n_joints  # (R,)
+    n_draws = _needs(n_seen, seeing, used, m, need, first_draw)
+    maps = np.empty(n_draws, dtype=np.int64)
+    u = np.empty(n_draws)
+    jitter = np.empty((n_draws, 2))
+    # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator (one
+    # call per person gives the same stream as a call per array), into one buffer: those kept are
+    # copied out before the next person's overwrite them
+    draws = np.empty((counts.max(), 3 * n_joints * m))
+    for p, rng in enumerate(rngs):
+        rng.random(out=draws[:counts[p]])
+        _keep_draws(draws[:counts[p]], first_view[p], need, first_draw, maps, u, jitter)
+    pixels = np.concatenate([peaks[..., :2].reshape(-1, 2), stack.sample_at(maps, u, jitter)])  # (R, 2)
+    view = np.concatenate([np.arange(n_maps), maps]) // n_joints  # (R,)
     cameras = [cam for views in people for cam, _ in views]
     rig = list({id(c): c for c in cameras}.values())
     camera_of_view = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])  # (V,)
@@ -138,15 +140,12 @@ def _seeing(peaks, first_view, n_seen, seeing):
             n_seen[p, j] = n
 
 
-@kernel('int64(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], int64[:, ::1], int64[::1], '
-        'float64[::1], float64[:, ::1])')
-def _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter):
-    # how many draws each map uses (used[n, c]: of the c-th of n cameras; all m of a single
-    # view), where its rays start (after the V * J peaks), and those draws: their maps, u and
-    # jitter (from draws (V, 3 J m), u (J, m) then jitter (J, m, 2) of each view); their number
-    n_views, n_joints = first_draw.shape
-    m = draws.shape[1] // (3 * n_joints)
-    need = np.zeros((n_views, n_joints), dtype=np.int64)
+@kernel('int64(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64, int64[:, ::1], int64[:, ::1])')
+def _needs(n_seen, seeing, used, m, need, first_draw):
+    # how many draws each map (V, J) uses (used[n, c]: of the c-th of n cameras; all m of a single
+    # view), where its rays start (after the V * J peaks); their number
+    n_views, n_joints = need.shape
+    need[:] = 0
     for p in range(n_seen.shape[0]):
         for j in range(n_joints):
             n = n_seen[p, j]
@@ -158,13 +157,25 @@ def _draws(n_seen, seeing, used, draws, first_draw, maps, u, jitter):
     for v in range(n_views):
         for j in range(n_joints):
             first_draw[v, j] = n_views * n_joints + r
-            for k in range(need[v, j]):
-                maps[r] = v * n_joints + j
-                u[r] = draws[v, j * m + k]
-                jitter[r, 0] = draws[v, n_joints * m + 2 * (j * m + k)]
-                jitter[r, 1] = draws[v, n_joints * m + 2 * (j * m + k) + 1]
-                r += 1
+            r += need[v, j]
     return r
+
+
+@kernel('void(float64[:, ::1], int64, int64[:, ::1], int64[:, ::1], int64[::1], float64[::1], float64[:, ::1])')
+def _keep_draws(draws, first_view, need, first_draw, maps, u, jitter):
+    # the draws used of views first_view.. (draws (K views, 3 J m): u (J, m) then jitter (J, m, 2) of
+    # each): their maps, u and jitter, at their place among all (first_draw)
+    n_views, n_joints = need.shape
+    m = draws.shape[1] // (3 * n_joints)
+    for v in range(first_view, first_view + len(draws)):
+        for j in range(n_joints):
+            r = first_draw[v, j] - n_views * n_joints
+            row = draws[v - first_view]
+            for k in range(need[v, j]):
+                maps[r + k] = v * n_joints + j
+                u[r + k] = row[j * m + k]
+                jitter[r + k, 0] = row[n_joints * m + 2 * (j * m + k)]
+                jitter[r + k, 1] = row[n_joints * m + 2 * (j * m + k) + 1]
 
 
 @kernel('void(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, :, ::1], int64[:, ::1])')
