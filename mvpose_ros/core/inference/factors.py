@@ -114,8 +114,13 @@ def _mean_over_views(values, counts, out):
                 total = 0.0
                 if counts[p] > 0:
                     total = values[first, j, k]
-                if counts[p] > 1:
+                if counts[p] > 8:
                     total += _pairwise_sum(values[first + 1:first + counts[p], j, k])
+                elif counts[p] > 1:  # fewer than 8 to reduce: _pairwise_sum's plain loop, inline
+                    rest = 0.0
+                    for v in range(first + 1, first + counts[p]):
+                        rest += values[v, j, k]
+                    total += rest
                 row[k] = total / max(counts[p], 1)
             total = _pairwise_sum(row)
             for k in range(len(row)):
