@@ -233,11 +233,12 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
             v = seeing[p, 0, j]
             o = centres[v]
             to_centre = centre - o
-            parent = parents[j]
-            anchor = anchors[p, max(parent, 0)]
-            rel = anchor - o
+            rel = np.zeros(3)  # from the view's centre to the parent's anchor, for 'limb'
+            on_limb = limb and parents[j] >= 0 and not np.isnan(lengths[j])
+            if on_limb:
+                rel = anchors[p, parents[j]] - o
+                on_limb = not np.isnan(rel[0])
             rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
-            on_limb = limb and parent >= 0 and not np.isnan(anchor[0]) and not np.isnan(lengths[j])
             for k in range(m):
                 d = dirs[first_draw[v, j] + k]
                 # dot products summed x, z, then y: numpy's einsum, for the same bits
