@@ -206,6 +206,10 @@ def test_projection_is_numpys_arithmetic():
         np.testing.assert_array_equal(cam.project(X), _numpy_project(cam, X))
         np.testing.assert_array_equal(cam.project(X[0, 0]), _numpy_project(cam, X[0, 0]))
         assert cam.project(np.zeros((0, 3))).shape == (0, 2)
+    # read-only points (a camera's centre) and broadcasts are taken as any other
+    np.testing.assert_array_equal(rig[0].project(rig[1].centre), _numpy_project(rig[0], rig[1].centre))
+    np.testing.assert_array_equal(rig[0].project(np.broadcast_to(X[1, 0], (2, 3))),
+                                  _numpy_project(rig[0], X[1, :1])[[0, 0]])
     which, of = np.array([3, 0, 0, 2]), np.array([1, 1, 5, 0])
     uv = rig_project(rig, which, X, of)
     for n in range(4):
@@ -242,6 +246,8 @@ def test_line_terms_and_their_solve_are_numpys_arithmetic():
                          o[..., 0] - dx * along, o[..., 1] - dy * along, o[..., 2] - dz * along])
     np.testing.assert_array_equal(terms, expected)
     np.testing.assert_array_equal(line_terms(o[:, :1], d), line_terms(np.broadcast_to(o[:, :1], d.shape), d))
+    d.flags.writeable = False
+    np.testing.assert_array_equal(line_terms(o, d), terms)
     out = np.zeros((9, 4, 3, 2))
     line_terms(o, d, out=out[..., 0])
     np.testing.assert_array_equal(out[..., 0], terms)

@@ -10,6 +10,9 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel
 
+# What the kernels' signatures take: C-contiguous and writable (numba types a read-only array
+# apart); np.require copies only an array that is not.
+_KERNEL_READY = ['C', 'W']
 MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
@@ -87,8 +90,9 @@ class HeatmapStack:
         pmf over its cells, from uniform numbers u (Q,) and jitter (Q, 2) in [0, 1) (the position
         within the drawn cell); NaN for empty maps. Only the draws asked for are made."""
         out = np.empty((len(maps), 2))
-        _sample(*self._flat(), np.ascontiguousarray(maps, dtype=np.int64), np.ascontiguousarray(u, dtype=np.float64),
-                np.ascontiguousarray(jitter, dtype=np.float64).reshape(-1, 2), out)
+        jitter = np.require(jitter, np.float64, _KERNEL_READY).reshape(-1, 2)
+        _sample(*self._flat(), np.require(maps, np.int64, _KERNEL_READY), np.require(u, np.float64, _KERNEL_READY),
+                jitter, out)
         return out
 
     def peak(self) -> np.ndarray:
@@ -101,7 +105,7 @@ class HeatmapStack:
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Bilinear values (N, J, K) of each map at pixels uv (N, J, K, 2); 0 outside the grid
         of cell centres and for NaN pixels."""
-        uv = np.ascontiguousarray(uv, dtype=np.float64)
+        uv = np.require(uv, np.float64, _KERNEL_READY)
         out = np.empty(uv.shape[:-1])
         _lookup(*self._flat(), uv.reshape(-1, 2), uv.shape[-2], out.reshape(-1))
         return out
@@ -111,12 +115,12 @@ class HeatmapStack:
         float64), first cell, rows h, columns w, origin (N * J, 2), stride."""
         n_j = self.start.shape[1]
         cells = np.float32 if self.values.dtype == np.float32 else np.float64
-        return (np.ascontiguousarray(self.values, dtype=cells),
-                np.ascontiguousarray(self.start, dtype=np.int64).reshape(-1),
-                np.ascontiguousarray(np.repeat(self.shape[:, 0], n_j), dtype=np.int64),
-                np.ascontiguousarray(np.repeat(self.shape[:, 1], n_j), dtype=np.int64),
-                np.ascontiguousarray(self.origin, dtype=np.float64).reshape(-1, 2),
-                np.ascontiguousarray(np.repeat(self.stride, n_j), dtype=np.float64))
+        return (np.require(self.values, cells, _KERNEL_READY),
+                np.require(self.start, np.int64, _KERNEL_READY).reshape(-1),
+                np.require(np.repeat(self.shape[:, 0], n_j), np.int64, _KERNEL_READY),
+                np.require(np.repeat(self.shape[:, 1], n_j), np.int64, _KERNEL_READY),
+                np.require(self.origin, np.float64, _KERNEL_READY).reshape(-1, 2),
+                np.require(np.repeat(self.stride, n_j), np.float64, _KERNEL_READY))
 
 
 # a stack as the kernels take it (HeatmapStack._flat), cells float32 (as rendered) or float64
