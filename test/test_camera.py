@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, load_rig, ray_ray_distance
+from mvpose_ros.core.geometry.camera import (Camera, closest_point_to_rays, closest_points_of_ray_sets, line_terms,
+                                             load_rig, ray_ray_distance, rig_directions, rig_project,
+                                             solve_line_terms)
 from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt, load_actors_gt_2d
 
 SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]
@@ -175,6 +177,112 @@ def test_rays_vectorised_shapes():
     cam = _load(_calibration('shelf'))[0]
     o, d = cam.rays(np.zeros((4, 7, 2)))
     assert o.shape == d.shape == (4, 7, 3)
+
+
+def _numpy_project(cam: Camera, X: np.ndarray) -> np.ndarray:
+    """Camera.project as numpy on whole arrays (the formulation the kernel replaced)."""
+    x, y, z = np.moveaxis(X, -1, 0)
+    R, t, K = cam.R, cam.t, cam.K
+    depth = R[2, 0] * x + R[2, 1] * y + R[2, 2] * z + t[2]
+    with np.errstate(divide='ignore'):
+        inv = np.where(depth > 0, 1.0 / depth, np.nan)
+    xn = (R[0, 0] * x + R[0, 1] * y + R[0, 2] * z + t[0]) * inv
+    yn = (R[1, 0] * x + R[1, 1] * y + R[1, 2] * z + t[1]) * inv
+    if cam.has_distortion:
+        k1, k2, p1, p2, k3 = cam.dist
+        r2 = xn * xn + yn * yn
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
+                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
+    return np.stack([K[0, 0] * xn + K[0, 1] * yn + K[0, 2], K[1, 0] * xn + K[1, 1] * yn + K[1, 2]], axis=-1)
+
+
+def test_projection_is_numpys_arithmetic():
+    rig = _load(_calibration('shelf'))[:3] + [_distorted_camera()]
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-3, 3, (6, 50, 3))
+    X[0, :5] = rig[0].centre  # at the camera: NaN
+    for cam in rig:
+        np.testing.assert_array_equal(cam.project(X), _numpy_project(cam, X))
+        np.testing.assert_array_equal(cam.project(X[0, 0]), _numpy_project(cam, X[0, 0]))
+        assert cam.project(np.zeros((0, 3))).shape == (0, 2)
+    # read-only points (a camera's centre) and broadcasts are taken as any other
+    np.testing.assert_array_equal(rig[0].project(rig[1].centre), _numpy_project(rig[0], rig[1].centre))
+    np.testing.assert_array_equal(rig[0].project(np.broadcast_to(X[1, 0], (2, 3))),
+                                  _numpy_project(rig[0], X[1, :1])[[0, 0]])
+    which, of = np.array([3, 0, 0, 2]), np.array([1, 1, 5, 0])
+    uv = rig_project(rig, which, X, of)
+    for n in range(4):
+        np.testing.assert_array_equal(uv[n], _numpy_project(rig[which[n]], X[of[n]]))
+    assert rig_project(rig, np.zeros(0, int), X[:0]).shape == (0, 50, 2)
+
+
+def test_rig_directions_are_each_cameras():
+    rig = _load(_calibration('shelf'))[:3] + [_distorted_camera()]
+    rng = np.random.default_rng(6)
+    which = rng.integers(0, len(rig), 200)
+    uv = rng.uniform(0, 700, (200, 2))
+    d = rig_directions(rig, which, uv)
+    for i, cam in enumerate(rig):
+        mine = which == i
+        if cam.has_distortion:
+            np.testing.assert_array_equal(d[mine], cam.directions(uv[mine]))
+        else:  # numpy's arithmetic on whole arrays, the same bits
+            to_ray = cam._pixel_to_ray
+            ray = to_ray[:, 0] * uv[mine, :1] + to_ray[:, 1] * uv[mine, 1:] + to_ray[:, 2]
+            np.testing.assert_array_equal(d[mine], ray / np.sqrt(np.einsum('ni,ni->n', ray, ray))[:, None])
+    assert rig_directions(rig[:1], np.zeros(0, int), np.zeros((0, 2))).shape == (0, 3)
+
+
+def test_line_terms_and_their_solve_are_numpys_arithmetic():
+    rng = np.random.default_rng(7)
+    o = rng.normal(size=(4, 3, 3))
+    d = rng.normal(size=(4, 3, 3))
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    terms = line_terms(o, d)
+    dx, dy, dz = np.moveaxis(d, -1, 0)
+    along = dx * o[..., 0] + dy * o[..., 1] + dz * o[..., 2]
+    expected = np.stack([1 - dx * dx, -dx * dy, -dx * dz, 1 - dy * dy, -dy * dz, 1 - dz * dz,
+                         o[..., 0] - dx * along, o[..., 1] - dy * along, o[..., 2] - dz * along])
+    np.testing.assert_array_equal(terms, expected)
+    np.testing.assert_array_equal(line_terms(o[:, :1], d), line_terms(np.broadcast_to(o[:, :1], d.shape), d))
+    d.flags.writeable = False
+    np.testing.assert_array_equal(line_terms(o, d), terms)
+    out = np.zeros((9, 4, 3, 2))
+    line_terms(o, d, out=out[..., 0])
+    np.testing.assert_array_equal(out[..., 0], terms)
+    # Cramer's rule against a linear solve; one line alone and non-finite sums are NaN
+    summed = terms.sum(axis=-1)
+    summed[:, 1] = terms[:, 1, 0]
+    summed[6, 2] = np.inf
+    x = solve_line_terms(summed, 3)
+    a = summed[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(-1, 3, 3)
+    np.testing.assert_allclose(x[[0, 3]], np.linalg.solve(a[[0, 3]], summed[6:, [0, 3]].T[..., None])[..., 0],
+                               rtol=1e-9)
+    assert np.isnan(x[[1, 2]]).all()
+    assert solve_line_terms(np.zeros((9, 0)), 2).shape == (0, 3)
+
+
+def test_closest_points_of_ray_sets_are_line_terms_summed_and_solved():
+    rng = np.random.default_rng(8)
+    centres = rng.normal(size=(4, 3))
+    of = rng.integers(0, 4, 30)
+    dirs = rng.normal(size=(30, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    sets = rng.integers(0, 30, (12, 4))
+    sets[:4, 3] = -1  # sets of three
+    sets[4, 1:] = -1  # one ray alone: NaN
+    sets[5, 1] = sets[5, 0]  # the same ray twice, and two more
+    # numpy: every ray's terms, a zero column for padding, summed slot after slot, solved
+    terms = np.concatenate([line_terms(centres[of], dirs), np.zeros((9, 1))], axis=1)
+    summed = terms[:, sets[:, 0]]
+    for k in range(1, 4):
+        summed += terms[:, sets[:, k]]
+    expected = solve_line_terms(summed, 4)
+    points = closest_points_of_ray_sets(centres, of, dirs, sets)
+    np.testing.assert_array_equal(points, expected)
+    assert np.isnan(points[4]).all() and np.isfinite(points[np.arange(12) != 4]).all()
+    assert closest_points_of_ray_sets(centres, of, dirs, np.zeros((0, 2), int)).shape == (0, 3)
 
 
 def test_closest_point_exact_without_noise():

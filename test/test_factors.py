@@ -4,7 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.inference.factors import (TEMPORAL_FORMS, FactorConfig, collision_table, limb_table,
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.heatmap import HeatmapStack, render_heatmaps
+from mvpose_ros.core.inference.factors import (TEMPORAL_FORMS, FactorConfig, collision_table, data_terms, limb_table,
                                                pair_distances, temporal_table)
 
 
@@ -183,3 +185,56 @@ def test_factor_config_defaults():
     config = FactorConfig()
     assert config.temporal_form == 'laplace' and config.temporal_scale == pytest.approx(0.08)
     assert set(TEMPORAL_FORMS) == {'laplace', 'gauss'}
+
+
+def _numpy_data_terms(hypotheses, people, stack) -> list[np.ndarray]:
+    """data_terms as numpy on whole arrays (the formulation the kernels replaced)."""
+    cameras = [cam for views in people for cam, _ in views]
+    counts = np.array([len(v) for v in people])
+    owner = np.repeat(np.arange(len(people)), counts)
+    points = np.stack(hypotheses)
+    uv = np.empty(stack.start.shape + (points.shape[2], 2))
+    for v, cam in enumerate(cameras):
+        uv[v] = cam.project(points[owner[v]])
+    values = stack.lookup(uv)
+    total = np.zeros((len(people),) + values.shape[1:])
+    seen = counts > 0
+    total[seen] = np.add.reduceat(values, np.concatenate([[0], np.cumsum(counts)[:-1]])[seen], axis=0)
+    total /= np.maximum(counts, 1)[:, None, None]
+    rows = total.sum(axis=-1, keepdims=True)
+    return list(np.where(rows > 0, total / np.where(rows > 0, rows, 1.0), 1.0 / total.shape[-1]))
+
+
+@pytest.mark.parametrize('m', [5, 64, 300])
+def test_data_terms_are_numpys_arithmetic(m):
+    rng = np.random.default_rng(4)
+    K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
+    # cameras on a circle 4 m around the origin, looking at it; one with distortion
+    cameras = []
+    for i, a in enumerate(np.linspace(0, 2 * np.pi, 4, endpoint=False)):
+        z = -np.array([np.cos(a), np.sin(a), 0.0])
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        R = np.stack([x, np.cross(z, x), z])
+        dist = [0.1, -0.05, 0.001, 0.0, 0.0] if i == 3 else np.zeros(5)
+        cameras.append(Camera(f'c{i}', K, R, -R @ (-4 * z), dist, 640, 480))
+    # people seen by 3, 1, 9 (cameras again: above 8 views numpy sums them pairwise) and 0 views
+    which = [[0, 1, 3], [2], [0, 1, 2, 3, 0, 1, 2, 3, 1], []]
+    hypotheses = [rng.normal(0, 0.3, (4, m, 3)) for _ in which]
+    hypotheses[0][1, :5] = cameras[0].centre  # at a camera: NaN pixels
+    centres = np.stack([cameras[c].project(h.reshape(-1, 3)).reshape(4, m, 2)[:, :3]
+                        for h, views in zip(hypotheses, which) for c in views])
+    centres = np.concatenate([centres, rng.uniform(0.3, 1.0, centres.shape[:3] + (1,))], axis=-1)
+    centres[:, 2] = 0.0  # joint 2 without evidence: uniform
+    maps = render_heatmaps(centres, 8.0, 12.0)
+    people = []
+    for views in which:
+        people.append([(cameras[c], maps.pop(0)) for c in views])
+    stack = HeatmapStack.of([hm for views in people for _, hm in views])
+    out = data_terms(hypotheses, people, stack)
+    expected = _numpy_data_terms(hypotheses, people, stack)
+    for got, want in zip(out, expected):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_allclose(out[2].sum(axis=-1), 1.0)
+    np.testing.assert_array_equal(out[3], 1.0 / m)
+    assert np.ptp(out[0][0]) > 0 and np.ptp(out[2][1]) > 0  # evidence somewhere
+    assert data_terms([], [], HeatmapStack.of([])) == []

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap, render_heatmaps
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap, render_heatmaps
 
 STRIDE, SIGMA = 4.0, 6.0
 
@@ -156,3 +156,87 @@ def test_sample_counts_follow_weights():
     sd = np.sqrt(n * p * (1 - p))
     assert np.all(np.abs(counts - n * p) < 4 * sd), counts
     assert len(np.unique(counts)) == 3  # joints draw independently
+
+
+def _random_stack(rng: np.random.Generator, dtype=np.float32) -> HeatmapStack:
+    """Heatmaps of 7 joints on grids of different sizes (one of a single cell), mostly zeros,
+    some maps empty, others with ties at their maximum."""
+    heatmaps = []
+    for h, w in [(5, 4), (1, 1), (3, 7), (6, 6)]:
+        maps = np.where(rng.random((7, h, w)) < 0.3, rng.random((7, h, w)), 0.0).astype(dtype)
+        maps[1] = 0.0
+        maps[2, 0, 0] = maps[2, -1, -1] = 2.0
+        heatmaps.append(PersonHeatmap(maps, rng.uniform(-50, 500, (7, 2)), float(rng.uniform(2, 8))))
+    return HeatmapStack.of(heatmaps)
+
+
+def _numpy_sample_at(stack: HeatmapStack, maps, u, jitter):
+    """HeatmapStack.sample_at as numpy on whole arrays (the formulation the kernel replaced)."""
+    nz = np.flatnonzero(stack.values)
+    cum = np.concatenate([[0.0], np.cumsum(stack.values[nz], dtype=np.float64)])
+    start = stack.start.ravel()
+    size = np.repeat(stack.shape[:, 0] * stack.shape[:, 1], stack.start.shape[1])
+    first = np.searchsorted(nz, start)[maps]
+    end = np.searchsorted(nz, start + size)[maps]
+    before = cum[first]
+    idx = np.searchsorted(cum, before + u * (cum[end] - before), side='right') - 1
+    idx = np.minimum(np.clip(idx, first, np.maximum(end - 1, first)), max(len(nz) - 1, 0))
+    cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - start[maps]
+    heatmap = maps // stack.start.shape[1]
+    row, col = np.divmod(cell, stack.shape[heatmap, 1])
+    origin = stack.origin.reshape(-1, 2)[maps]
+    uv = np.stack([origin[:, 0] + stack.stride[heatmap] * (col + (jitter[:, 0] - 0.5)),
+                   origin[:, 1] + stack.stride[heatmap] * (row + (jitter[:, 1] - 0.5))], axis=-1)
+    uv[end == first] = np.nan
+    return uv
+
+
+def _numpy_lookup(stack: HeatmapStack, uv):
+    """HeatmapStack.lookup as numpy on whole arrays (the formulation the kernel replaced)."""
+    inv = 1.0 / stack.stride[:, None, None]
+    c = (uv[..., 0] - stack.origin[:, :, None, 0]) * inv
+    r = (uv[..., 1] - stack.origin[:, :, None, 1]) * inv
+    h, w = stack.shape[:, 0, None, None], stack.shape[:, 1, None, None]
+    inside = (c >= 0) & (c <= w - 1) & (r >= 0) & (r <= h - 1)
+    c, r = np.where(inside, c, 0.0), np.where(inside, r, 0.0)
+    c0 = np.minimum(c.astype(np.intp), np.maximum(w - 2, 0))
+    r0 = np.minimum(r.astype(np.intp), np.maximum(h - 2, 0))
+    fc, fr = c - c0, r - r0
+    base = stack.start[..., None] + r0 * w + c0
+    right = np.minimum(c0 + 1, w - 1) - c0
+    down = (np.minimum(r0 + 1, h - 1) - r0) * w
+    v = stack.values
+    top = v[base] * (1 - fc) + v[base + right] * fc
+    bottom = v[base + down] * (1 - fc) + v[base + down + right] * fc
+    return np.where(inside, top * (1 - fr) + bottom * fr, 0.0)
+
+
+@pytest.mark.parametrize('dtype', [np.float32, np.float64])
+def test_stack_kernels_are_numpys_arithmetic(dtype):
+    rng = np.random.default_rng(3)
+    stack = _random_stack(rng, dtype)
+    n_maps = stack.start.size
+    maps = rng.integers(0, n_maps, 500)
+    u, jitter = rng.random(500), rng.random((500, 2))
+    np.testing.assert_array_equal(stack.sample_at(maps, u, jitter), _numpy_sample_at(stack, maps, u, jitter))
+    # peaks: the first maximal cell's centre; empty maps (NaN, NaN, 0)
+    peak = stack.peak()
+    for i, (start, (h, w), origin, stride) in enumerate(zip(stack.start.ravel(), np.repeat(stack.shape, 7, axis=0),
+                                                            stack.origin.reshape(-1, 2), np.repeat(stack.stride, 7))):
+        cells = stack.values[start:start + h * w]
+        best = int(np.argmax(cells))
+        expected = ([*(origin + stride * np.array([best % w, best // w])), cells[best]] if cells[best] > 0
+                    else [np.nan, np.nan, 0.0])
+        np.testing.assert_array_equal(peak.reshape(-1, 3)[i], expected)
+    # look-ups at cell centres, between them, on the grid's edges, outside and NaN
+    uv = stack.origin[:, :, None] + stack.stride[:, None, None, None] * rng.uniform(-1, 7, (4, 7, 30, 2))
+    uv[:, :, 0] = stack.origin  # cell [0, 0]
+    uv[:, :, 1, 0] = np.nan
+    np.testing.assert_array_equal(stack.lookup(uv), _numpy_lookup(stack, uv))
+
+
+def test_an_empty_stack():
+    stack = HeatmapStack.of([])
+    assert stack.peak().shape == (0, 0, 3)
+    assert stack.lookup(np.zeros((0, 0, 5, 2))).shape == (0, 0, 5)
+    assert stack.sample_at(np.zeros(0, int), np.zeros(0), np.zeros((0, 2))).shape == (0, 2)

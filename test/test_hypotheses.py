@@ -9,7 +9,8 @@ from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
-from mvpose_ros.core.inference.hypotheses import (SamplingConfig, camera_subsets, sample_people,
+from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, camera_subsets, sample_people,
                                                   split_draws)
 
 SIGMA, STRIDE = 1.5, 1.0
@@ -225,3 +226,103 @@ def test_data_term_prefers_the_true_point(rig, truth, sigma, stride):
     # no evidence at all for any hypothesis of a joint: uniform row
     empty = data_term(np.stack([far, far + 1.0], axis=1), views)
     np.testing.assert_allclose(empty, 0.5)
+
+
+def _numpy_sample_people(people, stack, rngs, config):
+    """sample_people as numpy on whole arrays (the formulation the kernels replaced)."""
+    m = config.hypotheses
+    n_views, n_joints = stack.start.shape
+    n_people, n_maps = len(people), n_views * n_joints
+    counts = np.array([len(v) for v in people], dtype=np.intp)
+    first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
+    owner = np.repeat(np.arange(n_people), counts)
+    draws = np.concatenate([rng.random((hi - lo, 3 * n_joints * m)) for rng, lo, hi in
+                            zip(rngs, first_view[:-1], first_view[1:])])
+    u = draws[:, :n_joints * m].reshape(n_maps, m)
+    jitter = draws[:, n_joints * m:].reshape(n_maps, m, 2)
+    peaks = stack.peak()
+    sees = np.zeros((n_people, counts.max(), n_joints), dtype=bool)
+    sees[owner, np.arange(n_views) - first_view[owner]] = peaks[..., 2] > 0
+    n_seen = sees.sum(axis=1)
+    seeing = first_view[:-1, None, None] + np.argsort(~sees, axis=1, kind='stable')
+    width = int(n_seen.max())
+    need = np.zeros((n_views, n_joints), dtype=np.intp)
+    plans = []
+    for n in range(2, width + 1):
+        pp, pj = np.nonzero(n_seen == n)
+        if len(pp):
+            views = seeing[pp, :n, pj]
+            plan = _plan(n, m, config.peak_hypotheses, width)
+            need[views, pj[:, None]] = plan[2]
+            plans.append((plan, pp, pj, views))
+    single_p, single_j = np.nonzero(n_seen == 1)
+    single_view = seeing[single_p, 0, single_j]
+    need[single_view, single_j] = m
+    first_draw = n_maps + np.concatenate([[0], np.cumsum(need.ravel())[:-1]]).reshape(n_views, n_joints)
+    maps = np.repeat(np.arange(n_maps), need.ravel())
+    k = np.arange(len(maps)) - (first_draw.ravel() - n_maps)[maps]
+    pixels = np.concatenate([peaks[..., :2].reshape(-1, 2), stack.sample_at(maps, u[maps, k], jitter[maps, k])])
+    view = np.concatenate([np.arange(n_maps), maps]) // n_joints
+    cameras = [cam for views in people for cam, _ in views]
+    rig = list({id(c): c for c in cameras}.values())
+    camera_of_view = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])
+    dirs = rig_directions(rig, camera_of_view[view], pixels)
+    centres = np.stack([cam.centre for cam in rig])[camera_of_view]
+    out = np.full((n_people, n_joints, m, 3), np.nan)
+    if plans:
+        terms = np.zeros((9, len(dirs) + 1))
+        terms[:, :-1] = line_terms(centres[view], dirs)
+        rays = []
+        for (cam_of, draw, _), _, joints, views in plans:
+            j = joints[:, None, None]
+            views = views[:, cam_of]
+            ray = np.where(draw == m, views * n_joints + j, first_draw[views, j] + draw)
+            rays.append(np.where(draw < 0, -1, ray))
+        ray = np.moveaxis(np.concatenate(rays), -1, 0)
+        summed = terms[:, ray[0]]
+        for slot in ray[1:]:
+            summed += terms[:, slot]
+        persons = np.concatenate([plan_persons for _, plan_persons, _, _ in plans])
+        joints = np.concatenate([plan_joints for _, _, plan_joints, _ in plans])
+        out[persons, joints] = solve_line_terms(summed, width)
+    located = ~np.isnan(out).all(axis=(1, 2, 3))
+    centre = np.full((n_people, 3), np.nan)
+    centre[located] = np.nanmean(out[located].reshape(-1, n_joints * m, 3), axis=1)
+    keep = located[single_p]
+    single_p, single_j, single_view = single_p[keep], single_j[keep], single_view[keep]
+    origin = centres[single_view]
+    direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]
+    depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
+    if config.single_view_depth == 'limb':
+        parent, length = INFERENCE_PARENT[single_j], PRIOR_BONE_LENGTH[single_j]
+        anchor = _anchors(out, config)[single_p, np.maximum(parent, 0)]
+        rel = anchor - origin
+        mid = np.einsum('nmd,nd->nm', direction, rel)
+        half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
+        near, far = mid - half, mid + half
+        limb = np.where(np.abs(near - depth) <= np.abs(far - depth), near, far)
+        depth = np.where(((parent >= 0) & ~np.isnan(anchor[:, 0]) & ~np.isnan(length))[:, None], limb, depth)
+    out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
+    unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
+    out[unseen_p, unseen_j] = centre[unseen_p, None]
+    return [out[p] if located[p] else None for p in range(n_people)]
+
+
+@pytest.mark.parametrize('config', [SamplingConfig(), SamplingConfig(27, False, 'centre'), SamplingConfig(5),
+                                    SamplingConfig(40, False, 'limb')])
+def test_sampling_is_numpys_arithmetic(views, config):
+    """Several people at once, as the kernels take them: one seen by all five cameras, one with a
+    wrist seen once (its elbow twice) and a wrist seen by none, one seen once only, one whose
+    joints no two of its cameras share (None), one with an elbow and its wrist seen once."""
+    wrist_seen_once = _without(_without(views, [6], {0, 1, 3, 4}), [11], set(range(5)))
+    split = _without(_without(views[:2], list(range(8, 16)), {0}), list(range(8)), {1})
+    limb_seen_once = _without(views[1:4], [10, 11], {1, 2})
+    people = [views, wrist_seen_once, views[2:3], split, limb_seen_once]
+    stack = HeatmapStack.of([hm for person in people for _, hm in person])
+    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(5)], config)
+    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(5)], config)
+    assert [h is None for h in out] == [False, False, True, True, False]
+    for got, want in zip(out, expected):
+        if want is not None:
+            np.testing.assert_array_equal(got, want)
+    assert sample_people([], HeatmapStack.of([]), [], config) == []

@@ -27,7 +27,10 @@ KERNEL_MODULES: tuple[str, ...] = (
     'mvpose_ros.core.association.view_consistency',
     'mvpose_ros.core.detection.grouping',
     'mvpose_ros.core.detection.openpose_detector',
+    'mvpose_ros.core.geometry.camera',
     'mvpose_ros.core.heatmap',
+    'mvpose_ros.core.inference.factors',
+    'mvpose_ros.core.inference.hypotheses',
 )
 
 

@@ -10,6 +10,9 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel
 
+# What the kernels' signatures take: C-contiguous and writable (numba types a read-only array
+# apart); np.require copies only an array that is not.
+_KERNEL_READY = ['C', 'W']
 MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
@@ -48,8 +51,8 @@ class PersonHeatmap:
 @dataclass
 class HeatmapStack:
     """N person heatmaps of J maps each (every person in every view of a frame), their cells
-    flattened into one array, so that sampling, peaks and look-ups for all of them take a fixed
-    number of numpy calls instead of a few per heatmap. Grids may differ in size."""
+    flattened into one array, so that sampling, peaks and look-ups for all of them take one
+    compiled call instead of a few per heatmap. Grids may differ in size."""
 
     values: np.ndarray  # (S,) every cell, map after map, row-major within a map
     start: np.ndarray  # (N, J) index in values of cell [0, 0] of each map
@@ -74,16 +77,6 @@ class HeatmapStack:
                    origin=np.array([hm.origin for hm in heatmaps], dtype=np.float64).reshape(-1, n_j, 2),
                    stride=np.array([hm.stride for hm in heatmaps], dtype=np.float64))
 
-    def _size(self) -> np.ndarray:
-        return np.broadcast_to((self.shape[:, 0] * self.shape[:, 1])[:, None], self.start.shape)
-
-    def _pixels(self, cell: np.ndarray, offset: np.ndarray) -> np.ndarray:
-        """Pixels (N, J, K, 2) of cells (N, J, K) (index within their map), plus offset (..., 2)
-        in cells."""
-        row, col = np.divmod(cell, self.shape[:, 1, None, None])
-        cr = np.stack([col, row], axis=-1) + offset
-        return self.origin[:, :, None] + self.stride[:, None, None, None] * cr
-
     def sample(self, u: np.ndarray, jitter: np.ndarray) -> np.ndarray:
         """Pixels (N, J, K, 2) drawn from each map as a pmf over its cells, from uniform numbers
         u (N, J, K) in [0, 1) and jitter (N, J, K, 2) in [0, 1) (the position within the drawn
@@ -96,71 +89,130 @@ class HeatmapStack:
         """Pixels (Q, 2), one draw from each of maps (Q,) (map j of heatmap i is i * J + j) as a
         pmf over its cells, from uniform numbers u (Q,) and jitter (Q, 2) in [0, 1) (the position
         within the drawn cell); NaN for empty maps. Only the draws asked for are made."""
-        # Only non-zero cells can be drawn, and maps are mostly zero: one CDF over the non-zero
-        # cells of every map, each map drawing inside its own stretch.
-        nz = np.flatnonzero(self.values)
-        cum = np.concatenate([[0.0], np.cumsum(self.values[nz], dtype=np.float64)])
-        start = self.start.ravel()
-        first = np.searchsorted(nz, start)[maps]
-        end = np.searchsorted(nz, start + self._size().ravel())[maps]
-        before = cum[first]
-        q = before + u * (cum[end] - before)
-        idx = np.searchsorted(cum, q, side='right') - 1
-        # rounding can step past a map's stretch; empty maps point anywhere (NaN below)
-        idx = np.clip(idx, first, np.maximum(end - 1, first))
-        idx = np.minimum(idx, max(len(nz) - 1, 0))
-        cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - start[maps]
-        heatmap = maps // self.start.shape[1]
-        row, col = np.divmod(cell, self.shape[heatmap, 1])
-        stride = self.stride[heatmap]
-        origin = self.origin.reshape(-1, 2)[maps]
-        uv = np.empty((len(maps), 2))
-        uv[:, 0] = origin[:, 0] + stride * (col + (jitter[:, 0] - 0.5))
-        uv[:, 1] = origin[:, 1] + stride * (row + (jitter[:, 1] - 0.5))
-        uv[end == first] = np.nan
-        return uv
+        out = np.empty((len(maps), 2))
+        jitter = np.require(jitter, np.float64, _KERNEL_READY).reshape(-1, 2)
+        _sample(*self._flat(), np.require(maps, np.int64, _KERNEL_READY), np.require(u, np.float64, _KERNEL_READY),
+                jitter, out)
+        return out
 
     def peak(self) -> np.ndarray:
         """(N, J, 3): pixel u, v of the centre of each map's maximal cell (the first, on ties)
         and the maximum; an empty map gives (NaN, NaN, 0)."""
-        n, n_j = self.start.shape
-        out = np.full((n, n_j, 3), np.nan)
-        out[..., 2] = 0.0
-        if n == 0:
-            return out
-        flat_start = self.start.ravel()
-        best = np.maximum.reduceat(self.values, flat_start)  # every map has >= 1 cell
-        at_max = np.flatnonzero(self.values == np.repeat(best, self._size().ravel()))
-        cell = at_max[np.searchsorted(at_max, flat_start)] - flat_start  # first maximal cell of each map
-        uv = self._pixels(cell.reshape(n, n_j, 1), np.zeros(2))[:, :, 0]
-        has = best.reshape(n, n_j) > 0
-        out[has, :2] = uv[has]
-        out[..., 2] = np.maximum(best.reshape(n, n_j), 0.0)
+        out = np.empty(self.start.shape + (3,))
+        _peak(*self._flat(), out.reshape(-1, 3))
         return out
 
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Bilinear values (N, J, K) of each map at pixels uv (N, J, K, 2); 0 outside the grid
         of cell centres and for NaN pixels."""
-        uv = np.asarray(uv, dtype=np.float64)
-        # u and v apart: broadcasts over a last axis of 2 are slow
-        inv = 1.0 / self.stride[:, None, None]
-        c = (uv[..., 0] - self.origin[:, :, None, 0]) * inv
-        r = (uv[..., 1] - self.origin[:, :, None, 1]) * inv
-        h = self.shape[:, 0, None, None]
-        w = self.shape[:, 1, None, None]
-        inside = (c >= 0) & (c <= w - 1) & (r >= 0) & (r <= h - 1)  # False for NaN
-        c = np.where(inside, c, 0.0)
-        r = np.where(inside, r, 0.0)
-        c0 = np.minimum(c.astype(np.intp), np.maximum(w - 2, 0))
-        r0 = np.minimum(r.astype(np.intp), np.maximum(h - 2, 0))
-        fc, fr = c - c0, r - r0
-        base = self.start[..., None] + r0 * w + c0
-        right = np.minimum(c0 + 1, w - 1) - c0
-        down = (np.minimum(r0 + 1, h - 1) - r0) * w
-        v = self.values
-        top = v[base] * (1 - fc) + v[base + right] * fc
-        bottom = v[base + down] * (1 - fc) + v[base + down + right] * fc
-        return np.where(inside, top * (1 - fr) + bottom * fr, 0.0)
+        uv = np.require(uv, np.float64, _KERNEL_READY)
+        out = np.empty(uv.shape[:-1])
+        _lookup(*self._flat(), uv.reshape(-1, 2), uv.shape[-2], out.reshape(-1))
+        return out
+
+    def _flat(self) -> tuple[np.ndarray, ...]:
+        """The stack as the kernels take it, per map (N * J,): cells (S,) (float32, or else
+        float64), first cell, rows h, columns w, origin (N * J, 2), stride."""
+        n_j = self.start.shape[1]
+        cells = np.float32 if self.values.dtype == np.float32 else np.float64
+        return (np.require(self.values, cells, _KERNEL_READY),
+                np.require(self.start, np.int64, _KERNEL_READY).reshape(-1),
+                np.require(np.repeat(self.shape[:, 0], n_j), np.int64, _KERNEL_READY),
+                np.require(np.repeat(self.shape[:, 1], n_j), np.int64, _KERNEL_READY),
+                np.require(self.origin, np.float64, _KERNEL_READY).reshape(-1, 2),
+                np.require(np.repeat(self.stride, n_j), np.float64, _KERNEL_READY))
+
+
+# a stack as the kernels take it (HeatmapStack._flat), cells float32 (as rendered) or float64
+_STACKS = [f'{cells}[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[::1]'
+           for cells in ('float32', 'float64')]
+
+
+@kernel(*(f'void({stack}, int64[::1], float64[::1], float64[:, ::1], float64[:, ::1])' for stack in _STACKS))
+def _sample(values, start, rows, cols, origin, stride, maps, u, jitter, out):
+    # Only non-zero cells can be drawn: one CDF (float64, summed in cell order) over the non-zero
+    # cells of every map, each map drawing inside its own stretch [first, end) of it. nz and cum
+    # are sized for every cell, but only their first (non-zero) entries are ever touched.
+    n_maps = len(start)
+    nz = np.empty(len(values), np.int64)
+    cum = np.empty(len(values) + 1)
+    first = np.empty(n_maps, np.int64)
+    end = np.empty(n_maps, np.int64)
+    cum[0] = 0.0
+    n = 0
+    for m in range(n_maps):
+        first[m] = n
+        for c in range(start[m], start[m] + rows[m] * cols[m]):
+            if values[c] != 0:
+                nz[n] = c
+                cum[n + 1] = cum[n] + np.float64(values[c])
+                n += 1
+        end[m] = n
+    for i in range(len(maps)):
+        m = maps[i]
+        lo, hi = first[m], end[m]
+        if hi == lo:
+            out[i, 0] = np.nan
+            out[i, 1] = np.nan
+            continue
+        before = cum[lo]
+        q = before + u[i] * (cum[hi] - before)
+        # the last cumulative sum <= q; rounding can step past the stretch, kept inside it
+        a, b = lo, hi + 1
+        while a < b:
+            mid = (a + b) // 2
+            if cum[mid] <= q:
+                a = mid + 1
+            else:
+                b = mid
+        idx = min(max(a - 1, lo), hi - 1)
+        cell = nz[idx] - start[m]
+        row, col = cell // cols[m], cell % cols[m]
+        out[i, 0] = origin[m, 0] + stride[m] * (col + (jitter[i, 0] - 0.5))
+        out[i, 1] = origin[m, 1] + stride[m] * (row + (jitter[i, 1] - 0.5))
+
+
+@kernel(*(f'void({stack}, float64[:, ::1])' for stack in _STACKS))
+def _peak(values, start, rows, cols, origin, stride, out):
+    for m in range(len(start)):
+        best_cell = 0
+        best = values[start[m]]
+        for c in range(1, rows[m] * cols[m]):
+            if values[start[m] + c] > best:
+                best, best_cell = values[start[m] + c], c
+        if best > 0:
+            out[m, 0] = origin[m, 0] + stride[m] * (best_cell % cols[m])
+            out[m, 1] = origin[m, 1] + stride[m] * (best_cell // cols[m])
+            out[m, 2] = best
+        else:
+            out[m, 0] = np.nan
+            out[m, 1] = np.nan
+            out[m, 2] = 0.0
+
+
+@kernel(*(f'void({stack}, float64[:, ::1], int64, float64[::1])' for stack in _STACKS))
+def _lookup(values, start, rows, cols, origin, stride, uv, per_map, out):
+    # uv (N * J * K, 2): K pixels per map; the same arithmetic, in the same order, as numpy's
+    # bilinear interpolation on whole arrays
+    for m in range(len(start)):
+        inv = 1.0 / stride[m]
+        h, w = rows[m], cols[m]
+        last_c, last_r = max(w - 2, 0), max(h - 2, 0)
+        for i in range(m * per_map, (m + 1) * per_map):
+            c = (uv[i, 0] - origin[m, 0]) * inv
+            r = (uv[i, 1] - origin[m, 1]) * inv
+            if not (c >= 0 and c <= w - 1 and r >= 0 and r <= h - 1):  # False for NaN
+                out[i] = 0.0
+                continue
+            c0 = min(int(c), last_c)
+            r0 = min(int(r), last_r)
+            fc, fr = c - c0, r - r0
+            base = start[m] + r0 * w + c0
+            right = min(c0 + 1, w - 1) - c0
+            down = (min(r0 + 1, h - 1) - r0) * w
+            top = values[base] * (1 - fc) + values[base + right] * fc
+            bottom = values[base + down] * (1 - fc) + values[base + down + right] * fc
+            out[i] = top * (1 - fr) + bottom * fr
 
 
 def render_heatmap(centres: list[np.ndarray], stride: float, sigma: float) -> PersonHeatmap:

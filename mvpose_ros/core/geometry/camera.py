@@ -15,6 +15,12 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
+from mvpose_ros.core.compiled import kernel
+
+
+# What the kernels' signatures take: C-contiguous and writable (numba types a read-only array,
+# e.g. Camera.centre or a broadcast, apart); np.require copies only an array that is not.
+_KERNEL_READY = ['C', 'W']
 
 # Newton steps for undistortion; quadratic convergence makes this exact to float precision for
 # any lens whose distortion map is monotone over the image.
@@ -55,6 +61,8 @@ class Camera:
         centre = -self.R.T @ self.t
         centre.flags.writeable = False
         object.__setattr__(self, '_centre', centre)
+        # the projection's parameters as _project takes them: R, t, K row-major, then dist
+        object.__setattr__(self, '_model', np.concatenate([self.R.ravel(), self.t, self.K.ravel(), self.dist]))
 
     @classmethod
     def from_projection(cls, name: str, P: np.ndarray, width: int, height: int) -> Camera:
@@ -87,21 +95,9 @@ class Camera:
 
     def project(self, X: np.ndarray) -> np.ndarray:
         """(..., 3) world points -> (..., 2) pixels; NaN for points at or behind the camera."""
-        # coordinate by coordinate on whole arrays: matmuls and broadcasts over a last axis of 2
-        # or 3 took 2.7 times as long
-        x, y, z = np.moveaxis(np.asarray(X, dtype=float), -1, 0)
-        R, t = self.R, self.t
-        depth = R[2, 0] * x + R[2, 1] * y + R[2, 2] * z + t[2]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            inv = np.where(depth > 0, 1.0 / depth, np.nan)
-        xn = (R[0, 0] * x + R[0, 1] * y + R[0, 2] * z + t[0]) * inv
-        yn = (R[1, 0] * x + R[1, 1] * y + R[1, 2] * z + t[1]) * inv
-        if self.has_distortion:
-            xn, yn = np.moveaxis(self._distort(np.stack([xn, yn], axis=-1)), -1, 0)
-        K = self.K
-        uv = np.empty(xn.shape + (2,))
-        uv[..., 0] = K[0, 0] * xn + K[0, 1] * yn + K[0, 2]
-        uv[..., 1] = K[1, 0] * xn + K[1, 1] * yn + K[1, 2]
+        X = np.require(X, np.float64, _KERNEL_READY)
+        uv = np.empty(X.shape[:-1] + (2,))
+        _project(self._model[None], _ZERO, _ZERO, X.reshape(1, -1, 3), uv.reshape(1, -1, 2))
         return uv
 
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -245,16 +241,55 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
     raise FileNotFoundError(f'{path}: no calibration_*.json or P<i>.txt files')
 
 
+def rig_project(cameras: Sequence[Camera], which: np.ndarray, points: np.ndarray,
+                of: np.ndarray | None = None) -> np.ndarray:
+    """(N, K, 2) pixels of points (P, K, 3) in metres: row n is points[of[n]] (of (N,); by
+    default row n) seen by cameras[which[n]] (N,); NaN at or behind the camera. Camera.project
+    for rows of points in many cameras at once."""
+    points = np.require(points, np.float64, _KERNEL_READY)
+    which = np.require(which, np.int64, _KERNEL_READY)
+    of = np.arange(len(which)) if of is None else np.require(of, np.int64, _KERNEL_READY)
+    uv = np.empty((len(which), points.shape[1], 2))
+    _project(np.stack([cam._model for cam in cameras]) if len(cameras) else np.zeros((0, 26)), which, of, points, uv)
+    return uv
+
+
+_ZERO = np.zeros(1, dtype=np.int64)  # one row, of the first camera
+
+
+@kernel('void(float64[:, ::1], int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1])')
+def _project(model, which, of, points, out):
+    # model (C, 26): R, t, K (row-major), dist of each camera; the arithmetic of numpy on whole
+    # arrays, in the same order
+    for n in range(len(which)):
+        R, t, K, dist = model[which[n], :9], model[which[n], 9:12], model[which[n], 12:21], model[which[n], 21:]
+        k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+        distorted = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
+        X = points[of[n]]
+        for i in range(X.shape[0]):
+            x, y, z = X[i, 0], X[i, 1], X[i, 2]
+            depth = R[6] * x + R[7] * y + R[8] * z + t[2]
+            inv = 1.0 / depth if depth > 0 else np.nan
+            xn = (R[0] * x + R[1] * y + R[2] * z + t[0]) * inv
+            yn = (R[3] * x + R[4] * y + R[5] * z + t[1]) * inv
+            if distorted:  # Camera._distort
+                r2 = xn * xn + yn * yn
+                radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
+                          yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
+            out[n, i, 0] = K[0] * xn + K[1] * yn + K[2]
+            out[n, i, 1] = K[3] * xn + K[4] * yn + K[5]
+
+
 def rig_directions(cameras: Sequence[Camera], which: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """(N, 3) unit world directions of the rays of pixels uv (N, 2), pixel n seen by
-    cameras[which[n]] (N,): Camera.directions for pixels of many cameras at once. The cameras
-    without distortion take one pass over every pixel (a pass per camera over masked copies
-    cost more than the arithmetic); a camera with distortion undistorts its own pixels."""
-    uv = np.asarray(uv, dtype=float)
-    which = np.asarray(which, dtype=np.intp)
-    to_ray = np.stack([cam._pixel_to_ray for cam in cameras])[which]  # (N, 3, 3)
-    d = to_ray[:, :, 0] * uv[:, :1] + to_ray[:, :, 1] * uv[:, 1:] + to_ray[:, :, 2]
-    d /= np.sqrt(np.einsum('ni,ni->n', d, d))[:, None]
+    cameras[which[n]] (N,): Camera.directions for pixels of many cameras at once. A camera with
+    distortion undistorts its own pixels."""
+    uv = np.require(uv, np.float64, _KERNEL_READY)
+    which = np.require(which, np.int64, _KERNEL_READY)
+    d = np.empty((len(uv), 3))
+    _directions(np.stack([cam._pixel_to_ray for cam in cameras]) if len(cameras) else np.zeros((0, 3, 3)),
+                which, uv, d)
     for i, cam in enumerate(cameras):
         if cam.has_distortion:
             mine = which == i
@@ -262,43 +297,125 @@ def rig_directions(cameras: Sequence[Camera], which: np.ndarray, uv: np.ndarray)
     return d
 
 
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, ::1])')
+def _directions(to_ray, which, uv, out):
+    # pixel (u, v, 1) through its camera's matrix (as for a lens without distortion), normalised
+    for n in range(len(which)):
+        T = to_ray[which[n]]
+        u, v = uv[n, 0], uv[n, 1]
+        dx = T[0, 0] * u + T[0, 1] * v + T[0, 2]
+        dy = T[1, 0] * u + T[1, 1] * v + T[1, 2]
+        dz = T[2, 0] * u + T[2, 1] * v + T[2, 2]
+        norm = np.sqrt((dx * dx + dz * dz) + dy * dy)  # the order of numpy's einsum, for the same bits
+        out[n, 0] = dx / norm
+        out[n, 1] = dy / norm
+        out[n, 2] = dz / norm
+
+
 def line_terms(origins: np.ndarray, dirs: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """(..., 3) lines with unit directions -> (9, ...) each line's share of the least-squares
     system A x = b of the point closest to several lines: A = I - d d^T as its six entries
     (xx, xy, xz, yy, yz, zz), then b = o - d (d . o). Summing the terms of some lines and
     solving (solve_line_terms) gives their closest point, so a set of lines used by many
-    solves is prepared once. Component-major, so every step runs on contiguous arrays; out:
+    solves is prepared once. Component-major, so that a term of many lines is contiguous; out:
     where to write them (9, ...)."""
-    o = np.moveaxis(np.asarray(origins, dtype=float), -1, 0)
-    dx, dy, dz = np.ascontiguousarray(np.moveaxis(np.asarray(dirs, dtype=float), -1, 0))
+    dirs = np.require(dirs, np.float64, _KERNEL_READY)
+    origins = np.asarray(origins, dtype=np.float64)
+    if origins.shape != dirs.shape:
+        origins = np.broadcast_to(origins, dirs.shape)
+    origins = np.require(origins, np.float64, _KERNEL_READY)  # a broadcast is read-only: a copy
     if out is None:
-        out = np.empty((9,) + dx.shape)
-    along = dx * o[0] + dy * o[1] + dz * o[2]
-    for k, (a, b) in enumerate(((dx, dx), (dx, dy), (dx, dz), (dy, dy), (dy, dz), (dz, dz))):
-        np.multiply(a, b, out=out[k])
-        np.negative(out[k], out=out[k])
-    out[[0, 3, 5]] += 1.0
-    for k, (oc, dc) in enumerate(zip(o, (dx, dy, dz)), start=6):
-        np.multiply(dc, along, out=out[k])
-        np.subtract(oc, out[k], out=out[k])
+        out = np.empty((9,) + dirs.shape[:-1])
+    _line_terms(origins.reshape(-1, 3), dirs.reshape(-1, 3), out.reshape(9, -1))
     return out
+
+
+@kernel('void(float64[::1], float64[::1], float64[::1])')
+def _ray_terms(o, d, out):
+    # one line's share (9,) of the normal equations, as numpy computed it on whole arrays
+    dx, dy, dz = d[0], d[1], d[2]
+    along = dx * o[0] + dy * o[1] + dz * o[2]
+    out[0] = -(dx * dx) + 1.0
+    out[1] = -(dx * dy)
+    out[2] = -(dx * dz)
+    out[3] = -(dy * dy) + 1.0
+    out[4] = -(dy * dz)
+    out[5] = -(dz * dz) + 1.0
+    out[6] = o[0] - dx * along
+    out[7] = o[1] - dy * along
+    out[8] = o[2] - dz * along
+
+
+@kernel('void(float64[:, ::1], float64[:, ::1], float64[:, :])')
+def _line_terms(o, d, out):
+    terms = np.empty(9)
+    for n in range(len(d)):
+        _ray_terms(o[n], d[n], terms)
+        out[:, n] = terms
 
 
 def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:
     """(9, ...) summed line_terms -> (..., 3) the closest point, by Cramer's rule on the
     symmetric 3x3 system; NaN where it is degenerate (fewer than two non-parallel lines, or not
     finite). n_lines: the most lines in any sum (scales the singularity threshold)."""
-    a00, a01, a02, a11, a12, a22, b0, b1, b2 = terms
+    terms = np.require(terms, np.float64, _KERNEL_READY)
+    x = np.empty(terms.shape[1:] + (3,))
+    _solve_line_terms(terms.reshape(9, -1), 1e-12 * n_lines ** 3, x.reshape(-1, 3))
+    return x
+
+
+@kernel('void(float64[::1], float64, float64[::1])')
+def _solve(terms, singular, out):
+    a00, a01, a02, a11, a12, a22 = terms[0], terms[1], terms[2], terms[3], terms[4], terms[5]
+    b0, b1, b2 = terms[6], terms[7], terms[8]
     c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
     c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
     det = a00 * c00 + a01 * c01 + a02 * c02
-    with np.errstate(invalid='ignore'):
-        ok = np.isfinite(det) & np.isfinite(b0 + b1 + b2) & (np.abs(det) > 1e-12 * n_lines ** 3)
-    inv = 1.0 / np.where(ok, det, 1.0)
-    x = np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
-                  (c01 * b0 + c11 * b1 + c12 * b2) * inv,
-                  (c02 * b0 + c12 * b1 + c22 * b2) * inv], axis=-1)
-    return np.where(ok[..., None], x, np.nan)
+    if np.isfinite(det) and np.isfinite(b0 + b1 + b2) and np.abs(det) > singular:
+        inv = 1.0 / det
+        out[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv
+        out[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv
+        out[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
+    else:
+        out[:] = np.nan
+
+
+@kernel('void(float64[:, ::1], float64, float64[:, ::1])')
+def _solve_line_terms(terms, singular, out):
+    summed = np.empty(9)
+    for n in range(terms.shape[1]):
+        summed[:] = terms[:, n]
+        _solve(summed, singular, out[n])
+
+
+def closest_points_of_ray_sets(centres: np.ndarray, of: np.ndarray, dirs: np.ndarray, sets: np.ndarray) -> np.ndarray:
+    """(N, 3) the point closest to each of N sets of rays, as line_terms then solve_line_terms
+    (the same arithmetic, each set's terms summed in its order): set n is the rays sets[n]
+    (N, K) (-1: no ray, padding), ray r going from centres[of[r]] ((C, 3) metres, (R,)) along the
+    unit dirs[r] (R, 3). NaN where a set is degenerate; K scales the singularity threshold as
+    solve_line_terms' n_lines. Without the (9, R) terms of every ray and (9, N) of every set."""
+    sets = np.require(sets, np.int64, _KERNEL_READY)
+    out = np.empty((len(sets), 3))
+    _closest_points(np.require(centres, np.float64, _KERNEL_READY), np.require(of, np.int64, _KERNEL_READY),
+                    np.require(dirs, np.float64, _KERNEL_READY), sets, 1e-12 * sets.shape[1] ** 3, out)
+    return out
+
+
+@kernel('void(float64[:, ::1], int64[::1], float64[:, ::1], int64[:, ::1], float64, float64[:, ::1])')
+def _closest_points(centres, of, dirs, sets, singular, out):
+    terms = np.empty(9)
+    summed = np.empty(9)
+    for n in range(len(sets)):
+        for k in range(sets.shape[1]):
+            r = sets[n, k]
+            if r < 0:  # padding: numpy summed a column of zeros
+                for t in range(9):
+                    summed[t] += 0.0
+                continue
+            _ray_terms(centres[of[r]], dirs[r], terms)
+            for t in range(9):
+                summed[t] = terms[t] if k == 0 else summed[t] + terms[t]
+        _solve(summed, singular, out[n])
 
 
 def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

@@ -10,7 +10,8 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.geometry.camera import Camera, rig_project
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 TEMPORAL_FORMS = ('laplace', 'gauss')
@@ -63,23 +64,68 @@ def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple
     if not people:
         return []
     cameras = [cam for views in people for cam, _ in views]
-    counts = np.array([len(v) for v in people])
-    owner = np.repeat(np.arange(len(people)), counts)
+    counts = np.array([len(v) for v in people], dtype=np.int64)
     points = np.stack(hypotheses)  # (P, J, M, 3)
-    uv = np.empty(stack.start.shape + (points.shape[2], 2))  # (V, J, M, 2)
-    for cam in {id(c): c for c in cameras}.values():
-        idx = [v for v, c in enumerate(cameras) if c is cam]
-        uv[idx] = cam.project(points[owner[idx]])
-    values = stack.lookup(uv)  # (V, J, M); NaN projections (behind a camera) give 0
-    total = np.zeros((len(people),) + values.shape[1:])
-    seen = counts > 0
-    # views are in person order: each person's sum over its views in one pass, view after view
-    total[seen] = np.add.reduceat(values, np.concatenate([[0], np.cumsum(counts)[:-1]])[seen], axis=0)
-    total /= np.maximum(counts, 1)[:, None, None]
-    rows = total.sum(axis=-1, keepdims=True)
-    uniform = np.full_like(total, 1.0 / total.shape[-1])
-    out = np.where(rows > 0, total / np.where(rows > 0, rows, 1.0), uniform)
+    n_people, n_joints, m = points.shape[:3]
+    rig = list({id(c): c for c in cameras}.values())
+    which = [next(i for i, r in enumerate(rig) if r is c) for c in cameras]  # (V,) each view's camera
+    uv = rig_project(rig, which, points.reshape(n_people, -1, 3), np.repeat(np.arange(n_people), counts))
+    values = stack.lookup(uv.reshape(stack.start.shape + (m, 2)))  # (V, J, M); NaN projections give 0
+    out = np.empty((n_people, n_joints, m))
+    _mean_over_views(values, counts, out)
     return list(out)
+
+
+@kernel('float64(float64[:])')
+def _pairwise_sum(x):
+    # numpy's summation of a row by add.reduce (pairwise: eight partial sums within blocks of 128)
+    n = len(x)
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += x[i]
+        return total
+    if n > 128:
+        half = n // 2
+        half -= half % 8
+        return _pairwise_sum(x[:half]) + _pairwise_sum(x[half:])
+    r = x[:8].copy()
+    i = 8
+    while i < n - n % 8:
+        for k in range(8):
+            r[k] += x[i + k]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for k in range(i, n):
+        total += x[k]
+    return total
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], float64[:, :, ::1])')
+def _mean_over_views(values, counts, out):
+    # values (V, J, M), views person after person -> out (P, J, M): each person's mean over its
+    # views, each row scaled to sum to one (uniform where it sums to 0). numpy's order of sums
+    # (add.reduceat: the first view plus the reduction of the others; then a row's reduction).
+    first = 0
+    for p in range(len(counts)):
+        for j in range(out.shape[1]):
+            row = out[p, j]
+            for k in range(len(row)):
+                total = 0.0
+                if counts[p] > 0:
+                    total = values[first, j, k]
+                if counts[p] > 8:
+                    total += _pairwise_sum(values[first + 1:first + counts[p], j, k])
+                elif counts[p] > 1:  # fewer than 8 to reduce: _pairwise_sum's plain loop, inline
+                    rest = 0.0
+                    for v in range(first + 1, first + counts[p]):
+                        rest += values[v, j, k]
+                    total += rest
+                row[k] = total / max(counts[p], 1)
+            total = _pairwise_sum(row)
+            for k in range(len(row)):
+                row[k] = row[k] / total if total > 0 else 1.0 / len(row)
+        first += counts[p]
 
 
 def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: FactorConfig,

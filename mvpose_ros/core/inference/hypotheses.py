@@ -15,8 +15,9 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
-from mvpose_ros.core.geometry.camera import Camera, line_terms, rig_directions, solve_line_terms
+from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
@@ -73,86 +74,182 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     if n_views == 0:
         return []
     n_people, n_maps = len(people), n_views * n_joints
-    counts = np.array([len(v) for v in people], dtype=np.intp)
-    first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
-    owner = np.repeat(np.arange(n_people), counts)  # (V,) each view's person
-    # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator: one
-    # call per person gives the same stream as a call per array
-    u = np.empty((n_views, n_joints, m))
-    jitter = np.empty((n_views, n_joints, m, 2))
-    for p, rng in enumerate(rngs):
-        lo, hi = first_view[p], first_view[p + 1]
-        draws = rng.random((hi - lo, 3 * n_joints * m))
-        u[lo:hi] = draws[:, :n_joints * m].reshape(-1, n_joints, m)
-        jitter[lo:hi] = draws[:, n_joints * m:].reshape(-1, n_joints, m, 2)
+    counts = np.array([len(v) for v in people], dtype=np.int64)
+    first_view = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     peaks = stack.peak()  # (V, J, 3)
 
     # each (person, joint): how many of the person's views see it, and those views in order
-    sees = np.zeros((n_people, counts.max(), n_joints), dtype=bool)
-    sees[owner, np.arange(n_views) - first_view[owner]] = peaks[..., 2] > 0
-    n_seen = sees.sum(axis=1)  # (P, J)
-    seeing = first_view[:-1, None, None] + np.argsort(~sees, axis=1, kind='stable')  # (P, K, J) views, seeing first
+    n_seen = np.empty((n_people, n_joints), dtype=np.int64)
+    seeing = np.empty((n_people, counts.max(), n_joints), dtype=np.int64)
+    _seeing(peaks, first_view, n_seen, seeing)
     width = int(n_seen.max())
     # Rays are made only for the draws a hypothesis uses (a camera of a joint seen by 5 uses ~23
-    # of its m): first every map's peak (ray v * J + j), then each map's first need[v, j] draws.
-    # The joints seen by n >= 2 views share one plan of which rays make each hypothesis.
-    need = np.zeros((n_views, n_joints), dtype=np.intp)
-    plans = []  # (plan, persons (Q,), joints (Q,), views (Q, n)) per n
-    for n in range(2, width + 1):
-        pp, pj = np.nonzero(n_seen == n)
-        if len(pp):
-            views = seeing[pp, :n, pj]
-            plan = _plan(n, m, config.peak_hypotheses, width)
-            need[views, pj[:, None]] = plan[2]
-            plans.append((plan, pp, pj, views))
-    single_p, single_j = np.nonzero(n_seen == 1)
-    single_view = seeing[single_p, 0, single_j]
-    need[single_view, single_j] = m  # every draw, for the rays of a single view (below)
-    first_draw = n_maps + np.concatenate([[0], np.cumsum(need.ravel())[:-1]]).reshape(n_views, n_joints)
-    maps = np.repeat(np.arange(n_maps), need.ravel())
-    k = np.arange(len(maps)) - (first_draw.ravel() - n_maps)[maps]  # each draw's index within its map
-    pixels = np.concatenate([peaks[..., :2].reshape(-1, 2),
-                             stack.sample_at(maps, u.reshape(n_maps, m)[maps, k],
-                                             jitter.reshape(n_maps, m, 2)[maps, k])])  # (R, 2)
+    # of its m): first every map's peak (ray v * J + j), then each map's first draws, as many as
+    # the plan of its joint's number of views uses (all m for a single view: its rays, below).
+    cam_of, draw, used = _plans(m, config.peak_hypotheses, width)
+    need = np.empty((n_views, n_joints), dtype=np.int64)
+    first_draw = np.empty((n_views, n_joints), dtype=np.int64)
+    n_draws = _needs(n_seen, seeing, used, m, need, first_draw)
+    maps = np.empty(n_draws, dtype=np.int64)
+    u = np.empty(n_draws)
+    jitter = np.empty((n_draws, 2))
+    # each view's draws in order, u (J, m) then jitter (J, m, 2), from its person's generator (one
+    # call per person gives the same stream as a call per array), into one buffer: those kept are
+    # copied out before the next person's overwrite them
+    draws = np.empty((counts.max(), 3 * n_joints * m))
+    for p, rng in enumerate(rngs):
+        rng.random(out=draws[:counts[p]])
+        _keep_draws(draws[:counts[p]], first_view[p], need, first_draw, maps, u, jitter)
+    pixels = np.concatenate([peaks[..., :2].reshape(-1, 2), stack.sample_at(maps, u, jitter)])  # (R, 2)
     view = np.concatenate([np.arange(n_maps), maps]) // n_joints  # (R,)
     cameras = [cam for views in people for cam, _ in views]
     rig = list({id(c): c for c in cameras}.values())
     camera_of_view = np.array([next(i for i, r in enumerate(rig) if r is c) for c in cameras])  # (V,)
-    dirs = rig_directions(rig, camera_of_view[view], pixels)  # (R, 3)
+    dirs = rig_directions(rig, np.take(camera_of_view, view), pixels)  # (R, 3)
     centres = np.stack([cam.centre for cam in rig])[camera_of_view]  # (V, 3)
 
     out = np.full((n_people, n_joints, m, 3), np.nan)
-    if plans:
-        # each ray's share of the normal equations once, then per hypothesis the sum of its rays'
-        # shares and one solve for the whole frame; the last column is no ray at all (zeros), for
-        # the slots where a subset is padded to K cameras
-        terms = np.zeros((9, len(dirs) + 1))
-        line_terms(centres[view], dirs, out=terms[:, :-1])
-        ray = np.concatenate([_rays(plan_views[:, cam_of], plan_joints, draw, m, n_joints, first_draw)
-                              for (cam_of, draw, _), _, plan_joints, plan_views in plans])  # (Q, m, K)
-        ray = np.ascontiguousarray(np.moveaxis(ray, -1, 0))  # (K, Q, m): one gather per camera slot
-        summed = terms[:, ray[0]]  # (9, Q, m)
-        for slot in ray[1:]:
-            summed += terms[:, slot]
-        persons = np.concatenate([plan_persons for _, plan_persons, _, _ in plans])
-        joints = np.concatenate([plan_joints for _, _, plan_joints, _ in plans])
-        out[persons, joints] = solve_line_terms(summed, width)  # (Q, m, 3)
-
-    located = ~np.isnan(out).all(axis=(1, 2, 3))  # (P,) anyone with a joint seen twice
-    centre = np.full((n_people, 3), np.nan)
-    centre[located] = np.nanmean(out[located].reshape(-1, n_joints * m, 3), axis=1)
-    # a joint seen by a single camera: its m rays, each at a depth chosen below
-    keep = located[single_p]
-    single_p, single_j, single_view = single_p[keep], single_j[keep], single_view[keep]
-    origin = centres[single_view]  # (S, 3)
-    direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]  # (S, m, 3)
-    depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
-    if config.single_view_depth == 'limb':
-        depth = _limb_depths(depth, direction, origin, single_p, single_j, _anchors(out, config))
-    out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
-    unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
-    out[unseen_p, unseen_j] = centre[unseen_p, None]
+    persons, joints = np.nonzero(n_seen >= 2)
+    if len(persons):
+        # the rays of each hypothesis, then one least-squares solve for the whole frame
+        sets = np.empty((len(persons) * m, width), dtype=np.int64)
+        _ray_sets(n_seen, seeing, first_draw, cam_of, draw, sets)
+        out[persons, joints] = closest_points_of_ray_sets(centres, view, dirs, sets).reshape(-1, m, 3)
+    # the joints seen by one camera or none, from the person's centre (mean hypothesis) and
+    # the anchors of the joints seen twice
+    located = np.empty(n_people, dtype=np.bool_)
+    _complete(out, n_seen, seeing, first_draw, dirs, centres, _anchors(out, config),
+              config.single_view_depth == 'limb', _PARENT, PRIOR_BONE_LENGTH, located)
     return [out[p] if located[p] else None for p in range(n_people)]
+
+
+_PARENT = INFERENCE_PARENT.astype(np.int64)
+
+
+@kernel('void(float64[:, :, ::1], int64[::1], int64[:, ::1], int64[:, :, ::1])')
+def _seeing(peaks, first_view, n_seen, seeing):
+    # peaks (V, J, 3) -> per (person, joint) the number of its views with a peak, and those
+    # views (P, K, J), in order
+    for p in range(len(first_view) - 1):
+        for j in range(peaks.shape[1]):
+            n = 0
+            for v in range(first_view[p], first_view[p + 1]):
+                if peaks[v, j, 2] > 0:
+                    seeing[p, n, j] = v
+                    n += 1
+            n_seen[p, j] = n
+
+
+@kernel('int64(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64, int64[:, ::1], int64[:, ::1])')
+def _needs(n_seen, seeing, used, m, need, first_draw):
+    # how many draws each map (V, J) uses (used[n, c]: of the c-th of n cameras; all m of a single
+    # view), where its rays start (after the V * J peaks); their number
+    n_views, n_joints = need.shape
+    need[:] = 0
+    for p in range(n_seen.shape[0]):
+        for j in range(n_joints):
+            n = n_seen[p, j]
+            if n == 1:
+                need[seeing[p, 0, j], j] = m
+            for c in range(n if n >= 2 else 0):
+                need[seeing[p, c, j], j] = used[n, c]
+    r = 0
+    for v in range(n_views):
+        for j in range(n_joints):
+            first_draw[v, j] = n_views * n_joints + r
+            r += need[v, j]
+    return r
+
+
+@kernel('void(float64[:, ::1], int64, int64[:, ::1], int64[:, ::1], int64[::1], float64[::1], float64[:, ::1])')
+def _keep_draws(draws, first_view, need, first_draw, maps, u, jitter):
+    # the draws used of views first_view.. (draws (K views, 3 J m): u (J, m) then jitter (J, m, 2) of
+    # each): their maps, u and jitter, at their place among all (first_draw)
+    n_views, n_joints = need.shape
+    m = draws.shape[1] // (3 * n_joints)
+    for v in range(first_view, first_view + len(draws)):
+        for j in range(n_joints):
+            r = first_draw[v, j] - n_views * n_joints
+            row = draws[v - first_view]
+            for k in range(need[v, j]):
+                maps[r + k] = v * n_joints + j
+                u[r + k] = row[j * m + k]
+                jitter[r + k, 0] = row[n_joints * m + 2 * (j * m + k)]
+                jitter[r + k, 1] = row[n_joints * m + 2 * (j * m + k) + 1]
+
+
+@kernel('void(int64[:, ::1], int64[:, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, :, ::1], int64[:, ::1])')
+def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
+    # out (Q * m, K): per joint seen by n >= 2 views (person-major) and hypothesis h, its rays by
+    # its plan (cam_of[n], draw[n]: (m, K)): a view's peak ray, a draw's ray, or -1 (padding)
+    n_joints = n_seen.shape[1]
+    m, width = draw.shape[1], draw.shape[2]
+    row = 0
+    for p in range(n_seen.shape[0]):
+        for j in range(n_joints):
+            n = n_seen[p, j]
+            if n < 2:
+                continue
+            for h in range(m):
+                for slot in range(width):
+                    d = draw[n, h, slot]
+                    v = seeing[p, cam_of[n, h, slot], j]
+                    out[row, slot] = -1 if d < 0 else v * n_joints + j if d == m else first_draw[v, j] + d
+                row += 1
+
+
+@kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
+        'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[::1], boolean[::1])')
+def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, located):
+    # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
+    # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
+    # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
+    # or, with limb, where they meet the sphere of the bone's length around the parent's
+    # anchor (the nearer of the two to the centre's depth; a ray missing it: its point nearest
+    # the parent); a joint seen by none, the centre.
+    n_joints, m = out.shape[1], out.shape[2]
+    for p in range(out.shape[0]):
+        total = np.zeros(3)
+        count = np.zeros(3)
+        for j in range(n_joints):
+            for k in range(m):
+                for c in range(3):
+                    x = out[p, j, k, c]
+                    if np.isnan(x):
+                        total[c] += 0.0
+                    else:
+                        total[c] += x
+                        count[c] += 1
+        located[p] = count[0] > 0 or count[1] > 0 or count[2] > 0
+        if not located[p]:
+            continue
+        centre = total / count
+        for j in range(n_joints):
+            if n_seen[p, j] == 0:
+                for k in range(m):
+                    out[p, j, k] = centre
+            if n_seen[p, j] != 1:
+                continue
+            v = seeing[p, 0, j]
+            o = centres[v]
+            to_centre = centre - o
+            rel = np.zeros(3)  # from the view's centre to the parent's anchor, for 'limb'
+            on_limb = limb and parents[j] >= 0 and not np.isnan(lengths[j])
+            if on_limb:
+                rel = anchors[p, parents[j]] - o
+                on_limb = not np.isnan(rel[0])
+            rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
+            for k in range(m):
+                d = dirs[first_draw[v, j] + k]
+                # dot products summed x, z, then y: numpy's einsum, for the same bits
+                depth = (d[0] * to_centre[0] + d[2] * to_centre[2]) + d[1] * to_centre[1]
+                if on_limb:
+                    mid = (d[0] * rel[0] + d[2] * rel[2]) + d[1] * rel[1]
+                    half = np.sqrt(max(mid * mid - rel_sq + lengths[j] * lengths[j], 0.0))
+                    near, far = mid - half, mid + half
+                    depth = near if np.abs(near - depth) <= np.abs(far - depth) else far
+                for c in range(3):
+                    out[p, j, k, c] = o[c] + depth * d[c]
 
 
 def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
@@ -165,34 +262,6 @@ def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
     seen = ~np.isnan(hyp[:, :, 0, 0])
     out[seen] = np.median(hyp[seen], axis=1)
     return out
-
-
-def _limb_depths(depth: np.ndarray, direction: np.ndarray, origin: np.ndarray, persons: np.ndarray,
-                 joints: np.ndarray, anchors: np.ndarray) -> np.ndarray:
-    """Depths (n, m) along single-view rays direction (n, m, 3) from origin (n, 3) of joints
-    `joints` (n,) of `persons` (n,) where each ray meets the sphere of its bone's length around its
-    parent's anchor (anchors (P, J, 3)); of the two, the one nearer the given depth (the person's
-    centre). A ray missing the sphere takes its point nearest the parent; a joint without a
-    located parent keeps `depth`."""
-    parent = INFERENCE_PARENT[joints]
-    length = PRIOR_BONE_LENGTH[joints]
-    anchor = anchors[persons, np.maximum(parent, 0)]  # (n, 3)
-    rel = anchor - origin
-    mid = np.einsum('nmd,nd->nm', direction, rel)  # depth of the point nearest the parent
-    half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
-    near, far = mid - half, mid + half
-    limb = np.where(np.abs(near - depth) <= np.abs(far - depth), near, far)
-    located = (parent >= 0) & ~np.isnan(anchor[:, 0]) & ~np.isnan(length)
-    return np.where(located[:, None], limb, depth)
-
-
-def _rays(views: np.ndarray, joints: np.ndarray, draw: np.ndarray, m: int, n_joints: int,
-          first_draw: np.ndarray) -> np.ndarray:
-    """Ray indices (joints, m, K) of the hypotheses of `joints` from a plan's views (m, K) and
-    draws (m, K) (draw m: the peak, ray v * J + j; -1: padding, the zero column -1)."""
-    j = joints[:, None, None]
-    ray = np.where(draw == m, views * n_joints + j, first_draw[views, j] + draw)
-    return np.where(draw < 0, -1, ray)
 
 
 @functools.lru_cache(maxsize=256)
@@ -216,3 +285,15 @@ def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray
         cam_of[i, :len(subset)] = subset
         draw[i, :len(subset)] = draws
     return cam_of, draw, np.array(used, dtype=np.intp)
+
+
+@functools.lru_cache(maxsize=64)
+def _plans(m: int, with_peaks: bool, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The _plan of every camera count n <= width, stacked: camera (width + 1, m, width) and draw
+    (width + 1, m, width) indices, draws used of each camera (width + 1, width)."""
+    cam_of = np.zeros((width + 1, m, width), dtype=np.int64)
+    draw = np.full((width + 1, m, width), -1, dtype=np.int64)
+    used = np.zeros((width + 1, width), dtype=np.int64)
+    for n in range(2, width + 1):
+        cam_of[n], draw[n], used[n, :n] = _plan(n, m, with_peaks, width)
+    return cam_of, draw, used
