@@ -63,7 +63,7 @@ def test_temporal_scale_sharpens():
 
 
 def _evenly_spaced_temporal(prev, cur, nxt, config) -> np.ndarray:
-    """The evenly spaced temporal table as it was computed before the factor knew about time steps
+    """The evenly spaced temporal table as numpy computed it before the factor knew about time steps
     (midpoint, temporal_scale), operation for operation."""
     mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])
     j, ma, mc = mid.shape[:3]
@@ -84,13 +84,30 @@ def _evenly_spaced_temporal(prev, cur, nxt, config) -> np.ndarray:
 def test_unit_steps_reproduce_the_evenly_spaced_table_exactly(form):
     config = FactorConfig(temporal_form=form)
     prev, cur, nxt = np.random.default_rng(5).normal(scale=0.3, size=(3, 4, 7, 3))
+    table = temporal_table(prev, cur, nxt, config)
+    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (1.0, 1.0)), table)
+    # numpy's table to float32 rounding (the kernel takes the squared distance directly, not by
+    # its expansion, and sums in float64); entries below 1e-30 only where numpy's are
     old = _evenly_spaced_temporal(prev, cur, nxt, config)
-    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config), old)
-    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (1.0, 1.0)), old)
+    np.testing.assert_allclose(table, old, rtol=1e-6, atol=1e-30)
     # equal steps of two periods: the same midpoint, the kernel twice as wide
     wide = FactorConfig(temporal_form=form, temporal_scale=2 * config.temporal_scale)
     np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (2.0, 2.0)),
-                                  _evenly_spaced_temporal(prev, cur, nxt, wide))
+                                  temporal_table(prev, cur, nxt, wide))
+    np.testing.assert_allclose(temporal_table(prev, cur, nxt, wide), _evenly_spaced_temporal(prev, cur, nxt, wide),
+                               rtol=1e-6, atol=1e-30)
+
+
+@pytest.mark.parametrize('shape', [(0, 5), (3, 1), (2, 16)])
+def test_temporal_table_of_no_joints_one_hypothesis_and_float32_points(shape):
+    """Edge cases against numpy: no joints, a single hypothesis (the table is 1), float32 input."""
+    j, m = shape
+    prev, cur, nxt = np.random.default_rng(7).normal(scale=0.3, size=(3, j, m, 3)).astype(np.float32)
+    config = FactorConfig()
+    table = temporal_table(prev, cur, nxt, config)
+    assert table.shape == (j, m, m, m) and table.dtype == np.float32 and table.flags.c_contiguous
+    np.testing.assert_allclose(table, _evenly_spaced_temporal(*(h.astype(np.float64) for h in (prev, cur, nxt)),
+                                                              config), rtol=1e-6, atol=1e-30)
 
 
 @pytest.mark.parametrize('form', TEMPORAL_FORMS)

@@ -10,6 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
@@ -50,7 +51,8 @@ class FactorConfig:
 
 def _normalised(table: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
     total = table.sum(axis=axes, keepdims=True)
-    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32, copy=False)
+    # C order: the BP kernels take C-contiguous tables (a product of transposed views is not)
+    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32, order='C', copy=False)
 
 
 def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple[Camera, PersonHeatmap]]],
@@ -97,35 +99,44 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     s0, s1 = (float(s) for s in steps)
     if not (s0 > 0 and s1 > 0):
         raise ValueError(f'temporal steps must be positive, got {steps}')
-    if s0 == s1:
-        mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])  # (J, Ma, Mc, 3)
-    else:
-        w = s0 / (s0 + s1)
-        mid = prev[:, :, None, :] + w * (nxt[:, None, :, :] - prev[:, :, None, :])
     scale = config.temporal_scale if s0 == s1 == 1.0 else config.temporal_scale * 0.5 * (s0 + s1)
-    j, ma, mc = mid.shape[:3]
-    mid = mid.reshape(j, ma * mc, 3)
-    mb = cur.shape[1]
-    # |b - mid|^2 = [mid, |mid|^2, 1] . [-2b, 1, |b|^2]: the whole M^3 part is one batched matmul
-    # (sums and broadcasts over rows of only M elements took longer than the product)
-    left = np.empty((j, ma * mc, 5))
-    left[..., :3] = mid
-    left[..., 3] = np.einsum('jkd,jkd->jk', mid, mid)
-    left[..., 4] = 1.0
-    right = np.empty((j, 5, mb))
-    right[:, :3] = -2.0 * cur.transpose(0, 2, 1)
-    right[:, 3] = 1.0
-    right[:, 4] = np.einsum('jbd,jbd->jb', cur, cur)
-    sq = left @ right  # every M^3 step below works in place, the arrays being large
-    # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
-    table = np.maximum(sq, 0.0, out=sq).astype(np.float32)
-    if config.temporal_form == 'laplace':
-        np.sqrt(table, out=table)
-        table *= np.float32(-1.0 / scale)
-    else:
-        table *= np.float32(-0.5 / scale ** 2)
-    np.exp(table, out=table)
-    return _normalised(table.reshape(j, ma, mc, mb), axes=(1, 2, 3))
+    laplace = config.temporal_form == 'laplace'
+    coef = np.float32(-1.0 / scale) if laplace else np.float32(-0.5 / scale ** 2)
+    return _temporal_table(*(np.ascontiguousarray(h, dtype=np.float64) for h in (prev, cur, nxt)),
+                           s0 == s1, s0 / (s0 + s1), coef, laplace)
+
+
+@kernel('float32[:, :, :, ::1](float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64, '
+        'float32, boolean)')
+def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
+    """temporal_table's (J, Ma, Mc, Mb) table, entry by entry in float32 from the squared
+    distance in float64: exp(coef sqrt(d^2)) (laplace) or exp(coef d^2), each joint's table
+    scaled to sum to one (summed in float64). even: the midpoint (a + c) / 2, else a + w (c - a)."""
+    n_j, ma, mb, mc = prev.shape[0], prev.shape[1], cur.shape[1], nxt.shape[1]
+    out = np.empty((n_j, ma, mc, mb), np.float32)
+    tiny = np.finfo(np.float32).tiny
+    for j in range(n_j):
+        total = 0.0
+        for a in range(ma):
+            for c in range(mc):
+                row = out[j, a, c]
+                p, n = prev[j, a], nxt[j, c]
+                if even:
+                    mx, my, mz = 0.5 * (p[0] + n[0]), 0.5 * (p[1] + n[1]), 0.5 * (p[2] + n[2])
+                else:
+                    mx, my, mz = p[0] + w * (n[0] - p[0]), p[1] + w * (n[1] - p[1]), p[2] + w * (n[2] - p[2])
+                for b in range(mb):
+                    dx = cur[j, b, 0] - mx
+                    dy = cur[j, b, 1] - my
+                    dz = cur[j, b, 2] - mz
+                    v = np.float32(dx * dx + dy * dy + dz * dz)
+                    if laplace:
+                        v = np.sqrt(v)
+                    v = np.exp(v * coef)
+                    row[b] = v
+                    total += v
+        out[j] /= max(np.float32(total), tiny)
+    return out
 
 
 def pair_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
