@@ -200,3 +200,18 @@ def test_factor_config_defaults():
     config = FactorConfig()
     assert config.temporal_form == 'laplace' and config.temporal_scale == pytest.approx(0.08)
     assert set(TEMPORAL_FORMS) == {'laplace', 'gauss'}
+
+
+@pytest.mark.parametrize('form', TEMPORAL_FORMS)
+def test_temporal_table_far_and_coinciding_hypotheses(form):
+    """Entries whose kernel underflows float32 (a hypothesis 100 m off) are 0, as numpy's; points at
+    the midpoint give the largest entry."""
+    rng = np.random.default_rng(8)
+    prev, cur, nxt = rng.normal(scale=0.05, size=(3, 2, 6, 3))
+    cur[:, 0] = 0.5 * (prev[:, 0] + nxt[:, 0])
+    cur[:, 5] += 100.0
+    config = FactorConfig(temporal_form=form)
+    table = temporal_table(prev, cur, nxt, config)
+    assert np.all(table[..., 5] == 0) and np.all(table[..., :5] > 0)
+    np.testing.assert_allclose(table, _evenly_spaced_temporal(prev, cur, nxt, config), rtol=1e-6, atol=1e-30)
+    assert np.all(table[:, 0, 0, 0] == table.max(axis=(1, 2, 3)))

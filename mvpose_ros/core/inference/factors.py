@@ -94,7 +94,7 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     a + s0 / (s0 + s1) (c - a), and the kernel scale is temporal_scale x (s0 + s1) / 2, so a
     longer step tolerates a proportionally larger deviation; steps (1, 1) is the evenly spaced
     factor, midpoint and temporal_scale. Returns (J, M, M, M) indexed [j, a, c, b]: the centre
-    state is last so that messages contract with plain matmuls.
+    state is last so that BP sums along contiguous rows (bp._update_temporal).
     """
     s0, s1 = (float(s) for s in steps)
     if not (s0 > 0 and s1 > 0):
@@ -106,6 +106,38 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
                            s0 == s1, s0 / (s0 + s1), coef, laplace)
 
 
+@kernel('void(float32[::1], float64[::1], float64[::1])')
+def _exp(x, poly, scale):
+    """x[:] = exp(x) in place, evaluated in float64 and rounded to float32 (so mostly libm's
+    correctly rounded expf), as loops that compile to vector instructions, which a call of expf
+    per entry does not: exp(r) 2^k with k = round(x / ln 2), r = x - k ln 2 (|r| <= ln 2 / 2) by
+    its Taylor series to r^10 (relative error 2e-13), 2^k from its bits. poly, scale: (N,) scratch.
+    Arguments below -700 (exp < 1e-304, 0 in float32) are taken as -700."""
+    n = len(x)
+    for i in range(n):
+        y = max(np.float64(x[i]), -700.0)
+        k = np.floor(y * 1.4426950408889634 + 0.5)
+        r = (y - k * 0.6931471803691238) - k * 1.9082149292705877e-10
+        p = 1.0 / 3628800.0
+        p = p * r + 1.0 / 362880.0
+        p = p * r + 1.0 / 40320.0
+        p = p * r + 1.0 / 5040.0
+        p = p * r + 1.0 / 720.0
+        p = p * r + 1.0 / 120.0
+        p = p * r + 1.0 / 24.0
+        p = p * r + 1.0 / 6.0
+        p = p * r + 0.5
+        p = p * r + 1.0
+        poly[i] = p * r + 1.0
+        # k + 1023 as the low bits of a float64 in [2^52, 2^53): moved to the exponent field, 2^k
+        scale[i] = k + (4503599627370496.0 + 1023.0)
+    bits = scale[:n].view(np.int64)
+    for i in range(n):
+        bits[i] = (bits[i] - 0x4330000000000000) << 52
+    for i in range(n):
+        x[i] = np.float32(poly[i] * scale[i])
+
+
 @kernel('float32[:, :, :, ::1](float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64, '
         'float32, boolean)')
 def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
@@ -114,9 +146,10 @@ def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
     scaled to sum to one (summed in float64). even: the midpoint (a + c) / 2, else a + w (c - a)."""
     n_j, ma, mb, mc = prev.shape[0], prev.shape[1], cur.shape[1], nxt.shape[1]
     out = np.empty((n_j, ma, mc, mb), np.float32)
+    size = ma * mc * mb
+    scratch = np.empty((2, size))
     tiny = np.finfo(np.float32).tiny
     for j in range(n_j):
-        total = 0.0
         for a in range(ma):
             for c in range(mc):
                 row = out[j, a, c]
@@ -129,13 +162,23 @@ def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
                     dx = cur[j, b, 0] - mx
                     dy = cur[j, b, 1] - my
                     dz = cur[j, b, 2] - mz
-                    v = np.float32(dx * dx + dy * dy + dz * dz)
-                    if laplace:
-                        v = np.sqrt(v)
-                    v = np.exp(v * coef)
-                    row[b] = v
-                    total += v
-        out[j] /= max(np.float32(total), tiny)
+                    row[b] = np.float32(dx * dx + dy * dy + dz * dz)
+        flat = out[j].reshape(size)
+        if laplace:
+            for i in range(size):
+                flat[i] = np.sqrt(flat[i]) * coef
+        else:
+            for i in range(size):
+                flat[i] *= coef
+        _exp(flat, scratch[0], scratch[1])
+        lanes = scratch[0, :mb]
+        lanes[:] = 0.0
+        for i in range(0, size, mb):
+            for b in range(mb):
+                lanes[b] += flat[i + b]
+        total = max(np.float32(lanes.sum()), tiny)
+        for i in range(size):
+            flat[i] /= total
     return out
 
 
