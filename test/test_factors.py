@@ -215,3 +215,33 @@ def test_temporal_table_far_and_coinciding_hypotheses(form):
     assert np.all(table[..., 5] == 0) and np.all(table[..., :5] > 0)
     np.testing.assert_allclose(table, _evenly_spaced_temporal(prev, cur, nxt, config), rtol=1e-6, atol=1e-30)
     assert np.all(table[:, 0, 0, 0] == table.max(axis=(1, 2, 3)))
+
+
+def _numpy_pair_tables(right, left, d_limb, length, config):
+    """collision_table and limb_table as numpy computed them (the same operations, whole arrays)."""
+    def normalised(table):
+        total = table.sum(axis=(-2, -1), keepdims=True)
+        return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32)
+
+    d = np.linalg.norm(right[..., :, None, :] - left[..., None, :, :], axis=-1)
+    collision = normalised(1.0 / (1.0 + np.exp((config.collision_centre - d) / config.collision_width)))
+    low, high = config.limb_range
+    excess = np.maximum(np.maximum(d_limb - high * length[:, None, None], low * length[:, None, None] - d_limb), 0.0)
+    return d, collision, normalised(np.exp(-0.5 * (excess / config.limb_sigma) ** 2))
+
+
+@pytest.mark.parametrize('people, edges, m', [(3, 4, 16), (1, 2, 1), (0, 3, 8), (2, 0, 8), (2, 5, 9)])
+def test_pair_tables_are_numpys_to_the_bit(people, edges, m):
+    """pair_distances, collision_table and limb_table against numpy, batched over people (none, no
+    edges, one hypothesis too)."""
+    rng = np.random.default_rng(9)
+    right, left = rng.normal(scale=0.4, size=(2, people, edges, m, 3))
+    length = rng.uniform(0.1, 0.5, edges)
+    config = FactorConfig()
+    d = pair_distances(right, left)
+    d_ref, collision, limb = _numpy_pair_tables(right, left, d, length, config)
+    assert d.shape == (people, edges, m, m)
+    np.testing.assert_array_equal(d, d_ref)
+    for table, ref in ((collision_table(right, left, config), collision), (limb_table(d, length, config), limb)):
+        assert table.dtype == np.float32 and table.flags.c_contiguous
+        np.testing.assert_array_equal(table, ref)

@@ -186,9 +186,9 @@ def _log(data: np.ndarray) -> np.ndarray:
 
 
 @kernel('float64(float64[::1])', 'float32(float32[::1])')
-def _sum(x):
-    """x.sum() added up in numpy's order (pairwise: eight running sums over blocks of at most 128
-    elements), so that a kernel's sums are numpy's to the bit. x: (N,), N >= 1."""
+def pairwise_sum(x):
+    """x.sum() of (N,), N >= 1, added up in numpy's order (pairwise: eight running sums over blocks
+    of at most 128 elements), so that a kernel's sums are numpy's to the bit."""
     n = len(x)
     if n < 8:
         s = x[0]
@@ -198,7 +198,7 @@ def _sum(x):
     if n > 128:
         half = n // 2
         half -= half % 8
-        return _sum(x[:half]) + _sum(x[half:])
+        return pairwise_sum(x[:half]) + pairwise_sum(x[half:])
     r0, r1, r2, r3, r4, r5, r6, r7 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
     i = 8
     while i < n - n % 8:
@@ -228,7 +228,7 @@ def _cavity(total, own, scratch, out):
     top = scratch.max()
     for k in range(m):
         scratch[k] = np.exp(scratch[k] - top)
-    s = _sum(scratch)
+    s = pairwise_sum(scratch)
     for k in range(m):
         out[k] = scratch[k] / s
 
@@ -239,7 +239,7 @@ def _log_message_into(m, out):
     its own precision, the rest in float64 (in the linear domain: messages are products of
     normalised beliefs and tables, so the sum neither over- nor underflows)."""
     tiny = np.finfo(np.float64).tiny
-    s = max(np.float64(_sum(m)), tiny)
+    s = max(np.float64(pairwise_sum(m)), tiny)
     for k in range(len(m)):
         out[k] = np.log(max(m[k] / s, tiny))
 

@@ -5,6 +5,7 @@ to a probability for numerical stability; a constant scale does not change BP ma
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -13,6 +14,7 @@ import numpy as np
 from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
+from mvpose_ros.core.inference.bp import pairwise_sum
 
 TEMPORAL_FORMS = ('laplace', 'gauss')
 
@@ -47,12 +49,6 @@ class FactorConfig:
         for name in ('temporal_scale', 'collision_width', 'limb_sigma'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
-
-
-def _normalised(table: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
-    total = table.sum(axis=axes, keepdims=True)
-    # C order: the BP kernels take C-contiguous tables (a product of transposed views is not)
-    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32, order='C', copy=False)
 
 
 def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple[Camera, PersonHeatmap]]],
@@ -183,17 +179,36 @@ def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
 
 
 def pair_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N).
-    Coordinate by coordinate, each step on whole (..., M, N) arrays: a norm over a last axis of 3
-    took 3.5 times as long (the same sums, in the same order)."""
-    a, b = np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)
-    d = a[0][..., :, None] - b[0][..., None, :]
-    sq = d * d
-    for k in (1, 2):
-        np.subtract(a[k][..., :, None], b[k][..., None, :], out=d)
-        d *= d
-        sq += d
-    return np.sqrt(sq, out=sq)
+    """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N)."""
+    lead = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
+    n = math.prod(lead)
+    a, b = (np.ascontiguousarray(x if x.shape[:-2] == lead else np.broadcast_to(x, lead + x.shape[-2:]),
+                                 dtype=np.float64).reshape(n, x.shape[-2], 3) for x in (a, b))
+    return _pair_distances(a, b).reshape(lead + (a.shape[1], b.shape[1]))
+
+
+@kernel('float64[:, :, ::1](float64[:, :, ::1], float64[:, :, ::1])')
+def _pair_distances(a, b):
+    """(N, M, K) distances between (N, M, 3) and (N, K, 3), their squares summed x, y, z in turn."""
+    n, m, k = a.shape[0], a.shape[1], b.shape[1]
+    out = np.empty((n, m, k))
+    for i in range(n):
+        for x in range(m):
+            for y in range(k):
+                dx = a[i, x, 0] - b[i, y, 0]
+                dy = a[i, x, 1] - b[i, y, 1]
+                dz = a[i, x, 2] - b[i, y, 2]
+                out[i, x, y] = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return out
+
+
+@kernel('void(float64[::1], float32[::1])')
+def _normalise_into(table, out):
+    """out = table / its sum (at least float32's tiny), in float32: one factor's (S,) table scaled
+    to sum to one, numpy's sum to the bit."""
+    total = max(pairwise_sum(table), np.float64(np.finfo(np.float32).tiny))
+    for i in range(len(table)):
+        out[i] = table[i] / total
 
 
 def collision_table(right: np.ndarray, left: np.ndarray, config: FactorConfig) -> np.ndarray:
@@ -202,8 +217,22 @@ def collision_table(right: np.ndarray, left: np.ndarray, config: FactorConfig) -
     right, left: (..., M, 3). Returns (..., M, M) indexed [right state, left state].
     """
     d = pair_distances(right, left)
-    table = 1.0 / (1.0 + np.exp((config.collision_centre - d) / config.collision_width))
-    return _normalised(table, axes=(-2, -1))
+    return _collision_table(d.reshape((math.prod(d.shape[:-2]),) + d.shape[-2:]), config.collision_centre,
+                            config.collision_width).reshape(d.shape)
+
+
+@kernel('float32[:, :, ::1](float64[:, :, ::1], float64, float64)')
+def _collision_table(d, centre, width):
+    """collision_table of (N, M, K) distances, each (M, K) table normalised."""
+    n, size = d.shape[0], d.shape[1] * d.shape[2]
+    out = np.empty(d.shape, np.float32)
+    table = np.empty(size)
+    for i in range(n):
+        flat = d[i].reshape(size)
+        for x in range(size):
+            table[x] = 1.0 / (1.0 + np.exp((centre - flat[x]) / width))
+        _normalise_into(table, out[i].reshape(size))
+    return out
 
 
 def limb_table(d: np.ndarray, length: np.ndarray, config: FactorConfig) -> np.ndarray:
@@ -216,5 +245,24 @@ def limb_table(d: np.ndarray, length: np.ndarray, config: FactorConfig) -> np.nd
     length: (E,) typical bone lengths in metres (body.LIMB_LENGTHS). Returns (..., E, M, M).
     """
     low, high = config.limb_range
-    excess = np.maximum(np.maximum(d - high * length[:, None, None], low * length[:, None, None] - d), 0.0)
-    return _normalised(np.exp(-0.5 * (excess / config.limb_sigma) ** 2), axes=(-2, -1))
+    flat = np.ascontiguousarray(d, dtype=np.float64).reshape((math.prod(d.shape[:-3]),) + d.shape[-3:])
+    return _limb_table(flat, np.ascontiguousarray(length, dtype=np.float64), low, high,
+                       config.limb_sigma).reshape(d.shape)
+
+
+@kernel('float32[:, :, :, ::1](float64[:, :, :, ::1], float64[::1], float64, float64, float64)')
+def _limb_table(d, length, low, high, sigma):
+    """limb_table of (N, E, M, K) distances, each (M, K) table normalised."""
+    n, n_e, size = d.shape[0], d.shape[1], d.shape[2] * d.shape[3]
+    out = np.empty(d.shape, np.float32)
+    table = np.empty(size)
+    for i in range(n):
+        for e in range(n_e):
+            flat = d[i, e].reshape(size)
+            longest, shortest = high * length[e], low * length[e]
+            for x in range(size):
+                excess = max(max(flat[x] - longest, shortest - flat[x]), 0.0)
+                q = excess / sigma
+                table[x] = np.exp(-0.5 * (q * q))
+            _normalise_into(table, out[i, e].reshape(size))
+    return out
