@@ -20,7 +20,8 @@ from typing import Callable
 import numba
 
 # Every module that defines kernels (test_compiled checks that none is missing).
-KERNEL_MODULES: tuple[str, ...] = ('mvpose_ros.core.inference.bp', 'mvpose_ros.core.inference.factors')
+KERNEL_MODULES: tuple[str, ...] = ('mvpose_ros.core.inference.bp', 'mvpose_ros.core.inference.confidence',
+                                   'mvpose_ros.core.inference.factors')
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:

@@ -203,7 +203,6 @@ class SlidingWindow:
                     chain.support.popleft()
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
-        # in id order, as _add_temporal makes the tables: stacked chains then share them uncopied
         run_chains([self._chains[pid].bp for pid in sorted(slot.people)], self.config.slide_iterations)
         self.timer.add('bp', t0)
 
@@ -270,8 +269,8 @@ class SlidingWindow:
         row = chain.frames.index(frame)
         best = chain.bp.total[row].argmax(axis=-1)  # (J,)
         hyp = chain.hypotheses[row]
-        return (np.take_along_axis(hyp, best[:, None, None], axis=1)[:, 0],
-                joint_confidence(chain.bp.marginals_at(row), hyp, best, chain.support[row]))
+        confidence = joint_confidence(chain.bp.marginals_at(row), hyp, best, chain.support[row])
+        return hyp[np.arange(len(best)), best], confidence
 
     def _decode_all(self) -> list[FrameResult]:
         decoded: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
