@@ -21,7 +21,7 @@ import numba
 
 # Every module that defines kernels (test_compiled checks that none is missing).
 KERNEL_MODULES: tuple[str, ...] = ('mvpose_ros.core.inference.bp', 'mvpose_ros.core.inference.confidence',
-                                   'mvpose_ros.core.inference.factors')
+                                   'mvpose_ros.core.inference.factors', 'mvpose_ros.core.inference.window')
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:

@@ -23,8 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
+from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, pairwise_sum, run_chains
 from mvpose_ros.core.inference.confidence import joint_confidence
 from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
@@ -353,12 +354,31 @@ def _steps(dt_prev: float, dt_next: float, rate: float) -> tuple[float, float]:
 
 
 def _pruned(p: PersonFrame, k: int) -> PersonFrame:
+    """Person p with the k hypotheses of each joint of highest data term (ties: the first), the
+    data term renormalised."""
     if k >= p.data.shape[1]:
         return p
-    keep = np.argsort(-p.data, axis=1, kind='stable')[:, :k]
-    data = np.take_along_axis(p.data, keep, axis=1)
-    return PersonFrame(p.person_id, np.take_along_axis(p.hypotheses, keep[..., None], axis=1),
-                       data / np.maximum(data.sum(axis=1, keepdims=True), np.finfo(float).tiny), p.support)
+    data, hypotheses = _top_hypotheses(np.ascontiguousarray(p.data, dtype=np.float64),
+                                       np.ascontiguousarray(p.hypotheses, dtype=np.float64), k)
+    return PersonFrame(p.person_id, hypotheses, data, p.support)
+
+
+@kernel('Tuple((float64[:, ::1], float64[:, :, ::1]))(float64[:, ::1], float64[:, :, ::1], int64)')
+def _top_hypotheses(data, hypotheses, k):
+    """_pruned's data (J, k) and hypotheses (J, k, 3) from (J, M) and (J, M, 3)."""
+    n_j = data.shape[0]
+    kept = np.empty((n_j, k))
+    points = np.empty((n_j, k, 3))
+    tiny = np.finfo(np.float64).tiny
+    for j in range(n_j):
+        order = np.argsort(-data[j], kind='mergesort')  # stable: ties in index order
+        for r in range(k):
+            kept[j, r] = data[j, order[r]]
+            points[j, r] = hypotheses[j, order[r]]
+        total = max(pairwise_sum(kept[j]), tiny)
+        for r in range(k):
+            kept[j, r] /= total
+    return kept, points
 
 
 def _result(frame: int, ids: list[int], decoded: list[tuple[np.ndarray, np.ndarray]]) -> FrameResult:
