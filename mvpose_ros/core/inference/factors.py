@@ -145,7 +145,11 @@ def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
     size = ma * mc * mb
     scratch = np.empty((2, size))
     tiny = np.finfo(np.float32).tiny
+    coords = np.empty((3, mb))  # cur[j] by coordinate: contiguous rows
+    xs, ys, zs = coords[0], coords[1], coords[2]
     for j in range(n_j):
+        for b in range(mb):
+            xs[b], ys[b], zs[b] = cur[j, b, 0], cur[j, b, 1], cur[j, b, 2]
         for a in range(ma):
             for c in range(mc):
                 row = out[j, a, c]
@@ -155,9 +159,9 @@ def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
                 else:
                     mx, my, mz = p[0] + w * (n[0] - p[0]), p[1] + w * (n[1] - p[1]), p[2] + w * (n[2] - p[2])
                 for b in range(mb):
-                    dx = cur[j, b, 0] - mx
-                    dy = cur[j, b, 1] - my
-                    dz = cur[j, b, 2] - mz
+                    dx = xs[b] - mx
+                    dy = ys[b] - my
+                    dz = zs[b] - mz
                     row[b] = np.float32(dx * dx + dy * dy + dz * dz)
         flat = out[j].reshape(size)
         if laplace:
