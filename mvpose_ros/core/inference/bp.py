@@ -263,53 +263,29 @@ def _update_temporal(table, total, tm, t):
     table: (J, Ma, Mc, Mb) indexed [j, a, c, b] (factors.temporal_table); total: (T, J, M) log
     beliefs; tm: (3, T, J, M) temporal messages (Messages.temporal); both updated in place. The
     beliefs of y[t-1], y[t], y[t+1] without this factor's messages are taken in the table's
-    precision, and every sum over the table runs along its contiguous last axis in the same
-    direction for all its rows (vector adds, not sums of a row), each entry read once for two
-    messages:
-      g[c, b] = sum_a n_prev[a] f[a, c, b]    to y[t] = sum_c n_next[c] g[c, b], to y[t+1] = g . n_cur
-      k_a[b] = sum_c n_next[c] f[a, c, b]     to y[t-1] = k_a . n_cur
+    precision; the products with the table are np.dot, the BLAS matrix-vector products numpy's
+    matmul makes of them (the same sums: the messages are numpy's to the bit):
+      over[a, c] = sum_b f[a, c, b] n_cur[b]     to y[t-1] = over . n_next, to y[t+1] = n_prev . over
+      to y[t] = sum_{a, c} n_prev[a] n_next[c] f[a, c, b]
     """
     n_j, ma, mc, mb = table.shape
     dtype = table.dtype
     n_prev, n_next, n_cur = np.empty(ma, dtype), np.empty(mc, dtype), np.empty(mb, dtype)
-    to_prev, to_next, to_cur = np.empty(ma, dtype), np.empty(mc, dtype), np.empty(mb, dtype)
-    g = np.empty(mc * mb, dtype)
-    k = np.empty(mb, dtype)
+    pair = np.empty(ma * mc, dtype)
     scratch = np.empty(max(ma, mb, mc))
     new = np.empty(max(ma, mb, mc))
     for j in range(n_j):
         _cavity(total[t - 1, j], tm[0, t, j], scratch[:ma], n_prev)
         _cavity(total[t, j], tm[1, t, j], scratch[:mb], n_cur)
         _cavity(total[t + 1, j], tm[2, t, j], scratch[:mc], n_next)
-        g[:] = 0
+        flat = table[j].reshape(ma * mc, mb)
         for a in range(ma):
-            f = table[j, a]
-            k[:] = 0
             for c in range(mc):
-                w = n_next[c]
-                for b in range(mb):
-                    k[b] += w * f[c, b]
-            s = k[0] * n_cur[0]
-            for b in range(1, mb):
-                s += k[b] * n_cur[b]
-            to_prev[a] = s
-            w = n_prev[a]
-            flat = f.reshape(mc * mb)
-            for i in range(mc * mb):
-                g[i] += w * flat[i]
-        to_cur[:] = 0
-        for c in range(mc):
-            w = n_next[c]
-            for b in range(mb):
-                to_cur[b] += w * g[c * mb + b]
-        for c in range(mc):
-            s = g[c * mb] * n_cur[0]
-            for b in range(1, mb):
-                s += g[c * mb + b] * n_cur[b]
-            to_next[c] = s
-        _send(to_prev, total[t - 1, j], tm[0, t, j], new[:ma])
-        _send(to_cur, total[t, j], tm[1, t, j], new[:mb])
-        _send(to_next, total[t + 1, j], tm[2, t, j], new[:mc])
+                pair[a * mc + c] = n_prev[a] * n_next[c]
+        over = np.dot(flat, n_cur).reshape(ma, mc)
+        _send(np.dot(over, n_next), total[t - 1, j], tm[0, t, j], new[:ma])
+        _send(np.dot(pair, flat), total[t, j], tm[1, t, j], new[:mb])
+        _send(np.dot(n_prev, over), total[t + 1, j], tm[2, t, j], new[:mc])
 
 
 @kernel('void(int64[:, ::1], float32[:, :, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1])',
@@ -325,25 +301,14 @@ def _update_pairwise(edges, tables, total, pm):
     n_t, n_e, m = pm.shape[0], pm.shape[1], pm.shape[3]
     dtype = tables.dtype
     n_i, n_k = np.empty(m, dtype), np.empty(m, dtype)
-    to_i, to_k = np.empty(m, dtype), np.empty(m, dtype)
     scratch = np.empty(m)
     new = np.empty((n_e, 2, m))
     for t in range(n_t):
         for e in range(n_e):
             _cavity(total[t, edges[e, 0]], pm[t, e, 0], scratch, n_i)
             _cavity(total[t, edges[e, 1]], pm[t, e, 1], scratch, n_k)
-            f = tables[t, e]
-            to_k[:] = 0
-            for x in range(m):
-                w = n_i[x]
-                for y in range(m):
-                    to_k[y] += w * f[x, y]
-                s = f[x, 0] * n_k[0]
-                for y in range(1, m):
-                    s += f[x, y] * n_k[y]
-                to_i[x] = s
-            _log_message_into(to_i, new[e, 0])
-            _log_message_into(to_k, new[e, 1])
+            _log_message_into(np.dot(tables[t, e], n_k), new[e, 0])  # BLAS, as numpy's matmul
+            _log_message_into(np.dot(n_i, tables[t, e]), new[e, 1])
         for e in range(n_e):
             for side in range(2):
                 joint = edges[e, side]
