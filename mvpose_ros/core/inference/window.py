@@ -365,19 +365,36 @@ def _pruned(p: PersonFrame, k: int) -> PersonFrame:
 
 @kernel('Tuple((float64[:, ::1], float64[:, :, ::1]))(float64[:, ::1], float64[:, :, ::1], int64)')
 def _top_hypotheses(data, hypotheses, k):
-    """_pruned's data (J, k) and hypotheses (J, k, 3) from (J, M) and (J, M, 3)."""
-    n_j = data.shape[0]
+    """_pruned's data (J, k) and hypotheses (J, k, 3) from (J, M) and (J, M, 3), 0 < k < M: per
+    joint the k largest by insertion in a sorted list, an equal value after those before it (the
+    order of numpy's stable argsort of -data)."""
+    n_j, m = data.shape
     kept = np.empty((n_j, k))
     points = np.empty((n_j, k, 3))
+    order = np.empty(k, np.int64)
     tiny = np.finfo(np.float64).tiny
     for j in range(n_j):
-        order = np.argsort(-data[j], kind='mergesort')  # stable: ties in index order
+        values = kept[j]
+        n = 0
+        for i in range(m):
+            v = data[j, i]
+            if n == k:
+                if not v > values[k - 1]:
+                    continue
+                n -= 1  # the smallest kept leaves
+            r = n
+            while r > 0 and values[r - 1] < v:
+                values[r] = values[r - 1]
+                order[r] = order[r - 1]
+                r -= 1
+            values[r] = v
+            order[r] = i
+            n += 1
         for r in range(k):
-            kept[j, r] = data[j, order[r]]
             points[j, r] = hypotheses[j, order[r]]
-        total = max(pairwise_sum(kept[j]), tiny)
+        total = max(pairwise_sum(values), tiny)
         for r in range(k):
-            kept[j, r] /= total
+            values[r] /= total
     return kept, points
 
 
