@@ -199,3 +199,14 @@ def test_kernels_give_the_numpy_messages(t_len, n_joints, m, dtype):
     np.testing.assert_allclose(marg, ref, rtol=tol, atol=tol)
     np.testing.assert_allclose(msgs.temporal, tm, rtol=tol, atol=tol)
     np.testing.assert_allclose(msgs.pairwise[0], pms[0], rtol=tol, atol=tol)
+
+
+@pytest.mark.parametrize('shape', [(4, 3, 16), (2, 0, 5), (1, 2, 1)])
+def test_marginals_are_numpys_softmax_to_the_bit(shape):
+    rng = np.random.default_rng(8)
+    data = rng.uniform(1e-3, 1.0, shape)
+    chain = ChainBP.build(data, [None] * shape[0])
+    x = chain.total
+    e = np.exp(x - x.max(axis=-1, keepdims=True))
+    np.testing.assert_array_equal(chain.marginals(), e / e.sum(axis=-1, keepdims=True))
+    np.testing.assert_array_equal(chain.marginals_at(shape[0] - 1), (e / e.sum(axis=-1, keepdims=True))[-1])

@@ -9,7 +9,8 @@ windows neither underflow nor drift. Each factor's update is one compiled kernel
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -62,8 +63,9 @@ class Messages:
 
 
 def _softmax(x: np.ndarray) -> np.ndarray:
-    e = np.exp(x - x.max(axis=-1, keepdims=True))
-    return e / e.sum(axis=-1, keepdims=True)
+    """exp(x) normalised along the last axis (..., M)."""
+    rows = np.ascontiguousarray(x, dtype=np.float64).reshape(math.prod(x.shape[:-1]), x.shape[-1])
+    return _softmax_rows(rows).reshape(x.shape)
 
 
 @dataclass
@@ -108,7 +110,8 @@ class ChainBP:
         if self.temporal:
             self.temporal[-1] = temporal_prev
         self.temporal.append(None)
-        self.groups = [replace(g, tables=np.concatenate([g.tables, t[None]])) for g, t in zip(self.groups, tables)]
+        self.groups = [PairwiseGroup(g.name, g.edges, np.concatenate([g.tables, t[None]]))
+                       for g, t in zip(self.groups, tables)]
         self.messages = self.messages.slid(0, 1)
         self.total = np.concatenate([self.total, _log(data)[None]])
 
@@ -129,7 +132,7 @@ class ChainBP:
         self.temporal = self.temporal[n:]
         if self.temporal:
             self.temporal[0] = None
-        self.groups = [replace(g, tables=g.tables[n:]) for g in self.groups]
+        self.groups = [PairwiseGroup(g.name, g.edges, g.tables[n:]) for g in self.groups]
         self.messages = self.messages.slid(n, 0)
         self.total = self.total[n:]
 
@@ -215,6 +218,20 @@ def pairwise_sum(x):
     for k in range(i, n):
         s += x[k]
     return s
+
+
+@kernel('float64[:, ::1](float64[:, ::1])')
+def _softmax_rows(x):
+    """Each row of x (N, M) exponentiated and normalised, numpy's arithmetic to the bit."""
+    out = np.empty_like(x)
+    for i in range(x.shape[0]):
+        top = x[i].max()
+        for k in range(x.shape[1]):
+            out[i, k] = np.exp(x[i, k] - top)
+        s = pairwise_sum(out[i])
+        for k in range(x.shape[1]):
+            out[i, k] /= s
+    return out
 
 
 @kernel('void(float64[::1], float64[::1], float64[::1], float32[::1])',
