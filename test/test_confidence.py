@@ -26,6 +26,21 @@ def test_confidence_is_in_the_unit_interval_whatever_the_input():
         assert c.shape == (3, J) and ((c >= 0) & (c <= 1)).all()
 
 
+@pytest.mark.parametrize('shape', [(3, J, M), (J, 16), (0, J, M), (2, 1), (4, 5, 1)])
+def test_confidence_is_numpys_to_the_bit(shape):
+    """The kernel against the numpy formulation it replaces (rows all zero, no joints, one hypothesis)."""
+    rng = np.random.default_rng(1)
+    marginals = rng.exponential(size=shape) * (rng.random(shape[:-1] + (1,)) < 0.8)
+    hyp = rng.normal(scale=0.3, size=shape + (3,))
+    best = marginals.argmax(-1)
+    support = rng.random(shape[:-1])
+    p = marginals / np.maximum(marginals.sum(axis=-1, keepdims=True), np.finfo(float).tiny)
+    decoded = np.take_along_axis(hyp, best[..., None, None], axis=-2)
+    spread = (p * np.linalg.norm(hyp - decoded, axis=-1)).sum(axis=-1)
+    expected = np.clip(support * np.exp(-spread / SPREAD_SCALE_M), 0.0, 1.0)
+    np.testing.assert_array_equal(joint_confidence(marginals, hyp, best, support), expected)
+
+
 def test_concentrated_beats_spread_and_seen_beats_hidden():
     hyp = np.zeros((1, M, 3))
     hyp[0, :, 0] = np.linspace(0, 1.4, M)  # hypotheses 20 cm apart along x

@@ -65,7 +65,7 @@ def test_temporal_scale_sharpens():
 
 
 def _evenly_spaced_temporal(prev, cur, nxt, config) -> np.ndarray:
-    """The evenly spaced temporal table as it was computed before the factor knew about time steps
+    """The evenly spaced temporal table as numpy computed it before the factor knew about time steps
     (midpoint, temporal_scale), operation for operation."""
     mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])
     j, ma, mc = mid.shape[:3]
@@ -86,13 +86,30 @@ def _evenly_spaced_temporal(prev, cur, nxt, config) -> np.ndarray:
 def test_unit_steps_reproduce_the_evenly_spaced_table_exactly(form):
     config = FactorConfig(temporal_form=form)
     prev, cur, nxt = np.random.default_rng(5).normal(scale=0.3, size=(3, 4, 7, 3))
+    table = temporal_table(prev, cur, nxt, config)
+    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (1.0, 1.0)), table)
+    # numpy's table to float32 rounding (the kernel takes the squared distance directly, not by
+    # its expansion, and sums in float64); entries below 1e-30 only where numpy's are
     old = _evenly_spaced_temporal(prev, cur, nxt, config)
-    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config), old)
-    np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (1.0, 1.0)), old)
+    np.testing.assert_allclose(table, old, rtol=1e-6, atol=1e-30)
     # equal steps of two periods: the same midpoint, the kernel twice as wide
     wide = FactorConfig(temporal_form=form, temporal_scale=2 * config.temporal_scale)
     np.testing.assert_array_equal(temporal_table(prev, cur, nxt, config, (2.0, 2.0)),
-                                  _evenly_spaced_temporal(prev, cur, nxt, wide))
+                                  temporal_table(prev, cur, nxt, wide))
+    np.testing.assert_allclose(temporal_table(prev, cur, nxt, wide), _evenly_spaced_temporal(prev, cur, nxt, wide),
+                               rtol=1e-6, atol=1e-30)
+
+
+@pytest.mark.parametrize('shape', [(0, 5), (3, 1), (2, 16)])
+def test_temporal_table_of_no_joints_one_hypothesis_and_float32_points(shape):
+    """Edge cases against numpy: no joints, a single hypothesis (the table is 1), float32 input."""
+    j, m = shape
+    prev, cur, nxt = np.random.default_rng(7).normal(scale=0.3, size=(3, j, m, 3)).astype(np.float32)
+    config = FactorConfig()
+    table = temporal_table(prev, cur, nxt, config)
+    assert table.shape == (j, m, m, m) and table.dtype == np.float32 and table.flags.c_contiguous
+    np.testing.assert_allclose(table, _evenly_spaced_temporal(*(h.astype(np.float64) for h in (prev, cur, nxt)),
+                                                              config), rtol=1e-6, atol=1e-30)
 
 
 @pytest.mark.parametrize('form', TEMPORAL_FORMS)
@@ -238,3 +255,48 @@ def test_data_terms_are_numpys_arithmetic(m):
     np.testing.assert_array_equal(out[3], 1.0 / m)
     assert np.ptp(out[0][0]) > 0 and np.ptp(out[2][1]) > 0  # evidence somewhere
     assert data_terms([], [], HeatmapStack.of([])) == []
+
+
+@pytest.mark.parametrize('form', TEMPORAL_FORMS)
+def test_temporal_table_far_and_coinciding_hypotheses(form):
+    """Entries whose kernel underflows float32 (a hypothesis 100 m off) are 0, as numpy's; points at
+    the midpoint give the largest entry."""
+    rng = np.random.default_rng(8)
+    prev, cur, nxt = rng.normal(scale=0.05, size=(3, 2, 6, 3))
+    cur[:, 0] = 0.5 * (prev[:, 0] + nxt[:, 0])
+    cur[:, 5] += 100.0
+    config = FactorConfig(temporal_form=form)
+    table = temporal_table(prev, cur, nxt, config)
+    assert np.all(table[..., 5] == 0) and np.all(table[..., :5] > 0)
+    np.testing.assert_allclose(table, _evenly_spaced_temporal(prev, cur, nxt, config), rtol=1e-6, atol=1e-30)
+    assert np.all(table[:, 0, 0, 0] == table.max(axis=(1, 2, 3)))
+
+
+def _numpy_pair_tables(right, left, d_limb, length, config):
+    """collision_table and limb_table as numpy computed them (the same operations, whole arrays)."""
+    def normalised(table):
+        total = table.sum(axis=(-2, -1), keepdims=True)
+        return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32)
+
+    d = np.linalg.norm(right[..., :, None, :] - left[..., None, :, :], axis=-1)
+    collision = normalised(1.0 / (1.0 + np.exp((config.collision_centre - d) / config.collision_width)))
+    low, high = config.limb_range
+    excess = np.maximum(np.maximum(d_limb - high * length[:, None, None], low * length[:, None, None] - d_limb), 0.0)
+    return d, collision, normalised(np.exp(-0.5 * (excess / config.limb_sigma) ** 2))
+
+
+@pytest.mark.parametrize('people, edges, m', [(3, 4, 16), (1, 2, 1), (0, 3, 8), (2, 0, 8), (2, 5, 9)])
+def test_pair_tables_are_numpys_to_the_bit(people, edges, m):
+    """pair_distances, collision_table and limb_table against numpy, batched over people (none, no
+    edges, one hypothesis too)."""
+    rng = np.random.default_rng(9)
+    right, left = rng.normal(scale=0.4, size=(2, people, edges, m, 3))
+    length = rng.uniform(0.1, 0.5, edges)
+    config = FactorConfig()
+    d = pair_distances(right, left)
+    d_ref, collision, limb = _numpy_pair_tables(right, left, d, length, config)
+    assert d.shape == (people, edges, m, m)
+    np.testing.assert_array_equal(d, d_ref)
+    for table, ref in ((collision_table(right, left, config), collision), (limb_table(d, length, config), limb)):
+        assert table.dtype == np.float32 and table.flags.c_contiguous
+        np.testing.assert_array_equal(table, ref)

@@ -468,3 +468,22 @@ def test_the_limb_factor_rules_out_a_wrist_half_a_metre_from_its_elbow(window):
         chosen[terms] = [np.linalg.norm(r.joints[0, 11] - pose[10]) for r in results]
     np.testing.assert_allclose(chosen[('data',)], 0.54)
     np.testing.assert_allclose(chosen[('data', 'limb')], 0.26)
+
+
+@pytest.mark.parametrize('k', [1, 5, 7])
+def test_pruning_is_numpys_to_the_bit(k):
+    """_pruned against the numpy formulation it replaces: a stable sort (ties keep index order),
+    rows of zeros, no joints."""
+    from mvpose_ros.core.inference.window import _pruned
+    rng = np.random.default_rng(3)
+    for n_j in (4, 0):
+        data = rng.integers(0, 4, (n_j, 8)).astype(float) / 4  # many ties
+        data[:1] = 0.0
+        p = PersonFrame(1, rng.normal(size=(n_j, 8, 3)), data, np.ones(n_j))
+        keep = np.argsort(-data, axis=1, kind='stable')[:, :k]
+        kept = np.take_along_axis(data, keep, axis=1)
+        out = _pruned(p, k)
+        np.testing.assert_array_equal(out.hypotheses, np.take_along_axis(p.hypotheses, keep[..., None], axis=1))
+        total = np.maximum(kept.sum(axis=1, keepdims=True), np.finfo(float).tiny)
+        np.testing.assert_array_equal(out.data, kept / total)
+        assert out.person_id == 1 and out.support is p.support

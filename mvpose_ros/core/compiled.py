@@ -29,8 +29,11 @@ KERNEL_MODULES: tuple[str, ...] = (
     'mvpose_ros.core.detection.openpose_detector',
     'mvpose_ros.core.geometry.camera',
     'mvpose_ros.core.heatmap',
+    'mvpose_ros.core.inference.bp',
+    'mvpose_ros.core.inference.confidence',
     'mvpose_ros.core.inference.factors',
     'mvpose_ros.core.inference.hypotheses',
+    'mvpose_ros.core.inference.window',
 )
 
 

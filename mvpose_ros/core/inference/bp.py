@@ -5,15 +5,17 @@ unary data term, one ternary temporal factor per joint and inner frame, and grou
 pairwise factors within a frame (collision pairs, limbs). The schedule is the paper's: every
 iteration updates all messages of one factor type before the next; temporal messages sweep
 forward through the window, then backward. Messages live in the log domain, normalised, so long
-windows neither underflow nor drift.
+windows neither underflow nor drift. Each factor's update is one compiled kernel.
 """
 from __future__ import annotations
 
-from collections import defaultdict
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+
+from mvpose_ros.core.compiled import kernel
 
 
 @dataclass(frozen=True)
@@ -52,7 +54,7 @@ class Messages:
         def move(a: np.ndarray, axis: int) -> np.ndarray:
             kept = a[(slice(None),) * axis + (slice(drop, None),)]
             if not add:
-                return kept
+                return np.ascontiguousarray(kept)  # as the kernels take them
             shape = list(a.shape)
             shape[axis] = add
             return np.concatenate([kept, np.zeros(shape, dtype=a.dtype)], axis=axis)
@@ -61,15 +63,9 @@ class Messages:
 
 
 def _softmax(x: np.ndarray) -> np.ndarray:
-    e = np.exp(x - x.max(axis=-1, keepdims=True))
-    return e / e.sum(axis=-1, keepdims=True)
-
-
-def _log_message(m: np.ndarray) -> np.ndarray:
-    """Log of a non-negative message normalised to sum to one (in the linear domain: messages
-    are products of normalised beliefs and tables, so the sum neither over- nor underflows)."""
-    tiny = np.finfo(np.float64).tiny
-    return np.log(np.maximum(m / np.maximum(m.sum(axis=-1, keepdims=True), tiny), tiny))
+    """exp(x) normalised along the last axis (..., M)."""
+    rows = np.ascontiguousarray(x, dtype=np.float64).reshape(math.prod(x.shape[:-1]), x.shape[-1])
+    return _softmax_rows(rows).reshape(x.shape)
 
 
 @dataclass
@@ -114,7 +110,8 @@ class ChainBP:
         if self.temporal:
             self.temporal[-1] = temporal_prev
         self.temporal.append(None)
-        self.groups = [replace(g, tables=np.concatenate([g.tables, t[None]])) for g, t in zip(self.groups, tables)]
+        self.groups = [PairwiseGroup(g.name, g.edges, np.concatenate([g.tables, t[None]]))
+                       for g, t in zip(self.groups, tables)]
         self.messages = self.messages.slid(0, 1)
         self.total = np.concatenate([self.total, _log(data)[None]])
 
@@ -135,7 +132,7 @@ class ChainBP:
         self.temporal = self.temporal[n:]
         if self.temporal:
             self.temporal[0] = None
-        self.groups = [replace(g, tables=g.tables[n:]) for g in self.groups]
+        self.groups = [PairwiseGroup(g.name, g.edges, g.tables[n:]) for g in self.groups]
         self.messages = self.messages.slid(n, 0)
         self.total = self.total[n:]
 
@@ -144,12 +141,13 @@ class ChainBP:
         chain, then each pairwise type over all frames."""
         tm = self.messages.temporal
         inner = [t for t in range(1, len(self) - 1) if self.temporal[t] is not None]
+        edges = [np.ascontiguousarray(g.edges, dtype=np.int64) for g in self.groups]
         for _ in range(iterations):
             for sweep in (inner, inner[::-1]):
                 for t in sweep:
-                    _update_temporal(t, self.temporal[t], self.total, tm)
-            for group, pm in zip(self.groups, self.messages.pairwise):
-                _update_pairwise(group, self.total, pm)
+                    _update_temporal(self.temporal[t], self.total, tm, t)
+            for group, e, pm in zip(self.groups, edges, self.messages.pairwise):
+                _update_pairwise(e, group.tables, self.total, pm)
 
     def marginals(self) -> np.ndarray:
         """(T, J, M) normalised beliefs."""
@@ -161,56 +159,10 @@ class ChainBP:
 
 
 def run_chains(chains: Sequence[ChainBP], iterations: int) -> None:
-    """ChainBP.run of every chain, with the chains of one shape stacked along the joint axis so
-    that each message update is one set of numpy calls for all of them (chains are independent:
-    the messages are exactly those of running each on its own)."""
-    alike: dict[tuple, list[ChainBP]] = defaultdict(list)
+    """ChainBP.run of every chain (chains are independent: each kernel call updates one factor of
+    one chain, so stacking chains of one shape saves nothing any more)."""
     for chain in chains:
-        key = (chain.total.shape, tuple(t is None for t in chain.temporal),
-               tuple((g.name, len(g.edges)) for g in chain.groups))
-        alike[key].append(chain)
-    for group in alike.values():
-        if len(group) == 1:
-            group[0].run(iterations)
-            continue
-        joint = _stacked(group)
-        joint.run(iterations)
-        n_j = group[0].total.shape[1]
-        for p, chain in enumerate(group):
-            joints = slice(p * n_j, (p + 1) * n_j)
-            chain.total = joint.total[:, joints]
-            chain.messages = Messages(joint.messages.temporal[:, :, joints],
-                                      [pm[:, p * len(g.edges):(p + 1) * len(g.edges)]
-                                       for pm, g in zip(joint.messages.pairwise, chain.groups)])
-
-
-def _stacked(chains: Sequence[ChainBP]) -> ChainBP:
-    """One chain whose joints are those of every chain in turn (same length and factor layout)."""
-    n_j = chains[0].total.shape[1]
-    temporal = [None if t is None else _joined([c.temporal[i] for c in chains])
-                for i, t in enumerate(chains[0].temporal)]
-    groups = [PairwiseGroup(g.name, np.concatenate([c.groups[k].edges + p * n_j for p, c in enumerate(chains)]),
-                            np.concatenate([c.groups[k].tables for c in chains], axis=1))
-              for k, g in enumerate(chains[0].groups)]
-    messages = Messages(np.concatenate([c.messages.temporal for c in chains], axis=2),
-                        [np.concatenate([c.messages.pairwise[k] for c in chains], axis=1)
-                         for k in range(len(groups))])
-    return ChainBP(temporal, groups, messages, np.concatenate([c.total for c in chains], axis=1))
-
-
-def _joined(arrays: Sequence[np.ndarray]) -> np.ndarray:
-    """np.concatenate(arrays) along axis 0, as a view without copying when they are successive
-    slices of one C-contiguous array (the temporal tables of one frame are made for every person
-    at once, window.SlidingWindow._add_temporal, and chains are stacked in the same order)."""
-    base = arrays[0].base
-    if (isinstance(base, np.ndarray) and base.flags.c_contiguous and base.dtype == arrays[0].dtype
-            and all(a.base is base and a.flags.c_contiguous for a in arrays)):
-        start = [a.__array_interface__['data'][0] for a in arrays]
-        if all(p + a.nbytes == q for p, a, q in zip(start, arrays, start[1:])):
-            offset = (start[0] - base.__array_interface__['data'][0]) // base.itemsize
-            size = sum(a.size for a in arrays)
-            return base.reshape(-1)[offset:offset + size].reshape((-1,) + arrays[0].shape[1:])
-    return np.concatenate(arrays)
+        chain.run(iterations)
 
 
 def loopy_bp(
@@ -236,32 +188,147 @@ def _log(data: np.ndarray) -> np.ndarray:
     return np.log(np.maximum(data, np.finfo(np.float64).tiny))
 
 
-def _update_temporal(t: int, table: np.ndarray, total: np.ndarray, tm: np.ndarray) -> None:
-    """Recompute the three outgoing messages of the temporal factor centred at frame t."""
-    j, ma, mc, mb = table.shape
-    # the beliefs of y[t-1], y[t], y[t+1] without this factor's own messages, at once, in the
-    # table's precision (float32): mixing would convert the M^3 table every call
-    n_prev, n_cur, n_next = _softmax(total[t - 1:t + 2] - tm[:, t]).astype(table.dtype)
-    flat = table.reshape(j, ma * mc, mb)
-    pair = (n_prev[:, :, None] * n_next[:, None, :]).reshape(j, 1, ma * mc)
-    over_cur = (flat @ n_cur[:, :, None]).reshape(j, ma, mc)
-    new = _log_message(np.stack([(over_cur @ n_next[:, :, None])[..., 0],  # to y[t-1]
-                                 (pair @ flat)[:, 0],  # to y[t]
-                                 (n_prev[:, None, :] @ over_cur)[:, 0]]))  # to y[t+1]
-    total[t - 1:t + 2] += new - tm[:, t]
-    tm[:, t] = new
+@kernel('float64(float64[::1])', 'float32(float32[::1])')
+def pairwise_sum(x):
+    """x.sum() of (N,), N >= 1, added up in numpy's order (pairwise: eight running sums over blocks
+    of at most 128 elements), so that a kernel's sums are numpy's to the bit."""
+    n = len(x)
+    if n < 8:
+        s = x[0]
+        for i in range(1, n):
+            s += x[i]
+        return s
+    if n > 128:
+        half = n // 2
+        half -= half % 8
+        return pairwise_sum(x[:half]) + pairwise_sum(x[half:])
+    r0, r1, r2, r3, r4, r5, r6, r7 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += x[i]
+        r1 += x[i + 1]
+        r2 += x[i + 2]
+        r3 += x[i + 3]
+        r4 += x[i + 4]
+        r5 += x[i + 5]
+        r6 += x[i + 6]
+        r7 += x[i + 7]
+        i += 8
+    s = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for k in range(i, n):
+        s += x[k]
+    return s
 
 
-def _update_pairwise(group: PairwiseGroup, total: np.ndarray, pm: np.ndarray) -> None:
-    """Flooding update of every factor of one pairwise type, all frames at once."""
-    i, k = group.edges[:, 0], group.edges[:, 1]
-    n_i = _softmax(total[:, i] - pm[:, :, 0]).astype(group.tables.dtype)
-    n_k = _softmax(total[:, k] - pm[:, :, 1]).astype(group.tables.dtype)
-    to_i = _log_message((group.tables @ n_k[..., None])[..., 0])
-    to_k = _log_message((n_i[..., None, :] @ group.tables)[..., 0, :])
-    # one unbuffered scatter, edge after edge and each edge's first joint before its second: the
-    # additions to a joint come in the order of a loop over the edges, so the sums are the same
-    change = np.stack([to_i - pm[:, :, 0], to_k - pm[:, :, 1]], axis=2)  # (T, E, 2, M)
-    np.add.at(total, (slice(None), group.edges.ravel()), change.reshape(len(total), -1, total.shape[-1]))
-    pm[:, :, 0] = to_i
-    pm[:, :, 1] = to_k
+@kernel('float64[:, ::1](float64[:, ::1])')
+def _softmax_rows(x):
+    """Each row of x (N, M) exponentiated and normalised, numpy's arithmetic to the bit."""
+    out = np.empty_like(x)
+    for i in range(x.shape[0]):
+        top = x[i].max()
+        for k in range(x.shape[1]):
+            out[i, k] = np.exp(x[i, k] - top)
+        s = pairwise_sum(out[i])
+        for k in range(x.shape[1]):
+            out[i, k] /= s
+    return out
+
+
+@kernel('void(float64[::1], float64[::1], float64[::1], float32[::1])',
+        'void(float64[::1], float64[::1], float64[::1], float64[::1])')
+def _cavity(total, own, scratch, out):
+    """out (M,) = the normalised belief of a variable without one factor's message `own` to it,
+    softmax(total - own) (as _softmax, in float64, then stored in out's precision); scratch: (M,)."""
+    m = len(total)
+    for k in range(m):
+        scratch[k] = total[k] - own[k]
+    top = scratch.max()
+    for k in range(m):
+        scratch[k] = np.exp(scratch[k] - top)
+    s = pairwise_sum(scratch)
+    for k in range(m):
+        out[k] = scratch[k] / s
+
+
+@kernel('void(float32[::1], float64[::1])', 'void(float64[::1], float64[::1])')
+def _log_message_into(m, out):
+    """out (M,): the log of a non-negative message m (M,) normalised to sum to one, m summed in
+    its own precision, the rest in float64 (in the linear domain: messages are products of
+    normalised beliefs and tables, so the sum neither over- nor underflows)."""
+    tiny = np.finfo(np.float64).tiny
+    s = max(np.float64(pairwise_sum(m)), tiny)
+    for k in range(len(m)):
+        out[k] = np.log(max(m[k] / s, tiny))
+
+
+@kernel('void(float32[::1], float64[::1], float64[::1], float64[::1])',
+        'void(float64[::1], float64[::1], float64[::1], float64[::1])')
+def _send(msg, total, old, scratch):
+    """Replace a factor's log message `old` (M,) to a variable by the log of msg (M,) normalised and update that
+    variable's log belief `total` (M,) with the change; scratch: (M,)."""
+    _log_message_into(msg, scratch)
+    for x in range(len(msg)):
+        total[x] += scratch[x] - old[x]
+        old[x] = scratch[x]
+
+
+@kernel('void(float32[:, :, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1], int64)',
+        'void(float64[:, :, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1], int64)')
+def _update_temporal(table, total, tm, t):
+    """Recompute the three outgoing messages of the temporal factor centred at frame t.
+
+    table: (J, Ma, Mc, Mb) indexed [j, a, c, b] (factors.temporal_table); total: (T, J, M) log
+    beliefs; tm: (3, T, J, M) temporal messages (Messages.temporal); both updated in place. The
+    beliefs of y[t-1], y[t], y[t+1] without this factor's messages are taken in the table's
+    precision; the products with the table are np.dot, the BLAS matrix-vector products numpy's
+    matmul makes of them (the same sums: the messages are numpy's to the bit):
+      over[a, c] = sum_b f[a, c, b] n_cur[b]     to y[t-1] = over . n_next, to y[t+1] = n_prev . over
+      to y[t] = sum_{a, c} n_prev[a] n_next[c] f[a, c, b]
+    """
+    n_j, ma, mc, mb = table.shape
+    dtype = table.dtype
+    n_prev, n_next, n_cur = np.empty(ma, dtype), np.empty(mc, dtype), np.empty(mb, dtype)
+    pair = np.empty(ma * mc, dtype)
+    scratch = np.empty(max(ma, mb, mc))
+    new = np.empty(max(ma, mb, mc))
+    for j in range(n_j):
+        _cavity(total[t - 1, j], tm[0, t, j], scratch[:ma], n_prev)
+        _cavity(total[t, j], tm[1, t, j], scratch[:mb], n_cur)
+        _cavity(total[t + 1, j], tm[2, t, j], scratch[:mc], n_next)
+        flat = table[j].reshape(ma * mc, mb)
+        for a in range(ma):
+            for c in range(mc):
+                pair[a * mc + c] = n_prev[a] * n_next[c]
+        over = np.dot(flat, n_cur).reshape(ma, mc)
+        _send(np.dot(over, n_next), total[t - 1, j], tm[0, t, j], new[:ma])
+        _send(np.dot(pair, flat), total[t, j], tm[1, t, j], new[:mb])
+        _send(np.dot(n_prev, over), total[t + 1, j], tm[2, t, j], new[:mc])
+
+
+@kernel('void(int64[:, ::1], float32[:, :, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1])',
+        'void(int64[:, ::1], float64[:, :, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1])')
+def _update_pairwise(edges, tables, total, pm):
+    """Flooding update of every factor of one pairwise type, all frames at once.
+
+    edges: (E, 2) joints; tables: (T, E, M, M) indexed [state of edges[e, 0], state of edges[e,
+    1]]; total: (T, J, M) log beliefs; pm: (T, E, 2, M) the group's messages; both updated in
+    place. Every message of a frame comes from its beliefs before the update; the changes are then
+    added edge after edge, each edge's first joint before its second.
+    """
+    n_t, n_e, m = pm.shape[0], pm.shape[1], pm.shape[3]
+    dtype = tables.dtype
+    n_i, n_k = np.empty(m, dtype), np.empty(m, dtype)
+    scratch = np.empty(m)
+    new = np.empty((n_e, 2, m))
+    for t in range(n_t):
+        for e in range(n_e):
+            _cavity(total[t, edges[e, 0]], pm[t, e, 0], scratch, n_i)
+            _cavity(total[t, edges[e, 1]], pm[t, e, 1], scratch, n_k)
+            _log_message_into(np.dot(tables[t, e], n_k), new[e, 0])  # BLAS, as numpy's matmul
+            _log_message_into(np.dot(n_i, tables[t, e]), new[e, 1])
+        for e in range(n_e):
+            for side in range(2):
+                joint = edges[e, side]
+                for x in range(m):
+                    total[t, joint, x] += new[e, side, x] - pm[t, e, side, x]
+                    pm[t, e, side, x] = new[e, side, x]

@@ -14,7 +14,12 @@ data term, each alone: the product ranked errors and wrong limbs best.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.inference.bp import pairwise_sum
 
 SPREAD_SCALE_M = 0.10
 
@@ -33,7 +38,32 @@ def joint_confidence(marginals: np.ndarray, hypotheses: np.ndarray, best: np.nda
     marginals: (..., J, M) beliefs (normalised here); hypotheses: (..., J, M, 3) metres; best:
     (..., J) index of the decoded hypothesis of each joint; support: (..., J) joint_support.
     """
-    p = marginals / np.maximum(marginals.sum(axis=-1, keepdims=True), np.finfo(float).tiny)
-    decoded = np.take_along_axis(hypotheses, best[..., None, None], axis=-2)  # (..., J, 1, 3)
-    spread = (p * np.linalg.norm(hypotheses - decoded, axis=-1)).sum(axis=-1)  # (..., J) metres
-    return np.clip(support * np.exp(-spread / SPREAD_SCALE_M), 0.0, 1.0)
+    lead, m = marginals.shape[:-1], marginals.shape[-1]
+    n = math.prod(lead)
+    support = np.asarray(support)
+    if support.shape != lead:
+        support = np.broadcast_to(support, lead)
+    return _joint_confidence(np.ascontiguousarray(marginals, dtype=np.float64).reshape(n, m),
+                             np.ascontiguousarray(hypotheses, dtype=np.float64).reshape(n, m, 3),
+                             np.ascontiguousarray(best, dtype=np.int64).reshape(n),
+                             np.ascontiguousarray(support, dtype=np.float64).reshape(n)).reshape(lead)
+
+
+@kernel('float64[::1](float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1])')
+def _joint_confidence(marginals, hypotheses, best, support):
+    """joint_confidence of N joints: (N, M), (N, M, 3), (N,), (N,) -> (N,); numpy's sums to the bit."""
+    n, m = marginals.shape
+    out = np.empty(n)
+    p = np.empty(m)
+    tiny = np.finfo(np.float64).tiny
+    for i in range(n):
+        total = max(pairwise_sum(marginals[i]), tiny)
+        decoded = hypotheses[i, best[i]]
+        for k in range(m):
+            dx = hypotheses[i, k, 0] - decoded[0]
+            dy = hypotheses[i, k, 1] - decoded[1]
+            dz = hypotheses[i, k, 2] - decoded[2]
+            p[k] = marginals[i, k] / total * np.sqrt(dx * dx + dy * dy + dz * dz)
+        spread = pairwise_sum(p)  # metres
+        out[i] = min(max(support[i] * np.exp(-spread / SPREAD_SCALE_M), 0.0), 1.0)
+    return out

@@ -5,6 +5,7 @@ to a probability for numerical stability; a constant scale does not change BP ma
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -13,6 +14,7 @@ import numpy as np
 from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.camera import Camera, rig_project
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
+from mvpose_ros.core.inference.bp import pairwise_sum
 
 TEMPORAL_FORMS = ('laplace', 'gauss')
 
@@ -47,11 +49,6 @@ class FactorConfig:
         for name in ('temporal_scale', 'collision_width', 'limb_sigma'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
-
-
-def _normalised(table: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
-    total = table.sum(axis=axes, keepdims=True)
-    return (table / np.maximum(total, np.finfo(np.float32).tiny)).astype(np.float32, copy=False)
 
 
 def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple[Camera, PersonHeatmap]]],
@@ -138,54 +135,129 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     a + s0 / (s0 + s1) (c - a), and the kernel scale is temporal_scale x (s0 + s1) / 2, so a
     longer step tolerates a proportionally larger deviation; steps (1, 1) is the evenly spaced
     factor, midpoint and temporal_scale. Returns (J, M, M, M) indexed [j, a, c, b]: the centre
-    state is last so that messages contract with plain matmuls.
+    state is last so that BP sums along contiguous rows (bp._update_temporal).
     """
     s0, s1 = (float(s) for s in steps)
     if not (s0 > 0 and s1 > 0):
         raise ValueError(f'temporal steps must be positive, got {steps}')
-    if s0 == s1:
-        mid = 0.5 * (prev[:, :, None, :] + nxt[:, None, :, :])  # (J, Ma, Mc, 3)
-    else:
-        w = s0 / (s0 + s1)
-        mid = prev[:, :, None, :] + w * (nxt[:, None, :, :] - prev[:, :, None, :])
     scale = config.temporal_scale if s0 == s1 == 1.0 else config.temporal_scale * 0.5 * (s0 + s1)
-    j, ma, mc = mid.shape[:3]
-    mid = mid.reshape(j, ma * mc, 3)
-    mb = cur.shape[1]
-    # |b - mid|^2 = [mid, |mid|^2, 1] . [-2b, 1, |b|^2]: the whole M^3 part is one batched matmul
-    # (sums and broadcasts over rows of only M elements took longer than the product)
-    left = np.empty((j, ma * mc, 5))
-    left[..., :3] = mid
-    left[..., 3] = np.einsum('jkd,jkd->jk', mid, mid)
-    left[..., 4] = 1.0
-    right = np.empty((j, 5, mb))
-    right[:, :3] = -2.0 * cur.transpose(0, 2, 1)
-    right[:, 3] = 1.0
-    right[:, 4] = np.einsum('jbd,jbd->jb', cur, cur)
-    sq = left @ right  # every M^3 step below works in place, the arrays being large
-    # squared distances in float64 (the expansion cancels), the kernel in float32 like the table
-    table = np.maximum(sq, 0.0, out=sq).astype(np.float32)
-    if config.temporal_form == 'laplace':
-        np.sqrt(table, out=table)
-        table *= np.float32(-1.0 / scale)
-    else:
-        table *= np.float32(-0.5 / scale ** 2)
-    np.exp(table, out=table)
-    return _normalised(table.reshape(j, ma, mc, mb), axes=(1, 2, 3))
+    laplace = config.temporal_form == 'laplace'
+    coef = np.float32(-1.0 / scale) if laplace else np.float32(-0.5 / scale ** 2)
+    return _temporal_table(*(np.ascontiguousarray(h, dtype=np.float64) for h in (prev, cur, nxt)),
+                           s0 == s1, s0 / (s0 + s1), coef, laplace)
+
+
+@kernel('void(float32[::1], float64[::1], float64[::1])')
+def _exp(x, poly, scale):
+    """x[:] = exp(x) in place, evaluated in float64 and rounded to float32 (so mostly libm's
+    correctly rounded expf), as loops that compile to vector instructions, which a call of expf
+    per entry does not: exp(r) 2^k with k = round(x / ln 2), r = x - k ln 2 (|r| <= ln 2 / 2) by
+    its Taylor series to r^10 (relative error 2e-13), 2^k from its bits. poly, scale: (N,) scratch.
+    Arguments below -700 (exp < 1e-304, 0 in float32) are taken as -700."""
+    n = len(x)
+    for i in range(n):
+        y = max(np.float64(x[i]), -700.0)
+        k = np.floor(y * 1.4426950408889634 + 0.5)
+        r = (y - k * 0.6931471803691238) - k * 1.9082149292705877e-10
+        p = 1.0 / 3628800.0
+        p = p * r + 1.0 / 362880.0
+        p = p * r + 1.0 / 40320.0
+        p = p * r + 1.0 / 5040.0
+        p = p * r + 1.0 / 720.0
+        p = p * r + 1.0 / 120.0
+        p = p * r + 1.0 / 24.0
+        p = p * r + 1.0 / 6.0
+        p = p * r + 0.5
+        p = p * r + 1.0
+        poly[i] = p * r + 1.0
+        # k + 1023 as the low bits of a float64 in [2^52, 2^53): moved to the exponent field, 2^k
+        scale[i] = k + (4503599627370496.0 + 1023.0)
+    bits = scale[:n].view(np.int64)
+    for i in range(n):
+        bits[i] = (bits[i] - 0x4330000000000000) << 52
+    for i in range(n):
+        x[i] = np.float32(poly[i] * scale[i])
+
+
+@kernel('float32[:, :, :, ::1](float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64, '
+        'float32, boolean)')
+def _temporal_table(prev, cur, nxt, even, w, coef, laplace):
+    """temporal_table's (J, Ma, Mc, Mb) table, entry by entry in float32 from the squared
+    distance in float64: exp(coef sqrt(d^2)) (laplace) or exp(coef d^2), each joint's table
+    scaled to sum to one (summed in float64). even: the midpoint (a + c) / 2, else a + w (c - a)."""
+    n_j, ma, mb, mc = prev.shape[0], prev.shape[1], cur.shape[1], nxt.shape[1]
+    out = np.empty((n_j, ma, mc, mb), np.float32)
+    size = ma * mc * mb
+    scratch = np.empty((2, size))
+    tiny = np.finfo(np.float32).tiny
+    coords = np.empty((3, mb))  # cur[j] by coordinate: contiguous rows
+    xs, ys, zs = coords[0], coords[1], coords[2]
+    for j in range(n_j):
+        for b in range(mb):
+            xs[b], ys[b], zs[b] = cur[j, b, 0], cur[j, b, 1], cur[j, b, 2]
+        for a in range(ma):
+            for c in range(mc):
+                row = out[j, a, c]
+                p, n = prev[j, a], nxt[j, c]
+                if even:
+                    mx, my, mz = 0.5 * (p[0] + n[0]), 0.5 * (p[1] + n[1]), 0.5 * (p[2] + n[2])
+                else:
+                    mx, my, mz = p[0] + w * (n[0] - p[0]), p[1] + w * (n[1] - p[1]), p[2] + w * (n[2] - p[2])
+                for b in range(mb):
+                    dx = xs[b] - mx
+                    dy = ys[b] - my
+                    dz = zs[b] - mz
+                    row[b] = np.float32(dx * dx + dy * dy + dz * dz)
+        flat = out[j].reshape(size)
+        if laplace:
+            for i in range(size):
+                flat[i] = np.sqrt(flat[i]) * coef
+        else:
+            for i in range(size):
+                flat[i] *= coef
+        _exp(flat, scratch[0], scratch[1])
+        lanes = scratch[0, :mb]
+        lanes[:] = 0.0
+        for i in range(0, size, mb):
+            for b in range(mb):
+                lanes[b] += flat[i + b]
+        total = max(np.float32(lanes.sum()), tiny)
+        for i in range(size):
+            flat[i] /= total
+    return out
 
 
 def pair_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N).
-    Coordinate by coordinate, each step on whole (..., M, N) arrays: a norm over a last axis of 3
-    took 3.5 times as long (the same sums, in the same order)."""
-    a, b = np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)
-    d = a[0][..., :, None] - b[0][..., None, :]
-    sq = d * d
-    for k in (1, 2):
-        np.subtract(a[k][..., :, None], b[k][..., None, :], out=d)
-        d *= d
-        sq += d
-    return np.sqrt(sq, out=sq)
+    """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N)."""
+    lead = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
+    n = math.prod(lead)
+    a, b = (np.ascontiguousarray(x if x.shape[:-2] == lead else np.broadcast_to(x, lead + x.shape[-2:]),
+                                 dtype=np.float64).reshape(n, x.shape[-2], 3) for x in (a, b))
+    return _pair_distances(a, b).reshape(lead + (a.shape[1], b.shape[1]))
+
+
+@kernel('float64[:, :, ::1](float64[:, :, ::1], float64[:, :, ::1])')
+def _pair_distances(a, b):
+    """(N, M, K) distances between (N, M, 3) and (N, K, 3), their squares summed x, y, z in turn."""
+    n, m, k = a.shape[0], a.shape[1], b.shape[1]
+    out = np.empty((n, m, k))
+    for i in range(n):
+        for x in range(m):
+            for y in range(k):
+                dx = a[i, x, 0] - b[i, y, 0]
+                dy = a[i, x, 1] - b[i, y, 1]
+                dz = a[i, x, 2] - b[i, y, 2]
+                out[i, x, y] = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return out
+
+
+@kernel('void(float64[::1], float32[::1])')
+def _normalise_into(table, out):
+    """out = table / its sum (at least float32's tiny), in float32: one factor's (S,) table scaled
+    to sum to one, numpy's sum to the bit."""
+    total = max(pairwise_sum(table), np.float64(np.finfo(np.float32).tiny))
+    for i in range(len(table)):
+        out[i] = table[i] / total
 
 
 def collision_table(right: np.ndarray, left: np.ndarray, config: FactorConfig) -> np.ndarray:
@@ -194,8 +266,22 @@ def collision_table(right: np.ndarray, left: np.ndarray, config: FactorConfig) -
     right, left: (..., M, 3). Returns (..., M, M) indexed [right state, left state].
     """
     d = pair_distances(right, left)
-    table = 1.0 / (1.0 + np.exp((config.collision_centre - d) / config.collision_width))
-    return _normalised(table, axes=(-2, -1))
+    return _collision_table(d.reshape((math.prod(d.shape[:-2]),) + d.shape[-2:]), config.collision_centre,
+                            config.collision_width).reshape(d.shape)
+
+
+@kernel('float32[:, :, ::1](float64[:, :, ::1], float64, float64)')
+def _collision_table(d, centre, width):
+    """collision_table of (N, M, K) distances, each (M, K) table normalised."""
+    n, size = d.shape[0], d.shape[1] * d.shape[2]
+    out = np.empty(d.shape, np.float32)
+    table = np.empty(size)
+    for i in range(n):
+        flat = d[i].reshape(size)
+        for x in range(size):
+            table[x] = 1.0 / (1.0 + np.exp((centre - flat[x]) / width))
+        _normalise_into(table, out[i].reshape(size))
+    return out
 
 
 def limb_table(d: np.ndarray, length: np.ndarray, config: FactorConfig) -> np.ndarray:
@@ -208,5 +294,24 @@ def limb_table(d: np.ndarray, length: np.ndarray, config: FactorConfig) -> np.nd
     length: (E,) typical bone lengths in metres (body.LIMB_LENGTHS). Returns (..., E, M, M).
     """
     low, high = config.limb_range
-    excess = np.maximum(np.maximum(d - high * length[:, None, None], low * length[:, None, None] - d), 0.0)
-    return _normalised(np.exp(-0.5 * (excess / config.limb_sigma) ** 2), axes=(-2, -1))
+    flat = np.ascontiguousarray(d, dtype=np.float64).reshape((math.prod(d.shape[:-3]),) + d.shape[-3:])
+    return _limb_table(flat, np.ascontiguousarray(length, dtype=np.float64), low, high,
+                       config.limb_sigma).reshape(d.shape)
+
+
+@kernel('float32[:, :, :, ::1](float64[:, :, :, ::1], float64[::1], float64, float64, float64)')
+def _limb_table(d, length, low, high, sigma):
+    """limb_table of (N, E, M, K) distances, each (M, K) table normalised."""
+    n, n_e, size = d.shape[0], d.shape[1], d.shape[2] * d.shape[3]
+    out = np.empty(d.shape, np.float32)
+    table = np.empty(size)
+    for i in range(n):
+        for e in range(n_e):
+            flat = d[i, e].reshape(size)
+            longest, shortest = high * length[e], low * length[e]
+            for x in range(size):
+                excess = max(max(flat[x] - longest, shortest - flat[x]), 0.0)
+                q = excess / sigma
+                table[x] = np.exp(-0.5 * (q * q))
+            _normalise_into(table, out[i, e].reshape(size))
+    return out

@@ -23,8 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mvpose_ros.core.compiled import kernel
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
+from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, pairwise_sum, run_chains
 from mvpose_ros.core.inference.confidence import joint_confidence
 from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
@@ -203,7 +204,6 @@ class SlidingWindow:
                     chain.support.popleft()
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
-        # in id order, as _add_temporal makes the tables: stacked chains then share them uncopied
         run_chains([self._chains[pid].bp for pid in sorted(slot.people)], self.config.slide_iterations)
         self.timer.add('bp', t0)
 
@@ -270,8 +270,8 @@ class SlidingWindow:
         row = chain.frames.index(frame)
         best = chain.bp.total[row].argmax(axis=-1)  # (J,)
         hyp = chain.hypotheses[row]
-        return (np.take_along_axis(hyp, best[:, None, None], axis=1)[:, 0],
-                joint_confidence(chain.bp.marginals_at(row), hyp, best, chain.support[row]))
+        confidence = joint_confidence(chain.bp.marginals_at(row), hyp, best, chain.support[row])
+        return hyp[np.arange(len(best)), best], confidence
 
     def _decode_all(self) -> list[FrameResult]:
         decoded: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
@@ -354,12 +354,48 @@ def _steps(dt_prev: float, dt_next: float, rate: float) -> tuple[float, float]:
 
 
 def _pruned(p: PersonFrame, k: int) -> PersonFrame:
+    """Person p with the k hypotheses of each joint of highest data term (ties: the first), the
+    data term renormalised."""
     if k >= p.data.shape[1]:
         return p
-    keep = np.argsort(-p.data, axis=1, kind='stable')[:, :k]
-    data = np.take_along_axis(p.data, keep, axis=1)
-    return PersonFrame(p.person_id, np.take_along_axis(p.hypotheses, keep[..., None], axis=1),
-                       data / np.maximum(data.sum(axis=1, keepdims=True), np.finfo(float).tiny), p.support)
+    data, hypotheses = _top_hypotheses(np.ascontiguousarray(p.data, dtype=np.float64),
+                                       np.ascontiguousarray(p.hypotheses, dtype=np.float64), k)
+    return PersonFrame(p.person_id, hypotheses, data, p.support)
+
+
+@kernel('Tuple((float64[:, ::1], float64[:, :, ::1]))(float64[:, ::1], float64[:, :, ::1], int64)')
+def _top_hypotheses(data, hypotheses, k):
+    """_pruned's data (J, k) and hypotheses (J, k, 3) from (J, M) and (J, M, 3), 0 < k < M: per
+    joint the k largest by insertion in a sorted list, an equal value after those before it (the
+    order of numpy's stable argsort of -data)."""
+    n_j, m = data.shape
+    kept = np.empty((n_j, k))
+    points = np.empty((n_j, k, 3))
+    order = np.empty(k, np.int64)
+    tiny = np.finfo(np.float64).tiny
+    for j in range(n_j):
+        values = kept[j]
+        n = 0
+        for i in range(m):
+            v = data[j, i]
+            if n == k:
+                if not v > values[k - 1]:
+                    continue
+                n -= 1  # the smallest kept leaves
+            r = n
+            while r > 0 and values[r - 1] < v:
+                values[r] = values[r - 1]
+                order[r] = order[r - 1]
+                r -= 1
+            values[r] = v
+            order[r] = i
+            n += 1
+        for r in range(k):
+            points[j, r] = hypotheses[j, order[r]]
+        total = max(pairwise_sum(values), tiny)
+        for r in range(k):
+            values[r] /= total
+    return kept, points
 
 
 def _result(frame: int, ids: list[int], decoded: list[tuple[np.ndarray, np.ndarray]]) -> FrameResult:
