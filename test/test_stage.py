@@ -90,3 +90,40 @@ def test_a_world_turned_so_that_y_is_up_gives_the_same_skeletons_turned(head_mod
     for plain, other in zip(*results):
         assert other.person_ids == plain.person_ids
         np.testing.assert_allclose(other.joints, plain.joints @ turn.T, atol=1e-6)
+
+
+def _awkward(a: np.ndarray) -> np.ndarray:
+    """The same values as a read-only, non-contiguous array (as a view into a message's buffer or a
+    transposed matrix may be)."""
+    big = np.zeros(a.shape + (2,), dtype=a.dtype)
+    big[..., 0] = a
+    view = big[..., 0]
+    view.flags.writeable = False
+    return view
+
+
+def test_inputs_of_any_memory_layout_give_the_same_skeletons():
+    """The compiled stages take C-contiguous, writable arrays: cameras made from transposed
+    (Fortran-ordered) matrices and 2D people whose keypoints, maps and origins are read-only
+    strided views give the same skeletons as plain arrays (a rig file's rotation is such a
+    transpose: the association node failed on it)."""
+    cameras, raw = shelf_openpose_raw(None)
+    odd_cameras = [replace(cam, K=np.asfortranarray(cam.K), R=cam.R.T.copy().T, t=_awkward(cam.t),
+                           dist=_awkward(cam.dist)) for cam in cameras]
+    config = StageConfig.from_params({'window': 4, 'lag': 1})
+    stages = Stage3D(cameras, config), Stage3D(odd_cameras, config)
+    results: tuple[list, list] = ([], [])
+    for k in range(6):
+        people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(cameras))]
+        odd = [[replace(p, keypoints=_awkward(p.keypoints),
+                        heatmap=replace(p.heatmap, maps=_awkward(p.heatmap.maps),
+                                        origin=_awkward(np.array(p.heatmap.origin))))
+                for p in views] for views in people]
+        for stage, out, inputs in zip(stages, results, (people, odd)):
+            out += stage.push(300 + k, inputs)
+    for stage, out in zip(stages, results):
+        out += stage.flush()
+    assert [r.frame for r in results[1]] == list(range(300, 306))
+    for plain, other in zip(*results):
+        assert other.person_ids == plain.person_ids
+        np.testing.assert_array_equal(other.joints, plain.joints)

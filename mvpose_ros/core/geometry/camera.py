@@ -45,7 +45,7 @@ class Camera:
 
     def __post_init__(self) -> None:
         for field, shape in (('K', (3, 3)), ('R', (3, 3)), ('t', (3,)), ('dist', (5,))):
-            value = np.array(getattr(self, field), dtype=float).reshape(shape)
+            value = np.array(getattr(self, field), dtype=float, order='C').reshape(shape)  # C: what kernels take
             value.flags.writeable = False  # frozen means the arrays too
             object.__setattr__(self, field, value)
         object.__setattr__(self, 'width', int(self.width))
