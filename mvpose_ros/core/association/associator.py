@@ -11,10 +11,10 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, _pairwise_sum, cluster_views
+from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
 from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker
 from mvpose_ros.core.association.view_consistency import _line_terms, _solve_line_terms, consistent_views
@@ -82,7 +82,7 @@ def _rough_centres(keypoints, origins, dirs, idx, min_score):
                 continue
             for i in range(9):
                 column[:] = terms[:, i]
-                summed[i] = _pairwise_sum(column, 0, width)
+                summed[i] = pairwise_sum(column)
             _solve_line_terms(summed, width, point)
             for i in range(3):
                 total[i] += point[i]

@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import Person2D
 
@@ -76,32 +76,6 @@ class ViewRays:
 _NEAR_PARALLEL = 1e-6
 
 
-@kernel('float64(float64[::1], int64, int64)')
-def _pairwise_sum(values, start, n):
-    """values[start:start + n] summed in numpy's pairwise order (add.reduce over a contiguous
-    axis), so that means equal the numpy formulation's to the last bit."""
-    if n < 8:
-        total = 0.0
-        for i in range(start, start + n):
-            total += values[i]
-        return total
-    if n <= 128:  # eight running sums (scalars: a scratch array per call cost more than the sum)
-        r0, r1, r2, r3, r4, r5, r6, r7 = values[start:start + 8]
-        i = 8
-        while i < n - n % 8:
-            at = start + i
-            r0, r1, r2, r3 = r0 + values[at], r1 + values[at + 1], r2 + values[at + 2], r3 + values[at + 3]
-            r4, r5, r6, r7 = r4 + values[at + 4], r5 + values[at + 5], r6 + values[at + 6], r7 + values[at + 7]
-            i += 8
-        total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        for k in range(i, n):
-            total += values[start + k]
-        return total
-    half = n // 2
-    half -= half % 8
-    return _pairwise_sum(values, start, half) + _pairwise_sum(values, start + half, n - half)
-
-
 @kernel('float64(float64[::1], float64[::1], float64[::1], float64[::1])')
 def _near_parallel_distance(o1, d1, o2, d2):
     """camera.ray_ray_distance of two lines (origins o, directions d (3,)) at most a little off parallel."""
@@ -157,7 +131,7 @@ def _mean_line_distances(origins, dirs, seen, owner, min_shared):
                     cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
                     if seen[a, j] and seen[b, j] and np.sqrt(max(1.0 - cos * cos, 0.0)) < _NEAR_PARALLEL:
                         per_joint[j] = _near_parallel_distance(origins[a], dirs[a, j], origins[b], dirs[b, j])
-            out[a, b] = out[b, a] = _pairwise_sum(per_joint, 0, n_joints) / shared
+            out[a, b] = out[b, a] = pairwise_sum(per_joint) / shared
     return out
 
 
@@ -214,7 +188,7 @@ def _greedy_clusters(dist, owner, max_distance):
                         count += 1
                     y = nxt[y]
                 x = nxt[x]
-            if not _pairwise_sum(cross, 0, count) / count <= max_distance:
+            if not pairwise_sum(cross[:count]) / count <= max_distance:
                 continue
         if cu < 0 and cv < 0:
             target = n_clusters

@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, pairwise_sum
 
 
 @dataclass(frozen=True)
@@ -186,38 +186,6 @@ def loopy_bp(
 
 def _log(data: np.ndarray) -> np.ndarray:
     return np.log(np.maximum(data, np.finfo(np.float64).tiny))
-
-
-@kernel('float64(float64[::1])', 'float32(float32[::1])')
-def pairwise_sum(x):
-    """x.sum() of (N,), N >= 1, added up in numpy's order (pairwise: eight running sums over blocks
-    of at most 128 elements), so that a kernel's sums are numpy's to the bit."""
-    n = len(x)
-    if n < 8:
-        s = x[0]
-        for i in range(1, n):
-            s += x[i]
-        return s
-    if n > 128:
-        half = n // 2
-        half -= half % 8
-        return pairwise_sum(x[:half]) + pairwise_sum(x[half:])
-    r0, r1, r2, r3, r4, r5, r6, r7 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
-    i = 8
-    while i < n - n % 8:
-        r0 += x[i]
-        r1 += x[i + 1]
-        r2 += x[i + 2]
-        r3 += x[i + 3]
-        r4 += x[i + 4]
-        r5 += x[i + 5]
-        r6 += x[i + 6]
-        r7 += x[i + 7]
-        i += 8
-    s = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    for k in range(i, n):
-        s += x[k]
-    return s
 
 
 @kernel('float64[:, ::1](float64[:, ::1])')

@@ -18,8 +18,7 @@ import math
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
-from mvpose_ros.core.inference.bp import pairwise_sum
+from mvpose_ros.core.compiled import kernel, pairwise_sum
 
 SPREAD_SCALE_M = 0.10
 

@@ -11,10 +11,9 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera, rig_project
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
-from mvpose_ros.core.inference.bp import pairwise_sum
 
 TEMPORAL_FORMS = ('laplace', 'gauss')
 
@@ -73,31 +72,6 @@ def data_terms(hypotheses: Sequence[np.ndarray], people: Sequence[Sequence[tuple
     return list(out)
 
 
-@kernel('float64(float64[:])')
-def _pairwise_sum(x):
-    # numpy's summation of a row by add.reduce (pairwise: eight partial sums within blocks of 128)
-    n = len(x)
-    if n < 8:
-        total = 0.0
-        for i in range(n):
-            total += x[i]
-        return total
-    if n > 128:
-        half = n // 2
-        half -= half % 8
-        return _pairwise_sum(x[:half]) + _pairwise_sum(x[half:])
-    r = x[:8].copy()
-    i = 8
-    while i < n - n % 8:
-        for k in range(8):
-            r[k] += x[i + k]
-        i += 8
-    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-    for k in range(i, n):
-        total += x[k]
-    return total
-
-
 @kernel('void(float64[:, :, ::1], int64[::1], float64[:, :, ::1])')
 def _mean_over_views(values, counts, out):
     # values (V, J, M), views person after person -> out (P, J, M): each person's mean over its
@@ -112,14 +86,14 @@ def _mean_over_views(values, counts, out):
                 if counts[p] > 0:
                     total = values[first, j, k]
                 if counts[p] > 8:
-                    total += _pairwise_sum(values[first + 1:first + counts[p], j, k])
-                elif counts[p] > 1:  # fewer than 8 to reduce: _pairwise_sum's plain loop, inline
+                    total += pairwise_sum(values[first + 1:first + counts[p], j, k])
+                elif counts[p] > 1:  # fewer than 8 to reduce: pairwise_sum's plain loop, inline
                     rest = 0.0
                     for v in range(first + 1, first + counts[p]):
                         rest += values[v, j, k]
                     total += rest
                 row[k] = total / max(counts[p], 1)
-            total = _pairwise_sum(row)
+            total = pairwise_sum(row)
             for k in range(len(row)):
                 row[k] = row[k] / total if total > 0 else 1.0 / len(row)
         first += counts[p]

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, pairwise_sum
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, pairwise_sum, run_chains
+from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
 from mvpose_ros.core.inference.confidence import joint_confidence
 from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
