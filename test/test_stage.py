@@ -78,15 +78,7 @@ def test_a_world_turned_so_that_y_is_up_gives_the_same_skeletons_turned(head_mod
     turn = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # world -> turned world
     turned = [replace(cam, R=cam.R @ turn.T) for cam in cameras]
     config = StageConfig.from_params({'window': 4, 'lag': 1, 'head_model': head_model})
-    stages = Stage3D(cameras, config), Stage3D(turned, config, up=turn @ UP)
-    results: tuple[list, list] = ([], [])
-    for k in range(6):
-        people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(cameras))]
-        for stage, out in zip(stages, results):
-            out += stage.push(300 + k, people)
-    for stage, out in zip(stages, results):
-        out += stage.flush()
-    assert [r.frame for r in results[1]] == list(range(300, 306))
+    results = _both(raw, (Stage3D(cameras, config), Stage3D(turned, config, up=turn @ UP)), lambda people: people)
     for plain, other in zip(*results):
         assert other.person_ids == plain.person_ids
         np.testing.assert_allclose(other.joints, plain.joints @ turn.T, atol=1e-6)
@@ -111,19 +103,27 @@ def test_inputs_of_any_memory_layout_give_the_same_skeletons():
     odd_cameras = [replace(cam, K=np.asfortranarray(cam.K), R=cam.R.T.copy().T, t=_awkward(cam.t),
                            dist=_awkward(cam.dist)) for cam in cameras]
     config = StageConfig.from_params({'window': 4, 'lag': 1})
-    stages = Stage3D(cameras, config), Stage3D(odd_cameras, config)
+
+    def odd(people: list) -> list:
+        return [[replace(p, keypoints=_awkward(p.keypoints),
+                         heatmap=replace(p.heatmap, maps=_awkward(p.heatmap.maps),
+                                         origin=_awkward(np.array(p.heatmap.origin))))
+                 for p in views] for views in people]
+
+    results = _both(raw, (Stage3D(cameras, config), Stage3D(odd_cameras, config)), odd)
+    for plain, other in zip(*results):
+        assert other.person_ids == plain.person_ids
+        np.testing.assert_array_equal(other.joints, plain.joints)
+
+
+def _both(raw: list, stages: tuple[Stage3D, Stage3D], second_input) -> tuple[list, list]:
+    """The results of two stages over Shelf frames 300-305, the second given second_input(people)."""
     results: tuple[list, list] = ([], [])
     for k in range(6):
-        people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(cameras))]
-        odd = [[replace(p, keypoints=_awkward(p.keypoints),
-                        heatmap=replace(p.heatmap, maps=_awkward(p.heatmap.maps),
-                                        origin=_awkward(np.array(p.heatmap.origin))))
-                for p in views] for views in people]
-        for stage, out, inputs in zip(stages, results, (people, odd)):
+        people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(raw))]
+        for stage, out, inputs in zip(stages, results, (people, second_input(people))):
             out += stage.push(300 + k, inputs)
     for stage, out in zip(stages, results):
         out += stage.flush()
     assert [r.frame for r in results[1]] == list(range(300, 306))
-    for plain, other in zip(*results):
-        assert other.person_ids == plain.person_ids
-        np.testing.assert_array_equal(other.joints, plain.joints)
+    return results

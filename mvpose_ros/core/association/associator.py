@@ -12,12 +12,12 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, pairwise_sum
-from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
 from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
 from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.association.tracking import IouTracker
-from mvpose_ros.core.association.view_consistency import _line_terms, _solve_line_terms, consistent_views
+from mvpose_ros.core.association.view_consistency import consistent_views
 
 
 @dataclass(frozen=True)
@@ -76,14 +76,14 @@ def _rough_centres(keypoints, origins, dirs, idx, min_score):
                     norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
                     for i in range(3):
                         direction[i] = d[i] / norm
-                    _line_terms(origins[row], direction, terms[k])
+                    line_terms_into(origins[row], direction, terms[k])
                     seen += 1
             if seen < 2:
                 continue
             for i in range(9):
                 column[:] = terms[:, i]
                 summed[i] = pairwise_sum(column)
-            _solve_line_terms(summed, width, point)
+            solve_line_terms_into(summed, 1e-12 * width ** 3, point)
             for i in range(3):
                 total[i] += point[i]
             located += 1

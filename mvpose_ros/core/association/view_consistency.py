@@ -25,44 +25,9 @@ import numpy as np
 
 from mvpose_ros.core.association.matching import ViewRays
 from mvpose_ros.core.compiled import kernel
-from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
 
 _NO_CAMERA = Camera('none', np.eye(3), np.eye(3), np.zeros(3), np.zeros(5), 1, 1)
-
-
-@kernel('void(float64[::1], float64[::1], float64[::1])')
-def _line_terms(origin, direction, out):
-    """camera.line_terms of one line (origin, unit direction (3,)) into out (9,): I - d d^T as
-    xx, xy, xz, yy, yz, zz, then o - d (d . o); the same arithmetic, so the same bits."""
-    dx, dy, dz = direction[0], direction[1], direction[2]
-    along = dx * origin[0] + dy * origin[1] + dz * origin[2]
-    out[0] = -(dx * dx) + 1.0
-    out[1] = -(dx * dy)
-    out[2] = -(dx * dz)
-    out[3] = -(dy * dy) + 1.0
-    out[4] = -(dy * dz)
-    out[5] = -(dz * dz) + 1.0
-    out[6] = origin[0] - dx * along
-    out[7] = origin[1] - dy * along
-    out[8] = origin[2] - dz * along
-
-
-@kernel('void(float64[::1], int64, float64[::1])')
-def _solve_line_terms(terms, n_lines, out):
-    """camera.solve_line_terms of summed terms (9,) into out (3,): the closest point by Cramer's
-    rule, NaN where degenerate (n_lines: the most lines in any sum of the call)."""
-    a00, a01, a02, a11, a12, a22, b0, b1, b2 = (terms[0], terms[1], terms[2], terms[3], terms[4], terms[5],
-                                                terms[6], terms[7], terms[8])
-    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    if not (np.isfinite(det) and np.isfinite(b0 + b1 + b2) and abs(det) > 1e-12 * n_lines ** 3):
-        out[:] = np.nan
-        return
-    inv = 1.0 / det
-    out[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv
-    out[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv
-    out[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
 
 
 @kernel('float64(float64[::1])')
@@ -106,7 +71,7 @@ def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, 
         for j in range(n_joints):
             if keypoints[row, j, 2] > min_score:
                 seen[k, j] = True
-                _line_terms(origins[row], dirs[row, j], terms[k, j])
+                line_terms_into(origins[row], dirs[row, j], terms[k, j])
                 for i in range(9):
                     total[j, i] += terms[k, j, i]
                 u, v = keypoints[row, j, 0], keypoints[row, j, 1]
@@ -129,7 +94,7 @@ def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, 
             else:
                 for i in range(9):
                     without[i] = total[j, i] - terms[left_out, j, i]
-                _solve_line_terms(without, width, points[j])
+                solve_line_terms_into(without, 1e-12 * width ** 3, points[j])
         for k in range(width):
             row = views[k]
             if row < 0:

@@ -331,8 +331,9 @@ def line_terms(origins: np.ndarray, dirs: np.ndarray, out: np.ndarray | None = N
 
 
 @kernel('void(float64[::1], float64[::1], float64[::1])')
-def _ray_terms(o, d, out):
-    # one line's share (9,) of the normal equations, as numpy computed it on whole arrays
+def line_terms_into(o, d, out):
+    """line_terms of one line (origin o, unit direction d (3,)) into out (9,), for other kernels; the
+    arithmetic numpy had on whole arrays, so the same bits."""
     dx, dy, dz = d[0], d[1], d[2]
     along = dx * o[0] + dy * o[1] + dz * o[2]
     out[0] = -(dx * dx) + 1.0
@@ -350,7 +351,7 @@ def _ray_terms(o, d, out):
 def _line_terms(o, d, out):
     terms = np.empty(9)
     for n in range(len(d)):
-        _ray_terms(o[n], d[n], terms)
+        line_terms_into(o[n], d[n], terms)
         out[:, n] = terms
 
 
@@ -365,7 +366,9 @@ def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:
 
 
 @kernel('void(float64[::1], float64, float64[::1])')
-def _solve(terms, singular, out):
+def solve_line_terms_into(terms, singular, out):
+    """solve_line_terms of one sum of terms (9,) into out (3,), for other kernels; singular:
+    1e-12 n_lines^3, the threshold on the determinant."""
     a00, a01, a02, a11, a12, a22 = terms[0], terms[1], terms[2], terms[3], terms[4], terms[5]
     b0, b1, b2 = terms[6], terms[7], terms[8]
     c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
@@ -385,7 +388,7 @@ def _solve_line_terms(terms, singular, out):
     summed = np.empty(9)
     for n in range(terms.shape[1]):
         summed[:] = terms[:, n]
-        _solve(summed, singular, out[n])
+        solve_line_terms_into(summed, singular, out[n])
 
 
 def closest_points_of_ray_sets(centres: np.ndarray, of: np.ndarray, dirs: np.ndarray, sets: np.ndarray) -> np.ndarray:
@@ -412,10 +415,10 @@ def _closest_points(centres, of, dirs, sets, singular, out):
                 for t in range(9):
                     summed[t] += 0.0
                 continue
-            _ray_terms(centres[of[r]], dirs[r], terms)
+            line_terms_into(centres[of[r]], dirs[r], terms)
             for t in range(9):
                 summed[t] = terms[t] if k == 0 else summed[t] + terms[t]
-        _solve(summed, singular, out[n])
+        solve_line_terms_into(summed, singular, out[n])
 
 
 def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
