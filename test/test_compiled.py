@@ -44,3 +44,14 @@ def test_division_by_zero_follows_numpy():
         return 1.0 / x
 
     assert inverse(0.0) == np.inf
+
+
+def test_kernel_array_copies_only_what_a_kernel_would_refuse():
+    plain = np.zeros((3, 3))
+    assert compiled.kernel_array(plain, np.float64) is plain
+    frozen = np.zeros(3)
+    frozen.flags.writeable = False
+    for odd in (frozen, np.zeros((3, 3)).T, np.zeros(6)[::2], np.zeros(3, np.float32)):
+        ready = compiled.kernel_array(odd, np.float64)
+        assert ready.flags.c_contiguous and ready.flags.writeable and ready.dtype == np.float64
+        np.testing.assert_array_equal(ready, odd)

@@ -3,11 +3,14 @@
 Every kernel of the package is compiled the same way, by `kernel`:
 - for the signatures it names, when its module is imported: a call with other types is a
   TypeError, never a compilation in the middle of a frame;
-- cached on disk beside its module: the first import after an install compiles (seconds), later
-  processes load the machine code;
+- cached on disk beside its module: the first import after an install compiles (about a minute
+  for all of them on 2 cores), later processes load the machine code;
 - without the GIL, so a node's worker thread and its executor run side by side;
 - without fast-math and with numpy's error model (x / 0 is inf, not an exception): the same
   arithmetic as the numpy it replaces, up to the order of sums.
+
+Callers hand kernels their arrays through `kernel_array` (the one place that says what a
+signature takes); kernels sum through `pairwise_sum` where numpy's bits must be kept.
 
 `python -m mvpose_ros.core.compiled` imports every module that holds kernels, so that a graph's
 nodes, started together, load the cache instead of each compiling the same code.
@@ -18,6 +21,8 @@ import importlib
 from typing import Callable
 
 import numba
+import numpy as np
+from numpy.typing import ArrayLike, DTypeLike
 
 # Every module that defines kernels (test_compiled checks that none is missing).
 KERNEL_MODULES: tuple[str, ...] = (
@@ -41,6 +46,15 @@ def kernel(*signatures: str) -> Callable[[Callable], Callable]:
     """Decorator: compile a function to machine code for `signatures` (numba's strings, e.g.
     'float64[:, ::1](float64[:, ::1], int64)')."""
     return numba.njit(list(signatures), cache=True, nogil=True, error_model='numpy')
+
+
+def kernel_array(a: ArrayLike, dtype: DTypeLike) -> np.ndarray:
+    """a as the kernels' signatures take arrays: C-contiguous, writable (numba types a read-only
+    array, such as a Camera's matrices or a broadcast, apart) and of dtype; copied only when it is
+    not already so (as np.require(a, dtype, 'CW') does, at a seventh of its cost: kernels are
+    called many times a frame)."""
+    out = np.ascontiguousarray(a, dtype=dtype)
+    return out if out.flags.writeable else out.copy()
 
 
 @kernel('float64(float64[::1])', 'float64(float64[:])', 'float32(float32[::1])', 'float32(float32[:])')

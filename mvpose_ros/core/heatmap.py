@@ -8,11 +8,8 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, kernel_array
 
-# What the kernels' signatures take: C-contiguous and writable (numba types a read-only array
-# apart); np.require copies only an array that is not.
-_KERNEL_READY = ['C', 'W']
 MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
@@ -90,8 +87,8 @@ class HeatmapStack:
         pmf over its cells, from uniform numbers u (Q,) and jitter (Q, 2) in [0, 1) (the position
         within the drawn cell); NaN for empty maps. Only the draws asked for are made."""
         out = np.empty((len(maps), 2))
-        jitter = np.require(jitter, np.float64, _KERNEL_READY).reshape(-1, 2)
-        _sample(*self._flat(), np.require(maps, np.int64, _KERNEL_READY), np.require(u, np.float64, _KERNEL_READY),
+        jitter = kernel_array(jitter, np.float64).reshape(-1, 2)
+        _sample(*self._flat(), kernel_array(maps, np.int64), kernel_array(u, np.float64),
                 jitter, out)
         return out
 
@@ -105,7 +102,7 @@ class HeatmapStack:
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Bilinear values (N, J, K) of each map at pixels uv (N, J, K, 2); 0 outside the grid
         of cell centres and for NaN pixels."""
-        uv = np.require(uv, np.float64, _KERNEL_READY)
+        uv = kernel_array(uv, np.float64)
         out = np.empty(uv.shape[:-1])
         _lookup(*self._flat(), uv.reshape(-1, 2), uv.shape[-2], out.reshape(-1))
         return out
@@ -115,12 +112,12 @@ class HeatmapStack:
         float64), first cell, rows h, columns w, origin (N * J, 2), stride."""
         n_j = self.start.shape[1]
         cells = np.float32 if self.values.dtype == np.float32 else np.float64
-        return (np.require(self.values, cells, _KERNEL_READY),
-                np.require(self.start, np.int64, _KERNEL_READY).reshape(-1),
-                np.require(np.repeat(self.shape[:, 0], n_j), np.int64, _KERNEL_READY),
-                np.require(np.repeat(self.shape[:, 1], n_j), np.int64, _KERNEL_READY),
-                np.require(self.origin, np.float64, _KERNEL_READY).reshape(-1, 2),
-                np.require(np.repeat(self.stride, n_j), np.float64, _KERNEL_READY))
+        return (kernel_array(self.values, cells),
+                kernel_array(self.start, np.int64).reshape(-1),
+                kernel_array(np.repeat(self.shape[:, 0], n_j), np.int64),
+                kernel_array(np.repeat(self.shape[:, 1], n_j), np.int64),
+                kernel_array(self.origin, np.float64).reshape(-1, 2),
+                kernel_array(np.repeat(self.stride, n_j), np.float64))
 
 
 # a stack as the kernels take it (HeatmapStack._flat), cells float32 (as rendered) or float64
@@ -234,7 +231,7 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
 
     Max (not sum) so that a map's value at a candidate is that candidate's own weight:
     overlapping evidence does not inflate the data term and values stay in [0, 1]."""
-    centres = np.ascontiguousarray(centres, dtype=np.float64)
+    centres = kernel_array(centres, np.float64)
     if len(centres) == 0:
         return []
     lo = np.empty(centres.shape[:2] + (2,))

@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel, pairwise_sum
+from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
 from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
@@ -101,9 +101,9 @@ def rough_centres(rays: ViewRays, people: Sequence[Sequence[int]], min_score: fl
     idx = np.full((len(people), width), -1, dtype=np.int64)
     for p, views in enumerate(people):
         idx[p, :len(views)] = views
-    return _rough_centres(np.ascontiguousarray(rays.keypoints, dtype=np.float64),
-                          np.ascontiguousarray(rays.origins, dtype=np.float64),
-                          np.ascontiguousarray(rays.dirs, dtype=np.float64), idx, float(min_score))
+    return _rough_centres(kernel_array(rays.keypoints, np.float64),
+                          kernel_array(rays.origins, np.float64),
+                          kernel_array(rays.dirs, np.float64), idx, float(min_score))
 
 
 class Associator:

@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel, pairwise_sum
+from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import Person2D
 
@@ -241,8 +241,8 @@ def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Pers
     if len(rays.owner) == 0:
         return np.zeros((0, 0))
     seen = np.ascontiguousarray(rays.keypoints[..., 2] > config.min_score)
-    return _mean_line_distances(np.ascontiguousarray(rays.origins, dtype=np.float64),
-                                np.ascontiguousarray(rays.dirs, dtype=np.float64), seen,
+    return _mean_line_distances(kernel_array(rays.origins, np.float64),
+                                kernel_array(rays.dirs, np.float64), seen,
                                 rays.owner.astype(np.int64), config.min_shared)
 
 

@@ -6,7 +6,7 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.types import Person2D
 
 
@@ -31,8 +31,8 @@ def _box_iou(a, b):
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pairwise IoU of boxes (N, 4) and (K, 4) as u0, v0, u1, v1 -> (N, K)."""
-    return _box_iou(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4),
-                    np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4))
+    return _box_iou(kernel_array(a, np.float64).reshape(-1, 4),
+                    kernel_array(b, np.float64).reshape(-1, 4))
 
 
 @kernel('float64[:, ::1](float64[:, :, ::1])')
@@ -60,7 +60,7 @@ def _keypoint_boxes(keypoints):
 def keypoint_boxes(keypoints: np.ndarray) -> np.ndarray:
     """(P, 4) u_min, v_min, u_max, v_max over each person's detected keypoints (P, J, 3) (score
     > 0), as Person2D.bbox; NaN for a person with none."""
-    return _keypoint_boxes(np.ascontiguousarray(keypoints, dtype=np.float64))
+    return _keypoint_boxes(kernel_array(keypoints, np.float64))
 
 
 class IouTracker:

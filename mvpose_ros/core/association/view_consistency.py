@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.association.matching import ViewRays
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
 
 _NO_CAMERA = Camera('none', np.eye(3), np.eye(3), np.zeros(3), np.zeros(5), 1, 1)
@@ -193,8 +193,8 @@ def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: S
 
 def _ray_arrays(rays: ViewRays) -> tuple[np.ndarray, ...]:
     """keypoints, owner, origins and dirs of rays as the kernels take them."""
-    return (np.ascontiguousarray(rays.keypoints, dtype=np.float64), rays.owner.astype(np.int64),
-            np.ascontiguousarray(rays.origins, dtype=np.float64), np.ascontiguousarray(rays.dirs, dtype=np.float64))
+    return (kernel_array(rays.keypoints, np.float64), rays.owner.astype(np.int64),
+            kernel_array(rays.origins, np.float64), kernel_array(rays.dirs, np.float64))
 
 
 @functools.lru_cache(maxsize=8)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 
 
@@ -42,7 +42,7 @@ def group_body25(frame: OpenPoseFrame, paf_power: float = 0.2, min_paf: float = 
     score = np.asarray(np.power(np.concatenate(pafs, axis=None), paf_power), dtype=np.float64)
     n_b = np.array([p.shape[1] for p in pafs])
     n_cand = np.array([len(c) for c in frame.candidates])
-    cand = np.ascontiguousarray(np.concatenate(frame.candidates), dtype=np.float64)
+    cand = kernel_array(np.concatenate(frame.candidates), np.float64)
     return _group(score, n_b, cand, n_cand, float(min_paf), int(min_joints), float(min_mean_score))
 
 

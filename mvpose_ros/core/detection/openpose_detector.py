@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.geometry.body import BODY25_INFERENCE_JOINTS, INFERENCE_MIRROR, to_inference
 from mvpose_ros.core.detection.grouping import group_body25
 from mvpose_ros.core.heatmap import render_heatmaps
@@ -58,9 +58,9 @@ def _centres(frame: OpenPoseFrame, groups: np.ndarray, keypoints: np.ndarray,
     # the radius in numpy (np.hypot is libm's), the rows compiled; fmax, fmin skip missing joints
     span = np.fmax.reduce(keypoints[..., :2], axis=1) - np.fmin.reduce(keypoints[..., :2], axis=1)
     radius = config.secondary_radius * np.hypot(span[:, 0], span[:, 1])  # (P,)
-    cand = np.ascontiguousarray(np.concatenate(frame.candidates), dtype=np.float64)
+    cand = kernel_array(np.concatenate(frame.candidates), np.float64)
     n_cand = np.array([len(c) for c in frame.candidates])
-    return _centre_rows(cand, n_cand, np.ascontiguousarray(groups, dtype=np.int64), radius,
+    return _centre_rows(cand, n_cand, kernel_array(groups, np.int64), radius,
                         float(config.secondary_weight), float(config.mirror_weight))
 
 

@@ -15,12 +15,8 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from mvpose_ros.core.compiled import kernel
+from mvpose_ros.core.compiled import kernel, kernel_array
 
-
-# What the kernels' signatures take: C-contiguous and writable (numba types a read-only array,
-# e.g. Camera.centre or a broadcast, apart); np.require copies only an array that is not.
-_KERNEL_READY = ['C', 'W']
 
 # Newton steps for undistortion; quadratic convergence makes this exact to float precision for
 # any lens whose distortion map is monotone over the image.
@@ -95,7 +91,7 @@ class Camera:
 
     def project(self, X: np.ndarray) -> np.ndarray:
         """(..., 3) world points -> (..., 2) pixels; NaN for points at or behind the camera."""
-        X = np.require(X, np.float64, _KERNEL_READY)
+        X = kernel_array(X, np.float64)
         uv = np.empty(X.shape[:-1] + (2,))
         _project(self._model[None], _ZERO, _ZERO, X.reshape(1, -1, 3), uv.reshape(1, -1, 2))
         return uv
@@ -246,9 +242,9 @@ def rig_project(cameras: Sequence[Camera], which: np.ndarray, points: np.ndarray
     """(N, K, 2) pixels of points (P, K, 3) in metres: row n is points[of[n]] (of (N,); by
     default row n) seen by cameras[which[n]] (N,); NaN at or behind the camera. Camera.project
     for rows of points in many cameras at once."""
-    points = np.require(points, np.float64, _KERNEL_READY)
-    which = np.require(which, np.int64, _KERNEL_READY)
-    of = np.arange(len(which)) if of is None else np.require(of, np.int64, _KERNEL_READY)
+    points = kernel_array(points, np.float64)
+    which = kernel_array(which, np.int64)
+    of = np.arange(len(which)) if of is None else kernel_array(of, np.int64)
     uv = np.empty((len(which), points.shape[1], 2))
     _project(np.stack([cam._model for cam in cameras]) if len(cameras) else np.zeros((0, 26)), which, of, points, uv)
     return uv
@@ -285,8 +281,8 @@ def rig_directions(cameras: Sequence[Camera], which: np.ndarray, uv: np.ndarray)
     """(N, 3) unit world directions of the rays of pixels uv (N, 2), pixel n seen by
     cameras[which[n]] (N,): Camera.directions for pixels of many cameras at once. A camera with
     distortion undistorts its own pixels."""
-    uv = np.require(uv, np.float64, _KERNEL_READY)
-    which = np.require(which, np.int64, _KERNEL_READY)
+    uv = kernel_array(uv, np.float64)
+    which = kernel_array(which, np.int64)
     d = np.empty((len(uv), 3))
     _directions(np.stack([cam._pixel_to_ray for cam in cameras]) if len(cameras) else np.zeros((0, 3, 3)),
                 which, uv, d)
@@ -319,11 +315,11 @@ def line_terms(origins: np.ndarray, dirs: np.ndarray, out: np.ndarray | None = N
     solving (solve_line_terms) gives their closest point, so a set of lines used by many
     solves is prepared once. Component-major, so that a term of many lines is contiguous; out:
     where to write them (9, ...)."""
-    dirs = np.require(dirs, np.float64, _KERNEL_READY)
+    dirs = kernel_array(dirs, np.float64)
     origins = np.asarray(origins, dtype=np.float64)
     if origins.shape != dirs.shape:
         origins = np.broadcast_to(origins, dirs.shape)
-    origins = np.require(origins, np.float64, _KERNEL_READY)  # a broadcast is read-only: a copy
+    origins = kernel_array(origins, np.float64)  # a broadcast is read-only: a copy
     if out is None:
         out = np.empty((9,) + dirs.shape[:-1])
     _line_terms(origins.reshape(-1, 3), dirs.reshape(-1, 3), out.reshape(9, -1))
@@ -359,7 +355,7 @@ def solve_line_terms(terms: np.ndarray, n_lines: int) -> np.ndarray:
     """(9, ...) summed line_terms -> (..., 3) the closest point, by Cramer's rule on the
     symmetric 3x3 system; NaN where it is degenerate (fewer than two non-parallel lines, or not
     finite). n_lines: the most lines in any sum (scales the singularity threshold)."""
-    terms = np.require(terms, np.float64, _KERNEL_READY)
+    terms = kernel_array(terms, np.float64)
     x = np.empty(terms.shape[1:] + (3,))
     _solve_line_terms(terms.reshape(9, -1), 1e-12 * n_lines ** 3, x.reshape(-1, 3))
     return x
@@ -397,10 +393,10 @@ def closest_points_of_ray_sets(centres: np.ndarray, of: np.ndarray, dirs: np.nda
     (N, K) (-1: no ray, padding), ray r going from centres[of[r]] ((C, 3) metres, (R,)) along the
     unit dirs[r] (R, 3). NaN where a set is degenerate; K scales the singularity threshold as
     solve_line_terms' n_lines. Without the (9, R) terms of every ray and (9, N) of every set."""
-    sets = np.require(sets, np.int64, _KERNEL_READY)
+    sets = kernel_array(sets, np.int64)
     out = np.empty((len(sets), 3))
-    _closest_points(np.require(centres, np.float64, _KERNEL_READY), np.require(of, np.int64, _KERNEL_READY),
-                    np.require(dirs, np.float64, _KERNEL_READY), sets, 1e-12 * sets.shape[1] ** 3, out)
+    _closest_points(kernel_array(centres, np.float64), kernel_array(of, np.int64),
+                    kernel_array(dirs, np.float64), sets, 1e-12 * sets.shape[1] ** 3, out)
     return out
 
 

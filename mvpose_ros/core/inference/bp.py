@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel, pairwise_sum
+from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ class Messages:
 
 def _softmax(x: np.ndarray) -> np.ndarray:
     """exp(x) normalised along the last axis (..., M)."""
-    rows = np.ascontiguousarray(x, dtype=np.float64).reshape(math.prod(x.shape[:-1]), x.shape[-1])
+    rows = kernel_array(x, np.float64).reshape(math.prod(x.shape[:-1]), x.shape[-1])
     return _softmax_rows(rows).reshape(x.shape)
 
 
@@ -141,7 +141,7 @@ class ChainBP:
         chain, then each pairwise type over all frames."""
         tm = self.messages.temporal
         inner = [t for t in range(1, len(self) - 1) if self.temporal[t] is not None]
-        edges = [np.ascontiguousarray(g.edges, dtype=np.int64) for g in self.groups]
+        edges = [kernel_array(g.edges, np.int64) for g in self.groups]
         for _ in range(iterations):
             for sweep in (inner, inner[::-1]):
                 for t in sweep:

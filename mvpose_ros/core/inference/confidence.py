@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel, pairwise_sum
+from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 
 SPREAD_SCALE_M = 0.10
 
@@ -42,10 +42,10 @@ def joint_confidence(marginals: np.ndarray, hypotheses: np.ndarray, best: np.nda
     support = np.asarray(support)
     if support.shape != lead:
         support = np.broadcast_to(support, lead)
-    return _joint_confidence(np.ascontiguousarray(marginals, dtype=np.float64).reshape(n, m),
-                             np.ascontiguousarray(hypotheses, dtype=np.float64).reshape(n, m, 3),
-                             np.ascontiguousarray(best, dtype=np.int64).reshape(n),
-                             np.ascontiguousarray(support, dtype=np.float64).reshape(n)).reshape(lead)
+    return _joint_confidence(kernel_array(marginals, np.float64).reshape(n, m),
+                             kernel_array(hypotheses, np.float64).reshape(n, m, 3),
+                             kernel_array(best, np.int64).reshape(n),
+                             kernel_array(support, np.float64).reshape(n)).reshape(lead)
 
 
 @kernel('float64[::1](float64[:, ::1], float64[:, :, ::1], int64[::1], float64[::1])')

@@ -11,7 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel, pairwise_sum
+from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera, rig_project
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
@@ -117,7 +117,7 @@ def temporal_table(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, config: F
     scale = config.temporal_scale if s0 == s1 == 1.0 else config.temporal_scale * 0.5 * (s0 + s1)
     laplace = config.temporal_form == 'laplace'
     coef = np.float32(-1.0 / scale) if laplace else np.float32(-0.5 / scale ** 2)
-    return _temporal_table(*(np.ascontiguousarray(h, dtype=np.float64) for h in (prev, cur, nxt)),
+    return _temporal_table(*(kernel_array(h, np.float64) for h in (prev, cur, nxt)),
                            s0 == s1, s0 / (s0 + s1), coef, laplace)
 
 
@@ -205,8 +205,8 @@ def pair_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """All distances between the hypotheses of two joints: (..., M, 3) x (..., N, 3) -> (..., M, N)."""
     lead = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
     n = math.prod(lead)
-    a, b = (np.ascontiguousarray(x if x.shape[:-2] == lead else np.broadcast_to(x, lead + x.shape[-2:]),
-                                 dtype=np.float64).reshape(n, x.shape[-2], 3) for x in (a, b))
+    a, b = (kernel_array(x if x.shape[:-2] == lead else np.broadcast_to(x, lead + x.shape[-2:]),
+                         np.float64).reshape(n, x.shape[-2], 3) for x in (a, b))
     return _pair_distances(a, b).reshape(lead + (a.shape[1], b.shape[1]))
 
 
@@ -268,8 +268,8 @@ def limb_table(d: np.ndarray, length: np.ndarray, config: FactorConfig) -> np.nd
     length: (E,) typical bone lengths in metres (body.LIMB_LENGTHS). Returns (..., E, M, M).
     """
     low, high = config.limb_range
-    flat = np.ascontiguousarray(d, dtype=np.float64).reshape((math.prod(d.shape[:-3]),) + d.shape[-3:])
-    return _limb_table(flat, np.ascontiguousarray(length, dtype=np.float64), low, high,
+    flat = kernel_array(d, np.float64).reshape((math.prod(d.shape[:-3]),) + d.shape[-3:])
+    return _limb_table(flat, kernel_array(length, np.float64), low, high,
                        config.limb_sigma).reshape(d.shape)
 
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel, pairwise_sum
+from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
 from mvpose_ros.core.inference.confidence import joint_confidence
@@ -358,8 +358,8 @@ def _pruned(p: PersonFrame, k: int) -> PersonFrame:
     data term renormalised."""
     if k >= p.data.shape[1]:
         return p
-    data, hypotheses = _top_hypotheses(np.ascontiguousarray(p.data, dtype=np.float64),
-                                       np.ascontiguousarray(p.hypotheses, dtype=np.float64), k)
+    data, hypotheses = _top_hypotheses(kernel_array(p.data, np.float64),
+                                       kernel_array(p.hypotheses, np.float64), k)
     return PersonFrame(p.person_id, hypotheses, data, p.support)
 
 
