@@ -45,7 +45,9 @@ def max_bundles_bytes(sizes: Sequence[tuple[int, int]]) -> int:
 
 def quantise(maps: np.ndarray) -> np.ndarray:
     """Heatmap values in [0, 1] (clipped) -> uint8 steps of 1/255, the wire format."""
-    return np.round(np.clip(maps, 0, 1) * 255).astype(np.uint8)
+    q = np.multiply(maps, 255.0)
+    np.clip(q, 0, 255, out=q)
+    return np.rint(q, out=q).astype(np.uint8)
 
 
 def _check_people(keypoints: np.ndarray, origin: np.ndarray, stride: np.ndarray,
@@ -86,8 +88,6 @@ def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
         if m.ndim != 3 or m.shape[0] != J or min(m.shape[1:]) < 1 or max(m.shape[1:]) > UINT16_MAX:
             raise ValueError(f'{label} {p} heatmap maps: expected ({J}, h, w) with 1 <= h, w <= '
                              f'{UINT16_MAX}, got {m.shape}')
-        if not np.isfinite(m).all():
-            raise ValueError(f'{label} {p} heatmap maps: non-finite values')
         if np.shape(person.heatmap.origin) != (J, 2):
             raise ValueError(f'{label} {p} heatmap origin: expected ({J}, 2), got '
                              f'{np.shape(person.heatmap.origin)}')
@@ -101,8 +101,21 @@ def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
     if J * h * w > UINT32_MAX:
         raise ValueError(f'heatmap grid ({h}, {w}): {J} * h * w exceeds the PointField count range')
     heat = np.zeros((n, J, h, w), dtype=np.uint8)
-    for p, m in enumerate(maps):  # pad at the bottom/right: a zero cell is "no evidence"
-        heat[p, :, :m.shape[1], :m.shape[2]] = quantise(m)
+    # One quantise per grid size (a camera's people share its message's grid), each map padded at
+    # the bottom/right: a zero cell is "no evidence".
+    by_grid: dict[tuple[int, ...], list[int]] = {}
+    for p, m in enumerate(maps):
+        by_grid.setdefault(m.shape, []).append(p)
+    bad = []
+    for (_, mh, mw), index in by_grid.items():
+        values = np.array([maps[p] for p in index], dtype=np.float32)
+        finite = np.isfinite(values).reshape(len(index), -1).all(axis=1)
+        if finite.all():
+            heat[index, :, :mh, :mw] = quantise(values)
+        else:
+            bad.append(index[int(np.argmin(finite))])
+    if bad:
+        raise ValueError(f'{label} {min(bad)} heatmap maps: non-finite values')
     records = np.zeros(n, dtype=people_dtype(J * h * w, keys))
     records['keypoints'] = keypoints.reshape(n, 3 * J)
     records['origin'] = origin
@@ -145,7 +158,7 @@ def _people_from_records(records: np.ndarray) -> list[Person2D]:
     if n == 0:
         return []
     h, w = (int(x) for x in records['grid'][0])
-    maps = records['heatmap'].reshape(n, J, h, w).astype(np.float32) / np.float32(255)
+    maps = np.divide(records['heatmap'].reshape(n, J, h, w), np.float32(255), dtype=np.float32)
     keypoints = keypoints.astype(np.float64)
     origin = records['origin'].astype(np.float64).reshape(n, J, 2)
     return [Person2D(keypoints=keypoints[p],

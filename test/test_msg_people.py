@@ -175,6 +175,12 @@ def test_encoders_reject():
     nan_maps = Person2D(PEOPLE[0].keypoints, PersonHeatmap(np.full((16, 4, 4), np.nan), np.zeros(2), 4.0))
     with pytest.raises(ValueError, match='person 0 heatmap maps: non-finite'):
         people_to_msg([nan_maps], _header())
+    # maps are checked a grid size at a time: the error still names the first bad person
+    inf_cell = Person2D(PEOPLE[1].keypoints, PersonHeatmap(PEOPLE[1].heatmap.maps.copy(), PEOPLE[1].heatmap.origin,
+                                                          PEOPLE[1].heatmap.stride))
+    inf_cell.heatmap.maps[3, 2, 7] = np.inf
+    with pytest.raises(ValueError, match='person 2 heatmap maps: non-finite'):
+        people_to_msg([PEOPLE[0], PEOPLE[2], inf_cell, nan_maps], _header())
     with pytest.raises(ValueError, match='person 3: no views'):
         bundles_to_msg([(3, {})], _header())
     with pytest.raises(ValueError, match='person id 3: given twice'):

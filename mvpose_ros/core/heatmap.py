@@ -25,7 +25,10 @@ class PersonHeatmap:
     stride: float  # pixels per cell
 
     def __post_init__(self) -> None:
-        self.origin = np.broadcast_to(np.asarray(self.origin, dtype=np.float64), (len(self.maps), 2))
+        origin = np.asarray(self.origin, dtype=np.float64)
+        shape = (len(self.maps), 2)
+        # broadcast only a shared origin: a decoder makes a heatmap per person and view each frame
+        self.origin = origin if origin.shape == shape else np.broadcast_to(origin, shape)
 
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Bilinear value (J, N) of joint j's map at pixel uv[j, n] (uv: (J, N, 2)); 0 outside
