@@ -146,8 +146,9 @@ def test_dropped_frames_leave_with_their_factors():
 
 
 def _numpy_bp(data, temporal, groups, iterations):
-    """The numpy formulation the kernels replace: the same schedule and messages, each update a few
-    whole-array numpy calls."""
+    """The numpy formulation the kernels replace, each update a few whole-array numpy calls, with the
+    paper's schedule in full: its backward sweep repeats the forward sweep's last update, which
+    ChainBP.run leaves out, so the messages agree only if that repeat changes nothing."""
     def softmax(x):
         e = np.exp(x - x.max(axis=-1, keepdims=True))
         return e / e.sum(axis=-1, keepdims=True)

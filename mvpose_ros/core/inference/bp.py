@@ -142,10 +142,12 @@ class ChainBP:
         tm = self.messages.temporal
         inner = [t for t in range(1, len(self) - 1) if self.temporal[t] is not None]
         edges = [kernel_array(g.edges, np.int64) for g in self.groups]
+        # The backward sweep starts one factor early: the forward sweep's last update left that
+        # factor's inputs (its cavities) as they were, so updating it again would resend its messages.
+        schedule = inner + inner[-2::-1]
         for _ in range(iterations):
-            for sweep in (inner, inner[::-1]):
-                for t in sweep:
-                    _update_temporal(self.temporal[t], self.total, tm, t)
+            for t in schedule:
+                _update_temporal(self.temporal[t], self.total, tm, t)
             for group, e, pm in zip(self.groups, edges, self.messages.pairwise):
                 _update_pairwise(e, group.tables, self.total, pm)
 
