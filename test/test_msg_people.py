@@ -176,8 +176,8 @@ def test_encoders_reject():
     with pytest.raises(ValueError, match='person 0 heatmap maps: non-finite'):
         people_to_msg([nan_maps], _header())
     # maps are checked a grid size at a time: the error still names the first bad person
-    inf_cell = Person2D(PEOPLE[1].keypoints, PersonHeatmap(PEOPLE[1].heatmap.maps.copy(), PEOPLE[1].heatmap.origin,
-                                                          PEOPLE[1].heatmap.stride))
+    heat = PEOPLE[1].heatmap
+    inf_cell = Person2D(PEOPLE[1].keypoints, PersonHeatmap(heat.maps.copy(), heat.origin, heat.stride))
     inf_cell.heatmap.maps[3, 2, 7] = np.inf
     with pytest.raises(ValueError, match='person 2 heatmap maps: non-finite'):
         people_to_msg([PEOPLE[0], PEOPLE[2], inf_cell, nan_maps], _header())
