@@ -18,7 +18,7 @@ from sensor_msgs.msg import PointCloud2
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.graph.config import (RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections, graph_nodes,
                                      graph_settings, load_params, node_command, played_connections, unknown_nodes)
-from mvpose_ros.graph.report import frame_ranges, latency_ms, report
+from mvpose_ros.graph.report import frame_ranges, latency_ms, print_latency, report
 from ros_harness import ros_domain
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'shelf.yaml'
@@ -217,3 +217,13 @@ def test_report_counts_missing_duplicate_unexpected_and_bad_outputs():
     assert out.getvalue().splitlines()[1] == ('missing 1: 302; dropped (skeletons/dropped: too few cameras in a set, '
                                               'or behind the input) 1: 303; duplicate 1: 301; unexpected 1: 400')
     assert problems[0] == '1 of 6 input stamps got no /skeletons'
+
+
+def test_latency_is_reported_by_quarter_of_the_run():
+    """A graph falling behind in its last quarter: p50 and p95 of each quarter, in run order."""
+    lat = np.concatenate([np.full(10, 100.0), np.full(10, 110.0), np.full(10, 120.0), np.arange(10) * 100.0 + 200])
+    out = io.StringIO()
+    print_latency(lat, '/cam0/camera_info', 'frames', out)
+    lines = out.getvalue().splitlines()
+    assert lines[1] == 'latency p50 by quarter of the run: 100, 110, 120, 650 ms'
+    assert lines[2] == 'latency p95 by quarter of the run: 100, 110, 120, 1055 ms'

@@ -67,15 +67,17 @@ def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.n
 
 
 def print_latency(lat: np.ndarray, start: str, unit: str, out: TextIO, output: str = OUTPUT_NAME) -> None:
-    """Print latency (N,) ms from `start` to `output`: p50, p95, max, and p50 by quarter of the run
-    (a graph that falls behind real time shows it growing)."""
+    """Print latency (N,) ms from `start` to `output`: p50, p95, max, and p50 / p95 by quarter of
+    the run (a graph that falls behind real time shows them growing)."""
     if not lat.size:
         return
     p50, p95 = np.percentile(lat, [50, 95])
     print(f'latency {start} -> {output}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {lat.max():.1f} ms '
           f'({lat.size} {unit})', file=out)
-    quarters = [f'{np.median(q):.0f}' for q in np.array_split(lat, 4) if q.size]
-    print(f'latency p50 by quarter of the run: {", ".join(quarters)} ms', file=out)
+    quarters = [q for q in np.array_split(lat, 4) if q.size]
+    print(f'latency p50 by quarter of the run: {", ".join(f"{np.median(q):.0f}" for q in quarters)} ms', file=out)
+    print(f'latency p95 by quarter of the run: {", ".join(f"{np.percentile(q, 95):.0f}" for q in quarters)} ms',
+          file=out)
 
 
 @dataclass
