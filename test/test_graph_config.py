@@ -205,8 +205,8 @@ def test_report_counts_missing_duplicate_unexpected_and_bad_outputs():
     assert lines[1] == 'missing 2: 302-303; duplicate 1: 301; unexpected 1: 400'
     assert lines[2].startswith('latency /cam0/camera_info -> /skeletons: p50 2.0 ms')
     assert lines[2].endswith('(4 frames)')
-    assert lines[4].startswith('latency /cam0/camera_info -> /skeletons/live: p50 1.5 ms')
-    assert lines[4].endswith('(6 frames)')
+    assert lines[5].startswith('latency /cam0/camera_info -> /skeletons/live: p50 1.5 ms')
+    assert lines[5].endswith('(6 frames)')
     assert problems == ['2 of 6 input stamps got no /skeletons', '1 stamps got more than one /skeletons',
                         '1 /skeletons stamps are not in the bag',
                         '1 undecodable /skeletons messages, first: 12040000000 ns: person 0 has 13 joints']
