@@ -43,10 +43,11 @@ CASES = {
 }
 
 
-def run_case(shelf, name: str) -> dict[str, np.ndarray]:
+def run_case(shelf, name: str, **overrides) -> dict[str, np.ndarray]:
     """The stage's output over a case as flat arrays: per decoded person, its frame, id, joints
-    (14, 3) and confidence (14,)."""
+    (14, 3) and confidence (14,); overrides: stage parameters on top of the case's."""
     start, n_frames, stride, params, offsets = CASES[name]
+    params = {**params, **overrides}
     cameras, raw = shelf
     seq = detect_sequence(cameras, raw, list(SHELF_TEST_FRAMES[start:start + n_frames]),
                           OpenPoseDetectorConfig(stride=stride))
@@ -83,6 +84,14 @@ def test_the_stage_gives_the_reference_results(shelf_openpose, reference, name):
     np.testing.assert_allclose(out['confidence'], ref['confidence'], rtol=0, atol=1e-6)
     if name == 'crowd':  # the crowd really is one
         assert len(out['ids']) / len(out['frames']) > 12
+
+
+@pytest.mark.parametrize('name', ['crowd', 'resolve'])
+def test_the_thread_count_changes_nothing(shelf_openpose, name):
+    """People's chains and temporal tables solved by one thread or three: the same bits."""
+    one, three = (run_case(shelf_openpose, name, threads=n) for n in (1, 3))
+    for key in one:
+        np.testing.assert_array_equal(one[key], three[key])
 
 
 def write_reference() -> None:

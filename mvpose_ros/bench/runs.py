@@ -61,6 +61,7 @@ class RunConfig:
     bp_hypotheses: int = _STAGE['bp_hypotheses']
     slide_iterations: int = _STAGE['slide_iterations']
     iterations: int = _STAGE['iterations']
+    threads: int = _STAGE['threads']
     stride: float = OpenPoseDetectorConfig.stride
     terms: tuple[str, ...] = tuple(_STAGE['terms'])
     head_model: str = _STAGE['head_model']

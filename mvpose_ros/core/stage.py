@@ -50,6 +50,8 @@ SOLVER_PARAMETERS = {
     'frame_rate': 'nominal frames per second: the temporal factor is defined for one such period and widens '
                   'with the real time between frames',
     'max_gap': 's between two successive frames beyond which every temporal chain breaks',
+    'threads': 'threads solving people\'s BP chains and temporal tables side by side (the results do not depend on '
+               'it; 1: none besides the caller\'s)',
 }
 ASSOCIATION_PARAMETERS = {
     'track_iou': 'per-camera tracking: minimum box IoU (paper: 0.7)',
@@ -63,7 +65,7 @@ PARAMETER_RANGES: dict[str, tuple[float | None, float | None]] = {
     'hypotheses': (1, None), 'bp_hypotheses': (0, None), 'seed': (0, None),
     'collision_centre': (0.0, 10.0), 'collision_width': (0.001, 10.0), 'frame_rate': (0.1, 1000.0),
     'max_gap': (0.0, 3600.0), 'track_iou': (0.0, 1.0), 'match_distance': (0.0, 10.0),
-    'max_view_residual': (0.0, 10.0),
+    'max_view_residual': (0.0, 10.0), 'threads': (1, 64),
 }
 # Thresholds and distances a running node applies to the frames after the change; every other
 # parameter sizes or seeds state made at start-up (read-only: a change needs a restart).
@@ -90,7 +92,8 @@ class StageConfig:
         inference = InferenceConfig(terms=tuple(d['terms']), window=window, lag=int(d['lag']),
                                     iterations=int(d['iterations']), bp_hypotheses=int(d['bp_hypotheses']) or None,
                                     slide_iterations=int(d['slide_iterations']) or None, factors=factors,
-                                    frame_rate=float(d['frame_rate']), max_gap=float(d['max_gap']))
+                                    frame_rate=float(d['frame_rate']), max_gap=float(d['max_gap']),
+                                    threads=int(d['threads']))
         sampling = replace(SamplingConfig(), hypotheses=int(d['hypotheses']),
                            single_view_depth=str(d['single_view_depth']))
         solver = SolverConfig(sampling=sampling,
@@ -111,7 +114,7 @@ class StageConfig:
             'head_model': solver.head_model, 'seed': solver.seed,
             'collision_centre': inference.factors.collision_centre,
             'collision_width': inference.factors.collision_width,
-            'frame_rate': inference.frame_rate, 'max_gap': inference.max_gap,
+            'frame_rate': inference.frame_rate, 'max_gap': inference.max_gap, 'threads': inference.threads,
             'track_iou': self.association.track_iou, 'match_distance': self.association.matching.max_distance,
             'max_view_residual': self.association.max_view_residual,
         }

@@ -16,6 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
+from mvpose_ros.core.workers import Workers
 
 
 @dataclass(frozen=True)
@@ -160,11 +161,17 @@ class ChainBP:
         return _softmax(self.total[row])
 
 
-def run_chains(chains: Sequence[ChainBP], iterations: int) -> None:
-    """ChainBP.run of every chain (chains are independent: each kernel call updates one factor of
-    one chain, so stacking chains of one shape saves nothing any more)."""
-    for chain in chains:
-        chain.run(iterations)
+def run_chains(chains: Sequence[ChainBP], iterations: int, workers: Workers | None = None) -> None:
+    """ChainBP.run of every chain. Chains are independent, so `workers` may run them side by side,
+    split by length (a chain's cost grows with its frames)."""
+    def run(part: Sequence[ChainBP]) -> None:
+        for chain in part:
+            chain.run(iterations)
+
+    if workers is None:
+        run(chains)
+    else:
+        workers.map(run, workers.split(chains, cost=len))
 
 
 def loopy_bp(

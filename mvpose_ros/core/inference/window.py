@@ -30,6 +30,7 @@ from mvpose_ros.core.inference.confidence import joint_confidence
 from mvpose_ros.core.inference.factors import FactorConfig, collision_table, limb_table, pair_distances, temporal_table
 from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.types import FrameResult, PersonFrame
+from mvpose_ros.core.workers import Workers
 
 TERMS = ('data', 'temp', 'col', 'limb')
 
@@ -43,7 +44,8 @@ class InferenceConfig:
     every window from scratch with `iterations`); frame_rate: nominal frames per second, the
     period the temporal factor's scale is defined for, and the time of a frame pushed without one
     (frame / frame_rate s); max_gap: seconds between two successive frames beyond which every
-    chain breaks (no temporal link across it)."""
+    chain breaks (no temporal link across it); threads: threads solving people's chains and
+    temporal tables side by side (core.workers; the results do not depend on it)."""
 
     terms: tuple[str, ...] = ('data', 'temp', 'col', 'limb')
     window: int | None = 15
@@ -54,6 +56,7 @@ class InferenceConfig:
     factors: FactorConfig = field(default_factory=FactorConfig)
     frame_rate: float = 25.0
     max_gap: float = 0.2
+    threads: int = 2
 
     def __post_init__(self) -> None:
         unknown = set(self.terms) - set(TERMS)
@@ -67,6 +70,8 @@ class InferenceConfig:
             raise ValueError(f'iterations must be >= 1, got {self.iterations}')
         if self.slide_iterations is not None and self.slide_iterations < 1:
             raise ValueError(f'slide_iterations must be >= 1 or None, got {self.slide_iterations}')
+        if self.threads < 1:
+            raise ValueError(f'threads must be >= 1, got {self.threads}')
         if not (0 < self.frame_rate < float('inf') and self.max_gap > 0):
             raise ValueError(f'frame_rate and max_gap must be positive, got {self.frame_rate}, {self.max_gap}')
 
@@ -119,6 +124,7 @@ class SlidingWindow:
         self._unsent = 0
         self._chains: dict[int, _Chain] = {}  # warm-started mode: each present person's chain
         self._ended: list[tuple[int, _Chain]] = []  # (person id, chain) broken, with frames still to output
+        self._workers = Workers(config.threads)
 
     @property
     def _warm(self) -> bool:
@@ -204,7 +210,7 @@ class SlidingWindow:
                     chain.support.popleft()
             self.timer.add('bp', t0)
         t0 = time.perf_counter()
-        run_chains([self._chains[pid].bp for pid in sorted(slot.people)], self.config.slide_iterations)
+        run_chains([self._chains[pid].bp for pid in sorted(slot.people)], self.config.slide_iterations, self._workers)
         self.timer.add('bp', t0)
 
     def _groups(self, pid: int, i: int) -> list[PairwiseGroup]:
@@ -225,13 +231,17 @@ class SlidingWindow:
         pids = sorted(cur.people.keys() & prev.people.keys() & nxt.people.keys())
         if not pids:
             return
-        # every person's joints in one call: the table of a joint depends on that joint alone
-        n_j = len(cur.people[pids[0]].hypotheses)
+        # each worker's people's joints in one call: the table of a joint depends on that joint alone
         steps = _steps(cur.time - prev.time, nxt.time - cur.time, self.config.frame_rate)
-        tables = temporal_table(*(np.concatenate([s.people[pid].hypotheses for pid in pids]) for s in (prev, cur, nxt)),
-                                self.config.factors, steps)
-        for k, pid in enumerate(pids):
-            cur.temporal[pid] = tables[k * n_j:(k + 1) * n_j]
+
+        def tables(part: list[int]) -> np.ndarray:
+            return temporal_table(*(np.concatenate([s.people[pid].hypotheses for pid in part])
+                                    for s in (prev, cur, nxt)), self.config.factors, steps)
+
+        parts = self._workers.split(pids)
+        for part, table in zip(parts, self._workers.map(tables, parts)):
+            for k, joints in enumerate(np.split(table, len(part))):
+                cur.temporal[part[k]] = joints
 
     def _run(self, pid: int, i: int) -> range:
         """Buffer positions of the chain of person pid through position i (linked frames)."""
