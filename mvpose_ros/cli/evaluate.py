@@ -79,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--collision-width', type=float, default=d['collision_width'])
     p.add_argument('--seed', type=int, default=d['seed'])
     p.add_argument('--max-gap', type=float, default=d['max_gap'], help=SOLVER_PARAMETERS['max_gap'])
+    p.add_argument('--threads', type=int, default=d['threads'], help=SOLVER_PARAMETERS['threads'])
     p.add_argument('--drop-every', type=int, default=0, metavar='N',
                    help='leave out every N-th frame (as sets dropped upstream) and score the frames left')
     p.add_argument('--drop-fraction', type=float, default=0.0, metavar='F',
