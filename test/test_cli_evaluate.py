@@ -75,3 +75,11 @@ def test_confidence_report_on_shelf_error_falls_as_confidence_rises(shelf_run, t
     strict = [float(row.split()[4]) for row in limb_rows]
     assert strict[0] == min(strict) and strict[-1] > strict[0] + 10
     assert (tmp_path / 'confidence_joints.png').is_file() and (tmp_path / 'confidence_limbs.png').is_file()
+
+
+def test_the_secondary_radius_reaches_the_detector(shelf_run, tmp_path):
+    """--secondary-radius 0 leaves other candidates out of the heatmaps, so the skeletons move."""
+    path = tmp_path / 'r0.jsonl'
+    run(build_parser().parse_args(['shelf', '--no-ablation', '--secondary-radius', '0', '--predictions', str(path)]),
+        io.StringIO())
+    assert path.read_text() != shelf_run[1].read_text()

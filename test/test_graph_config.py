@@ -76,24 +76,36 @@ def _check_nodes(nodes, params):
         assert fqn == f'/{spec.name}'
 
 
-def test_crowd_overrides_reach_the_solver_after_the_file(monkeypatch):
-    """config/crowd.yaml (mvpose-graph --overrides) holds bp_solver values only; given after
-    shelf.yaml, the real node takes them and keeps the file's others."""
-    crowd = CONFIG.with_name('crowd.yaml')
-    assert set(load_params(crowd)) == {'bp_solver'}
-    spec = next(n for n in graph_nodes(5, 'b', 1.0) if n.executable == 'bp_solver')
-    cmd = node_command(spec, [CONFIG, crowd], python='python')
+def _started_parameters(executable: str, module: str, cls: str, files: list, names: tuple, monkeypatch) -> dict:
+    """The values of `names` that the graph's first `executable` node takes from parameter files."""
+    spec = next(n for n in graph_nodes(5, 'b', 1.0) if n.executable == executable)
+    cmd = node_command(spec, files, python='python')
     with ros_domain(monkeypatch):
         rclpy.init(args=['prog', *cmd[3:]], signal_handler_options=SignalHandlerOptions.NO)
-        node = importlib.import_module('mvpose_ros.nodes.bp_solver').BpSolverNode()
+        node = getattr(importlib.import_module(module), cls)()
         try:
-            got = {k: node.get_parameter(k).value for k in ('hypotheses', 'bp_hypotheses', 'window', 'lag')}
+            return {k: node.get_parameter(k).value for k in names}
         finally:
             node.destroy_node()
             rclpy.try_shutdown()
-    shelf = load_params(CONFIG)['bp_solver']
-    assert got == {**load_params(crowd)['bp_solver'], 'window': shelf['window'], 'lag': shelf['lag']}
-    assert got['hypotheses'] != shelf['hypotheses']
+
+
+def test_crowd_overrides_reach_the_nodes_after_the_file(monkeypatch):
+    """config/crowd.yaml (mvpose-graph --overrides) holds bp_solver and detector values only; given
+    after shelf.yaml, the real nodes take them and keep the file's others."""
+    crowd = CONFIG.with_name('crowd.yaml')
+    overrides = load_params(crowd)
+    assert set(overrides) == {'bp_solver', '/**/heatmap_detector'}
+    shelf = load_params(CONFIG)
+    got = _started_parameters('bp_solver', 'mvpose_ros.nodes.bp_solver', 'BpSolverNode', [CONFIG, crowd],
+                              ('hypotheses', 'bp_hypotheses', 'window', 'lag'), monkeypatch)
+    assert got == {**overrides['bp_solver'], 'window': shelf['bp_solver']['window'], 'lag': shelf['bp_solver']['lag']}
+    assert got['hypotheses'] != shelf['bp_solver']['hypotheses']
+    got = _started_parameters('heatmap_detector', 'mvpose_ros.nodes.heatmap_detector', 'HeatmapDetectorNode',
+                              [CONFIG, crowd], ('secondary_radius', 'stride'), monkeypatch)
+    detector = shelf['/**/heatmap_detector']
+    assert got == {**overrides['/**/heatmap_detector'], 'stride': detector['stride']}
+    assert got['secondary_radius'] != detector['secondary_radius']
 
 
 def test_overrides_take_node_sections_only(tmp_path):

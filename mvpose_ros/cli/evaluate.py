@@ -71,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--head-model', choices=HEAD_MODELS, default=d['head_model'])
     p.add_argument('--heatmap-stride', type=float, default=OpenPoseDetectorConfig.stride,
                    help='heatmap cell size in pixels (the ROS graph config uses 8)')
+    p.add_argument('--secondary-radius', type=float, default=OpenPoseDetectorConfig.secondary_radius,
+                   help='other candidates of a joint within this fraction of the person\'s box diagonal also go '
+                        'into its heatmap (the heatmap_detector parameter)')
     p.add_argument('--match-distance', type=float, default=d['match_distance'],
                    help='cross-view matching threshold, metres of mean ray distance')
     p.add_argument('--max-view-residual', type=float, default=d['max_view_residual'],
@@ -122,7 +125,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         return 0
     t0 = time.perf_counter()
     if args.dataset == 'shelf':
-        seq = shelf_openpose(args.data_root, OpenPoseDetectorConfig(stride=args.heatmap_stride))
+        detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
+        seq = shelf_openpose(args.data_root, detector)
     else:
         seq, gt, head_model = campus_sequence(args.data_root, args.campus_dir)
         actors, reference = CAMPUS_ACTORS, None
