@@ -193,6 +193,7 @@ def test_a_killed_bp_solver_in_a_real_graph_is_restarted_and_its_output_resumes(
     (['--report-every', '0'], '--report-every must be > 0 s, got 0'),
     (['--respawn', '--respawn-delay', '-1'], '--respawn-delay must be >= 0 s, got -1'),
     (['--respawn', '--respawn-limit', '0'], '--respawn-limit must be >= 1, got 0'),
+    (['--domain-id', '233'], '--domain-id must be in 0-232 (DDS has no port for a higher one), got 233'),
 ])
 def test_respawn_options_are_checked(args, problem, capsys):
     assert graph.main(['--config', str(REPO / 'config' / 'shelf.yaml'), '--bag', str(REPO / 'nowhere'), *args]) == 2

@@ -52,6 +52,8 @@ from typing import Sequence
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, RESPAWN_WINDOW_S
 from mvpose_ros.graph.session import PROG, run
 
+MAX_DOMAIN_ID = 232  # the highest domain id whose DDS ports are valid (Fast DDS refuses higher ones)
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line."""
@@ -78,7 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--loops', type=int, default=1,
                    help='replay the bag this many times, stamps moved on every loop (a soak run; default 1)')
     p.add_argument('--predictions', help='predictions file to write (default: mvpose_graph.predictions)')
-    p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID for the graph (default: inherited)')
+    p.add_argument('--domain-id', type=int,
+                   help=f'ROS_DOMAIN_ID for the graph, 0-{MAX_DOMAIN_ID} (default: inherited)')
     p.add_argument('--log-dir', type=Path, help='per-node logs (default: beside the predictions, <name>_logs)')
     p.add_argument('--respawn', action='store_true',
                    help='restart a node that dies (not the player) instead of stopping the run; the frames lost '
@@ -102,6 +105,9 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
     if args.respawn_limit is not None and args.respawn_limit < 1:
         raise ValueError(f'--respawn-limit must be >= 1, got {args.respawn_limit}')
+    if args.domain_id is not None and not 0 <= args.domain_id <= MAX_DOMAIN_ID:
+        raise ValueError(f'--domain-id must be in 0-{MAX_DOMAIN_ID} (DDS has no port for a higher one), '
+                         f'got {args.domain_id}')
     if args.report_every is not None and not args.report_every > 0:
         raise ValueError(f'--report-every must be > 0 s, got {args.report_every:g}')
     if args.rig is None:
