@@ -4,7 +4,11 @@ Every kernel of the package is compiled the same way, by `kernel`:
 - for the signatures it names, when its module is imported: a call with other types is a
   TypeError, never a compilation in the middle of a frame;
 - cached on disk beside its module: the first import after an install compiles (about a minute
-  for all of them on 2 cores), later processes load the machine code;
+  for all of them on 2 cores), later processes load the machine code. numba renews a kernel's
+  cache only when its own file changes, and a kernel holds the code of the kernels it calls from
+  other modules: after editing such a kernel (camera's `*_into`, `project_point`,
+  `line_distance`, `pairwise_sum`), delete the caches (`find mvpose_ros -name '*.nbi' -delete`);
+  an install rewrites every file, so it renews them all;
 - without the GIL, so a node's worker thread and its executor run side by side;
 - without fast-math and with numpy's error model (x / 0 is inf, not an exception): the same
   arithmetic as the numpy it replaces, up to the order of sums.
@@ -46,6 +50,13 @@ def kernel(*signatures: str) -> Callable[[Callable], Callable]:
     """Decorator: compile a function to machine code for `signatures` (numba's strings, e.g.
     'float64[:, ::1](float64[:, ::1], int64)')."""
     return numba.njit(list(signatures), cache=True, nogil=True, error_model='numpy')
+
+
+def inline_kernel(function: Callable) -> Callable:
+    """Decorator for a small scalar helper that kernels call per element (a point's projection):
+    compiled into each calling kernel, as a separately compiled call cost the caller up to twice
+    its time. Without a signature or a cache of its own; not callable from Python."""
+    return numba.njit(inline='always', nogil=True, error_model='numpy')(function)
 
 
 def kernel_array(a: ArrayLike, dtype: DTypeLike) -> np.ndarray:

@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
-from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera, line_distance
 from mvpose_ros.core.types import Person2D
 
 
@@ -72,22 +72,8 @@ class ViewRays:
 
 
 # Below this sine of the angle between two rays, their distance is taken from the parallel-safe
-# formula (as camera.ray_ray_distance) instead of the one that divides by the sine.
+# formula (camera.line_distance) instead of the one that divides by the sine.
 _NEAR_PARALLEL = 1e-6
-
-
-@kernel('float64(float64[::1], float64[::1], float64[::1], float64[::1])')
-def _near_parallel_distance(o1, d1, o2, d2):
-    """camera.ray_ray_distance of two lines (origins o, directions d (3,)) at most a little off parallel."""
-    u = d1 / np.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
-    v = d2 / np.sqrt(d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2])
-    gap = o2 - o1
-    normal = np.cross(u, v)
-    normal_norm = np.sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2])
-    if normal_norm < 1e-9:  # parallel: from o2 to line 1
-        side = np.cross(gap, u)
-        return np.sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2])
-    return abs(gap[0] * normal[0] + gap[1] * normal[1] + gap[2] * normal[2]) / normal_norm
 
 
 @kernel('float64[:, ::1](float64[:, ::1], float64[:, :, ::1], boolean[:, ::1], int64[::1], int64)')
@@ -130,7 +116,7 @@ def _mean_line_distances(origins, dirs, seen, owner, min_shared):
                 for j in range(n_joints):
                     cos = d[0, a, j] * d[0, b, j] + d[1, a, j] * d[1, b, j] + d[2, a, j] * d[2, b, j]
                     if seen[a, j] and seen[b, j] and np.sqrt(max(1.0 - cos * cos, 0.0)) < _NEAR_PARALLEL:
-                        per_joint[j] = _near_parallel_distance(origins[a], dirs[a, j], origins[b], dirs[b, j])
+                        per_joint[j] = line_distance(origins[a], dirs[a, j], origins[b], dirs[b, j])
             out[a, b] = out[b, a] = pairwise_sum(per_joint) / shared
     return out
 

@@ -18,16 +18,13 @@ too. The check repeats while three or more views remain.
 """
 from __future__ import annotations
 
-import functools
 from typing import Sequence
 
 import numpy as np
 
 from mvpose_ros.core.association.matching import ViewRays
 from mvpose_ros.core.compiled import kernel, kernel_array
-from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
-
-_NO_CAMERA = Camera('none', np.eye(3), np.eye(3), np.zeros(3), np.zeros(5), 1, 1)
+from mvpose_ros.core.geometry.camera import Camera, line_terms_into, project_point, rig_model, solve_line_terms_into
 
 
 @kernel('float64(float64[::1])')
@@ -48,12 +45,11 @@ def _median(values):
 
 
 @kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[::1], int64, float64, '
-        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1], float64[:, ::1])')
-def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, R, t, K, dist, distorted, out):
+        'float64[:, ::1], float64[:, ::1])')
+def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, model, out):
     """leave_one_out_residuals of one person into out[:width, :width], its views the rows
-    views[:width] of the rays of ViewRays (-1: padding), and the rig's R (C, 3, 3), t (C, 3),
-    K (C, 3, 3), dist (C, 5) and whether each has distortion (C,). width: the most views of any
-    person of the call (it scales the singularity threshold)."""
+    views[:width] of the rays of ViewRays (-1: padding), and the rig's camera.rig_model (C, 27).
+    width: the most views of any person of the call (it scales the singularity threshold)."""
     n_joints = keypoints.shape[1]
     seen = np.zeros((width, n_joints), dtype=np.bool_)
     terms = np.zeros((width, n_joints, 9))
@@ -104,21 +100,8 @@ def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, 
             n = 0
             for j in range(n_joints):
                 if seen[k, j]:
-                    # Camera.project, the same arithmetic so the same bits (written out here: a
-                    # call per joint cost three times the projection)
-                    x, y, z = points[j, 0], points[j, 1], points[j, 2]
-                    depth = R[c, 2, 0] * x + R[c, 2, 1] * y + R[c, 2, 2] * z + t[c, 2]
-                    inv = 1.0 / depth if depth > 0 else np.nan
-                    xn = (R[c, 0, 0] * x + R[c, 0, 1] * y + R[c, 0, 2] * z + t[c, 0]) * inv
-                    yn = (R[c, 1, 0] * x + R[c, 1, 1] * y + R[c, 1, 2] * z + t[c, 1]) * inv
-                    if distorted[c]:
-                        k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
-                        r2 = xn * xn + yn * yn
-                        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
-                                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
-                    du = K[c, 0, 0] * xn + K[c, 0, 1] * yn + K[c, 0, 2] - keypoints[row, j, 0]
-                    dv = K[c, 1, 0] * xn + K[c, 1, 1] * yn + K[c, 1, 2] - keypoints[row, j, 1]
+                    u, v = project_point(model, c, points[j, 0], points[j, 1], points[j, 2])
+                    du, dv = u - keypoints[row, j, 0], v - keypoints[row, j, 1]
                     e = np.sqrt(du * du + dv * dv)
                     if np.isfinite(e):
                         error[n] = e
@@ -127,18 +110,16 @@ def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, 
 
 
 @kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], float64, '
-        'float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1], float64[:, :, ::1])')
-def _residuals(keypoints, owner, origins, dirs, idx, min_score, R, t, K, dist, distorted, out):
+        'float64[:, ::1], float64[:, :, ::1])')
+def _residuals(keypoints, owner, origins, dirs, idx, min_score, model, out):
     """leave_one_out_residuals into out (P, K, K) of people's views idx (P, K) (-1: padding)."""
     for p in range(len(idx)):
-        _person_residuals(keypoints, owner, origins, dirs, idx[p], idx.shape[1], min_score, R, t, K, dist, distorted,
-                          out[p])
+        _person_residuals(keypoints, owner, origins, dirs, idx[p], idx.shape[1], min_score, model, out[p])
 
 
 @kernel('void(float64[:, :, ::1], int64[::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], int64[::1], '
-        'float64, float64, float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], boolean[::1])')
-def _leave_out_contradicted(keypoints, owner, origins, dirs, idx, lengths, min_score, max_residual, R, t, K, dist,
-                            distorted):
+        'float64, float64, float64[:, ::1])')
+def _leave_out_contradicted(keypoints, owner, origins, dirs, idx, lengths, min_score, max_residual, model):
     """consistent_views on people's views idx (P, K) (-1: padding), lengths (P,) views each: both
     updated in place. Each round decides for every person still checked at once, with the
     residuals of a batch as wide as its widest person (as leave_one_out_residuals of them)."""
@@ -155,7 +136,7 @@ def _leave_out_contradicted(keypoints, owner, origins, dirs, idx, lengths, min_s
         for p in range(n_people):
             if not active[p]:
                 continue
-            _person_residuals(keypoints, owner, origins, dirs, idx[p], width, min_score, R, t, K, dist, distorted, r)
+            _person_residuals(keypoints, owner, origins, dirs, idx[p], width, min_score, model, r)
             worst = -1  # the view whose leaving out leaves the others most consistent
             for k in range(width):
                 left_out[k] = r[k, k]
@@ -187,7 +168,7 @@ def leave_one_out_residuals(cameras: Sequence[Camera], rays: ViewRays, people: S
     idx = np.full((len(people), width), -1, dtype=np.int64)
     for p, views in enumerate(people):
         idx[p, :len(views)] = views
-    _residuals(*_ray_arrays(rays), idx, float(min_score), *_rig_arrays(tuple(cameras)), out)
+    _residuals(*_ray_arrays(rays), idx, float(min_score), rig_model(cameras), out)
     return out
 
 
@@ -195,15 +176,6 @@ def _ray_arrays(rays: ViewRays) -> tuple[np.ndarray, ...]:
     """keypoints, owner, origins and dirs of rays as the kernels take them."""
     return (kernel_array(rays.keypoints, np.float64), rays.owner.astype(np.int64),
             kernel_array(rays.origins, np.float64), kernel_array(rays.dirs, np.float64))
-
-
-@functools.lru_cache(maxsize=8)
-def _rig_arrays(cameras: tuple[Camera | None, ...]) -> tuple[np.ndarray, ...]:
-    """R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5) and has_distortion (C,) of a rig, made once
-    per rig (a camera not known yet, None, has no views: any values do)."""
-    rig = [cam if cam is not None else _NO_CAMERA for cam in cameras]
-    return (np.stack([cam.R for cam in rig]), np.stack([cam.t for cam in rig]), np.stack([cam.K for cam in rig]),
-            np.stack([cam.dist for cam in rig]), np.array([cam.has_distortion for cam in rig]))
 
 
 def consistent_views(cameras: Sequence[Camera], rays: ViewRays, people: Sequence[Sequence[int]],
@@ -217,5 +189,5 @@ def consistent_views(cameras: Sequence[Camera], rays: ViewRays, people: Sequence
         idx[p, :len(views)] = views
     lengths = np.array([len(v) for v in people], dtype=np.int64)
     _leave_out_contradicted(*_ray_arrays(rays), idx, lengths, float(min_score), float(max_residual),
-                            *_rig_arrays(tuple(cameras)))
+                            rig_model(cameras))
     return [row[:n] for row, n in zip(idx.tolist(), lengths.tolist())]

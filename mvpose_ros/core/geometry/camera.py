@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from mvpose_ros.core.compiled import kernel, kernel_array
+from mvpose_ros.core.compiled import inline_kernel, kernel, kernel_array
 
 
 # Newton steps for undistortion; quadratic convergence makes this exact to float precision for
@@ -57,8 +57,10 @@ class Camera:
         centre = -self.R.T @ self.t
         centre.flags.writeable = False
         object.__setattr__(self, '_centre', centre)
-        # the projection's parameters as _project takes them: R, t, K row-major, then dist
-        object.__setattr__(self, '_model', np.concatenate([self.R.ravel(), self.t, self.K.ravel(), self.dist]))
+        # the projection's parameters as project_point takes them: R, t, K row-major, dist, then
+        # 1 for a lens with distortion (0 without)
+        object.__setattr__(self, '_model', np.concatenate([self.R.ravel(), self.t, self.K.ravel(), self.dist,
+                                                           [float(self._distorted)]]))
 
     @classmethod
     def from_projection(cls, name: str, P: np.ndarray, width: int, height: int) -> Camera:
@@ -237,6 +239,15 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
     raise FileNotFoundError(f'{path}: no calibration_*.json or P<i>.txt files')
 
 
+def rig_model(cameras: Sequence[Camera | None]) -> np.ndarray:
+    """(C, 27) every camera's projection as the kernels take it (project_point): R, t, K row-major,
+    dist, then 1 for a lens with distortion; a camera not known yet (None) projects every point to
+    NaN."""
+    if not len(cameras):
+        return np.zeros((0, 27))
+    return np.stack([cam._model if cam is not None else _UNKNOWN_MODEL for cam in cameras])
+
+
 def rig_project(cameras: Sequence[Camera], which: np.ndarray, points: np.ndarray,
                 of: np.ndarray | None = None) -> np.ndarray:
     """(N, K, 2) pixels of points (P, K, 3) in metres: row n is points[of[n]] (of (N,); by
@@ -246,35 +257,38 @@ def rig_project(cameras: Sequence[Camera], which: np.ndarray, points: np.ndarray
     which = kernel_array(which, np.int64)
     of = np.arange(len(which)) if of is None else kernel_array(of, np.int64)
     uv = np.empty((len(which), points.shape[1], 2))
-    _project(np.stack([cam._model for cam in cameras]) if len(cameras) else np.zeros((0, 26)), which, of, points, uv)
+    _project(rig_model(cameras), which, of, points, uv)
     return uv
 
 
 _ZERO = np.zeros(1, dtype=np.int64)  # one row, of the first camera
+_UNKNOWN_MODEL = np.zeros(27)  # depth 0 for every point: NaN pixels
+
+
+@inline_kernel
+def project_point(model, c, x, y, z):
+    """Pixel (u, v) of the world point (x, y, z) m in camera c of a rig_model (C, 27); NaN at or
+    behind the camera. For other kernels; the arithmetic of numpy on whole arrays, in the same order."""
+    depth = model[c, 6] * x + model[c, 7] * y + model[c, 8] * z + model[c, 11]
+    inv = 1.0 / depth if depth > 0 else np.nan
+    xn = (model[c, 0] * x + model[c, 1] * y + model[c, 2] * z + model[c, 9]) * inv
+    yn = (model[c, 3] * x + model[c, 4] * y + model[c, 5] * z + model[c, 10]) * inv
+    if model[c, 26] != 0:  # Camera._distort
+        k1, k2, p1, p2, k3 = model[c, 21], model[c, 22], model[c, 23], model[c, 24], model[c, 25]
+        r2 = xn * xn + yn * yn
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
+                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
+    return (model[c, 12] * xn + model[c, 13] * yn + model[c, 14],
+            model[c, 15] * xn + model[c, 16] * yn + model[c, 17])
 
 
 @kernel('void(float64[:, ::1], int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1])')
 def _project(model, which, of, points, out):
-    # model (C, 26): R, t, K (row-major), dist of each camera; the arithmetic of numpy on whole
-    # arrays, in the same order
     for n in range(len(which)):
-        R, t, K, dist = model[which[n], :9], model[which[n], 9:12], model[which[n], 12:21], model[which[n], 21:]
-        k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-        distorted = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
         X = points[of[n]]
         for i in range(X.shape[0]):
-            x, y, z = X[i, 0], X[i, 1], X[i, 2]
-            depth = R[6] * x + R[7] * y + R[8] * z + t[2]
-            inv = 1.0 / depth if depth > 0 else np.nan
-            xn = (R[0] * x + R[1] * y + R[2] * z + t[0]) * inv
-            yn = (R[3] * x + R[4] * y + R[5] * z + t[1]) * inv
-            if distorted:  # Camera._distort
-                r2 = xn * xn + yn * yn
-                radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
-                          yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
-            out[n, i, 0] = K[0] * xn + K[1] * yn + K[2]
-            out[n, i, 1] = K[3] * xn + K[4] * yn + K[5]
+            out[n, i, 0], out[n, i, 1] = project_point(model, which[n], X[i, 0], X[i, 1], X[i, 2])
 
 
 def rig_directions(cameras: Sequence[Camera], which: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -434,16 +448,32 @@ def closest_point_to_rays(origins: np.ndarray, dirs: np.ndarray, weights: np.nda
 
 
 def ray_ray_distance(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> np.ndarray:
-    """(..., 3) two lines each -> (...) distance between their closest points (lines, not rays)."""
-    o1, d1, o2, d2 = (np.asarray(a, dtype=float) for a in (o1, d1, o2, d2))
-    d1 = d1 / np.linalg.norm(d1, axis=-1, keepdims=True)
-    d2 = d2 / np.linalg.norm(d2, axis=-1, keepdims=True)
+    """(..., 3) two lines each (broadcast together) -> (...) distance between their closest points
+    (lines, not rays)."""
+    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (o1, d1, o2, d2)))
+    shape = arrays[0].shape[:-1]
+    flat = [kernel_array(a, np.float64).reshape(-1, 3) for a in arrays]
+    out = np.empty(len(flat[0]))
+    _line_distances(*flat, out)
+    return out.reshape(shape)
+
+
+@kernel('float64(float64[::1], float64[::1], float64[::1], float64[::1])')
+def line_distance(o1, d1, o2, d2):
+    """Distance between two lines (origins o, directions d (3,), any length), for other kernels:
+    along the common normal, or for parallel lines from o2 to line 1."""
+    u = d1 / np.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+    v = d2 / np.sqrt(d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2])
     gap = o2 - o1
-    n = np.cross(d1, d2)
-    n_norm = np.linalg.norm(n, axis=-1)
-    parallel = n_norm < 1e-9
-    with np.errstate(divide='ignore', invalid='ignore'):
-        skew = np.abs(np.sum(gap * n, axis=-1)) / n_norm
-    # Parallel lines: distance from o2 to line 1.
-    side = np.linalg.norm(np.cross(gap, d1), axis=-1)
-    return np.where(parallel, side, skew)
+    normal = np.cross(u, v)
+    normal_norm = np.sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2])
+    if normal_norm < 1e-9:  # parallel
+        side = np.cross(gap, u)
+        return np.sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2])
+    return abs(gap[0] * normal[0] + gap[1] * normal[1] + gap[2] * normal[2]) / normal_norm
+
+
+@kernel('void(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1])')
+def _line_distances(o1, d1, o2, d2, out):
+    for i in range(len(out)):
+        out[i] = line_distance(o1[i], d1[i], o2[i], d2[i])
