@@ -273,6 +273,7 @@ def test_closest_points_of_ray_sets_are_line_terms_summed_and_solved():
     sets[:4, 3] = -1  # sets of three
     sets[4, 1:] = -1  # one ray alone: NaN
     sets[5, 1] = sets[5, 0]  # the same ray twice, and two more
+    sets[6] = -1  # no ray at all, after a set that had some: NaN, nothing left over from it
     # numpy: every ray's terms, a zero column for padding, summed slot after slot, solved
     terms = np.concatenate([line_terms(centres[of], dirs), np.zeros((9, 1))], axis=1)
     summed = terms[:, sets[:, 0]]
@@ -281,7 +282,7 @@ def test_closest_points_of_ray_sets_are_line_terms_summed_and_solved():
     expected = solve_line_terms(summed, 4)
     points = closest_points_of_ray_sets(centres, of, dirs, sets)
     np.testing.assert_array_equal(points, expected)
-    assert np.isnan(points[4]).all() and np.isfinite(points[np.arange(12) != 4]).all()
+    assert np.isnan(points[[4, 6]]).all() and np.isfinite(points[~np.isin(np.arange(12), [4, 6])]).all()
     assert closest_points_of_ray_sets(centres, of, dirs, np.zeros((0, 2), int)).shape == (0, 3)
 
 

@@ -419,15 +419,13 @@ def _closest_points(centres, of, dirs, sets, singular, out):
     terms = np.empty(9)
     summed = np.empty(9)
     for n in range(len(sets)):
+        summed[:] = 0.0
         for k in range(sets.shape[1]):
             r = sets[n, k]
-            if r < 0:  # padding: numpy summed a column of zeros
+            if r >= 0:  # -1: padding, no ray
+                line_terms_into(centres[of[r]], dirs[r], terms)
                 for t in range(9):
-                    summed[t] += 0.0
-                continue
-            line_terms_into(centres[of[r]], dirs[r], terms)
-            for t in range(9):
-                summed[t] = terms[t] if k == 0 else summed[t] + terms[t]
+                    summed[t] += terms[t]
         solve_line_terms_into(summed, singular, out[n])
 
 
