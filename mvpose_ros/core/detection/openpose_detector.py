@@ -91,15 +91,15 @@ def _centre_rows(cand, n_cand, groups, radius, secondary_weight, mirror_weight):
                 for c in range(n_cand[b]):
                     du, dv = cand[first[b] + c, 0] - cand[own, 0], cand[first[b] + c, 1] - cand[own, 1]
                     if c != groups[p, b] and np.sqrt(du * du + dv * dv) <= radius[p]:
-                        out[p, j, 1 + c, 0] = cand[first[b] + c, 0] * 1.0
-                        out[p, j, 1 + c, 1] = cand[first[b] + c, 1] * 1.0
+                        out[p, j, 1 + c, 0] = cand[first[b] + c, 0]
+                        out[p, j, 1 + c, 1] = cand[first[b] + c, 1]
                         out[p, j, 1 + c, 2] = cand[first[b] + c, 2] * secondary_weight
             # the counterpart's evidence, also where the joint itself is missing
             m = _TYPES[_MIRROR[j]]
             if mirror and m != b and groups[p, m] >= 0:
                 counterpart = first[m] + groups[p, m]
-                out[p, j, -1, 0] = cand[counterpart, 0] * 1.0
-                out[p, j, -1, 1] = cand[counterpart, 1] * 1.0
+                out[p, j, -1, 0] = cand[counterpart, 0]
+                out[p, j, -1, 1] = cand[counterpart, 1]
                 out[p, j, -1, 2] = cand[counterpart, 2] * mirror_weight
     return out
 
