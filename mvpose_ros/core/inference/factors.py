@@ -126,7 +126,7 @@ def _exp(x, poly, scale):
     """x[:] = exp(x) in place, evaluated in float64 and rounded to float32 (so mostly libm's
     correctly rounded expf), as loops that compile to vector instructions, which a call of expf
     per entry does not: exp(r) 2^k with k = round(x / ln 2), r = x - k ln 2 (|r| <= ln 2 / 2) by
-    its Taylor series to r^10 (relative error 2e-13), 2^k from its bits. poly, scale: (N,) scratch.
+    its Taylor series to r^10 (relative error below 5e-13 in float64), 2^k from its bits. poly, scale: (N,) scratch.
     Arguments below -700 (exp < 1e-304, 0 in float32) are taken as -700."""
     n = len(x)
     for i in range(n):
