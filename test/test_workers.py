@@ -36,12 +36,15 @@ def test_parts_run_at_the_same_time_and_come_back_in_order():
 
 
 def test_an_error_is_raised_once_every_part_has_finished():
+    raised = threading.Event()
     finished = []
 
     def part(x: int) -> None:
         if x == 0:
+            raised.set()
             raise RuntimeError('part 0 failed')
-        time.sleep(0.2)
+        assert raised.wait(timeout=10)  # still running when part 0 has failed
+        time.sleep(0.05)  # a map that did not wait would be back by now
         finished.append(x)
 
     with pytest.raises(RuntimeError, match='part 0 failed'):
