@@ -10,7 +10,7 @@ from std_msgs.msg import Header
 
 from msg_adapters.records import UINT16_MAX, UINT32_MAX, from_cloud, to_cloud
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
-from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 from mvpose_ros.core.types import Person2D
 
 J = NUM_INFERENCE_JOINTS  # 16 keypoints and maps per person
@@ -23,9 +23,10 @@ MIN_STRIDE = 4.0  # pixels
 
 
 def people_dtype(n_cells: int, keys: Sequence[tuple[str, str]] = ()) -> np.dtype:
-    """Record dtype of encoding B (after keys, for C), heatmap count n_cells = 16 * h * w."""
+    """Record dtype of encoding B (after keys, for C): per joint its map's grid (h, w), and room
+    for n_cells heatmap cells, the most any record's 16 maps hold."""
     return np.dtype([*keys, ('keypoints', '<f4', (3 * J,)), ('origin', '<f4', (2 * J,)),
-                     ('stride', '<f4'), ('grid', '<u2', (2,)), ('heatmap', 'u1', (n_cells,))])
+                     ('stride', '<f4'), ('grid', '<u2', (2 * J,)), ('heatmap', 'u1', (n_cells,))])
 
 
 def max_people_bytes(width: int, height: int, keys: Sequence[tuple[str, str]] = ()) -> int:
@@ -77,57 +78,51 @@ def _check_people(keypoints: np.ndarray, origin: np.ndarray, stride: np.ndarray,
 
 def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
                     label: str) -> np.ndarray:
-    """Records (P,) of B's fields (keys left zero) with every map zero-padded to the common grid;
-    errors name the offending entry as f'{label} {index}'."""
-    maps = []
+    """Records (P,) of B's fields (keys left zero), each map cut to its evidence
+    (HeatmapStack.trimmed: the same look-ups and draws) and each record's maps one after another,
+    zero-padded to the largest record; errors name the offending entry as f'{label} {index}'."""
     for p, person in enumerate(people):
         kp = np.shape(person.keypoints)
         if kp != (J, 3):
             raise ValueError(f'{label} {p} keypoints: expected ({J}, 3), got {kp}')
-        m = np.asarray(person.heatmap.maps)
-        if m.ndim != 3 or m.shape[0] != J or min(m.shape[1:]) < 1 or max(m.shape[1:]) > UINT16_MAX:
-            raise ValueError(f'{label} {p} heatmap maps: expected ({J}, h, w) with 1 <= h, w <= '
-                             f'{UINT16_MAX}, got {m.shape}')
-        if np.shape(person.heatmap.origin) != (J, 2):
-            raise ValueError(f'{label} {p} heatmap origin: expected ({J}, 2), got '
-                             f'{np.shape(person.heatmap.origin)}')
-        maps.append(m)
+        shape = person.heatmap.shape
+        if len(shape) != J or shape.min() < 1 or shape.max() > UINT16_MAX:
+            raise ValueError(f'{label} {p} heatmap grids: expected {J} of h x w with 1 <= h, w <= '
+                             f'{UINT16_MAX}, got {shape.tolist()}')
     n = len(people)
     keypoints = np.array([p.keypoints for p in people], dtype=np.float32).reshape(n, J, 3)
     origin = np.array([p.heatmap.origin for p in people], dtype=np.float32).reshape(n, 2 * J)
     stride = np.array([p.heatmap.stride for p in people], dtype=np.float32)
     _check_people(keypoints, origin, stride, label)
-    h, w = np.max([m.shape[1:] for m in maps], axis=0) if maps else (0, 0)
-    if J * h * w > UINT32_MAX:
-        raise ValueError(f'heatmap grid ({h}, {w}): {J} * h * w exceeds the PointField count range')
-    heat = np.zeros((n, J, h, w), dtype=np.uint8)
-    # One quantise per grid size (a camera's people share its message's grid), each map padded at
-    # the bottom/right: a zero cell is "no evidence".
-    by_grid: dict[tuple[int, ...], list[int]] = {}
-    for p, m in enumerate(maps):
-        by_grid.setdefault(m.shape, []).append(p)
-    bad = []
-    for (_, mh, mw), index in by_grid.items():
-        values = np.array([maps[p] for p in index], dtype=np.float32)
-        finite = np.isfinite(values).reshape(len(index), -1).all(axis=1)
-        if finite.all():
-            heat[index, :, :mh, :mw] = quantise(values)
-        else:
-            bad.append(index[int(np.argmin(finite))])
-    if bad:
-        raise ValueError(f'{label} {min(bad)} heatmap maps: non-finite values')
-    records = np.zeros(n, dtype=people_dtype(J * h * w, keys))
+    if not n:
+        return np.zeros(0, dtype=people_dtype(0, keys))
+    stack = HeatmapStack.of([p.heatmap for p in people])
+    if not np.isfinite(stack.values).all():
+        bad = next(p for p, person in enumerate(people) if not np.isfinite(person.heatmap.cells).all())
+        raise ValueError(f'{label} {bad} heatmap maps: non-finite values')
+    stack = stack.trimmed()
+    with np.errstate(over='ignore'):  # an origin beyond float32 is named by the check
+        origin = stack.origin.astype(np.float32).reshape(n, 2 * J)
+    _check_people(keypoints, origin, stride, label)
+    cells = quantise(stack.values.astype(np.float32, copy=False))
+    sizes = (stack.shape[..., 0] * stack.shape[..., 1]).sum(axis=1)
+    n_cells = int(sizes.max())
+    if n_cells > UINT32_MAX:
+        raise ValueError(f'heatmap cells of one record: {n_cells} exceeds the PointField count range')
+    records = np.zeros(n, dtype=people_dtype(n_cells, keys))
     records['keypoints'] = keypoints.reshape(n, 3 * J)
     records['origin'] = origin
     records['stride'] = stride
-    records['grid'] = (h, w)
-    records['heatmap'] = heat.reshape(n, J * h * w)
+    records['grid'] = stack.shape.reshape(n, 2 * J)
+    heat = records['heatmap']
+    for p, first in enumerate(stack.start[:, 0]):
+        heat[p, :sizes[p]] = cells[first:first + sizes[p]]
     return records
 
 
 def _records_from_msg(msg: PointCloud2, keys: Sequence[tuple[str, str]]) -> np.ndarray:
     """Decode B's layout (after keys) with the heatmap count the message declares, then check
-    the grid against it."""
+    every record's grids against it."""
     slot = len(keys) + 4  # the heatmap field's position; its name is checked by from_cloud
     n_cells = msg.fields[slot].count if len(msg.fields) > slot else 0
     if n_cells > len(msg.data):  # also keeps a corrupt count from sizing a huge dtype
@@ -137,16 +132,25 @@ def _records_from_msg(msg: PointCloud2, keys: Sequence[tuple[str, str]]) -> np.n
         if n_cells != 0:
             raise ValueError(f'people heatmap count: expected 0 with no records, got {n_cells}')
         return records
-    grid = records['grid']
-    other = (grid != grid[0]).any(axis=1)
-    if other.any():
-        i = int(np.argmax(other))
-        raise ValueError(f'people grid mismatch: record {i} has {tuple(grid[i].tolist())}, '
-                         f'record 0 has {tuple(grid[0].tolist())}')
-    h, w = (int(x) for x in grid[0])
-    if h < 1 or w < 1 or J * h * w != n_cells:
-        raise ValueError(f'people grid ({h}, {w}): needs h, w >= 1 and heatmap count {J} * h * w'
-                         f' = {J * h * w}, got count {n_cells}')
+    grid = records['grid'].reshape(len(records), J, 2).astype(np.int64)
+    empty = (grid < 1).any(axis=2)
+    if empty.any():
+        i, j = np.argwhere(empty)[0]
+        raise ValueError(f'people record {i} joint {j}: grid {tuple(grid[i, j].tolist())}, needs h, w >= 1')
+    sizes = (grid[..., 0] * grid[..., 1]).sum(axis=1)
+    over = sizes > n_cells
+    if over.any():
+        i = int(np.argmax(over))
+        raise ValueError(f'people record {i}: its grids hold {sizes[i]} cells, more than the heatmap count '
+                         f'{n_cells}')
+    with np.errstate(invalid='ignore', over='ignore'):  # non-finite origins and strides are named later
+        corner = (records['origin'].astype(np.float64).reshape(-1, J, 2)
+                  + records['stride'].astype(np.float64)[:, None, None] * (grid[..., ::-1] - 1))
+        beyond = np.abs(corner).max(axis=2) > np.finfo(np.float32).max
+    if beyond.any():
+        i, j = np.argwhere(beyond)[0]
+        raise ValueError(f'people record {i} joint {j}: its map reaches pixel {tuple(corner[i, j].tolist())}, '
+                         f'beyond float32')
     return records
 
 
@@ -157,13 +161,14 @@ def _people_from_records(records: np.ndarray) -> list[Person2D]:
     _check_people(keypoints, records['origin'], records['stride'], 'record')
     if n == 0:
         return []
-    h, w = (int(x) for x in records['grid'][0])
-    maps = np.divide(records['heatmap'].reshape(n, J, h, w), np.float32(255), dtype=np.float32)
+    grid = records['grid'].reshape(n, J, 2).astype(np.int64)
+    sizes = (grid[..., 0] * grid[..., 1]).sum(axis=1)
+    cells = np.divide(records['heatmap'], np.float32(255), dtype=np.float32)
     keypoints = keypoints.astype(np.float64)
     origin = records['origin'].astype(np.float64).reshape(n, J, 2)
     return [Person2D(keypoints=keypoints[p],
-                     heatmap=PersonHeatmap(maps=maps[p], origin=origin[p],
-                                           stride=float(records['stride'][p])))
+                     heatmap=PersonHeatmap.from_cells(cells[p, :sizes[p]], grid[p], origin[p],
+                                                      float(records['stride'][p])))
             for p in range(n)]
 
 
@@ -173,7 +178,7 @@ def people_to_msg(people: Sequence[Person2D], header: Header) -> PointCloud2:
 
 
 def msg_to_people(msg: PointCloud2) -> list[Person2D]:
-    """Decode encoding B; maps come back on the message's common grid, as float32 / 255."""
+    """Decode encoding B; maps come back on their own grids, as float32 / 255."""
     return _people_from_records(_records_from_msg(msg, ()))
 
 

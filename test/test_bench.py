@@ -97,7 +97,7 @@ def test_copied_heatmap_peak_moves_by_the_joint_displacement(rig):
         before, after = person.views[c].heatmap.peak(), view.heatmap.peak()
         np.testing.assert_allclose(after[:, :2], before[:, :2] + shift, atol=1e-9)
         np.testing.assert_array_equal(after[:, 2], before[:, 2])
-        assert view.heatmap.maps is person.views[c].heatmap.maps  # cells unchanged, shared
+        assert view.heatmap.cells is person.views[c].heatmap.cells  # cells unchanged, shared
 
 
 def test_a_joint_without_3d_or_outside_the_image_is_dropped(rig):

@@ -21,11 +21,13 @@ def test_each_map_covers_its_own_centres_plus_margin():
     low = np.array([[200.0, 200.0], [120.0, 330.0]]) - margin
     assert np.all(hm.origin <= low) and np.all(hm.origin > low - STRIDE)
     np.testing.assert_array_equal(hm.origin % STRIDE, 0.0)
-    _, h, w = hm.maps.shape
-    # the grid (common to both maps) is just big enough for the larger spread, map 1's
-    last = hm.origin[1] + STRIDE * np.array([w - 1, h - 1])
-    assert np.all(last >= np.array([150.0, 390.0]) + margin)
-    assert np.all(last < np.array([150.0, 390.0]) + margin + STRIDE)
+    # each map's grid is just big enough for its own spread, plus one zero column and row
+    for j, top in enumerate([(200.0, 200.0), (150.0, 390.0)]):
+        h, w = hm.shape[j]
+        last = hm.origin[j] + STRIDE * np.array([w - 2, h - 2])
+        assert np.all(last >= np.array(top) + margin) and np.all(last < np.array(top) + margin + STRIDE)
+        assert not hm.maps[j, h - 1, :w].any() and not hm.maps[j, :h, w - 1].any()
+    assert (hm.shape[0] < hm.shape[1]).all()
     assert hm.maps.dtype == np.float32
     assert hm.maps.min() >= 0 and hm.maps.max() <= 1
 
@@ -68,10 +70,10 @@ def test_max_combination_keeps_each_weight():
     assert 0.9 < hm.lookup(np.array([[[202.0, 260.0]]]))[0, 0] <= 1.0  # 2 px off the cell centre
 
 
-def _reference_render(centres: np.ndarray, stride: float, sigma: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """render_heatmaps written out map by map, cell by cell: per person (maps, origin)."""
+def _reference_render(centres: np.ndarray, stride: float, sigma: float) -> list[tuple[list[np.ndarray], np.ndarray]]:
+    """render_heatmaps written out map by map, cell by cell: per person (its maps, origin)."""
     margin = MARGIN_SIGMAS * sigma
-    layout = []
+    out = []
     for person in centres:
         rows = [c[np.isfinite(c).all(axis=1) & (c[:, 2] > 0)] for c in person]
         lo = np.array([r[:, :2].min(axis=0) - margin if len(r) else (np.inf, np.inf) for r in rows])
@@ -80,19 +82,19 @@ def _reference_render(centres: np.ndarray, stride: float, sigma: float) -> list[
         anchor[~np.isfinite(anchor)] = 0.0
         empty = np.array([len(r) == 0 for r in rows])
         lo[empty], hi[empty] = anchor, anchor
-        layout.append((rows, np.floor(lo / stride) * stride, hi))
-    w, h = np.max([np.ceil((hi - lo) / stride).max(axis=0) for _, lo, hi in layout], axis=0).astype(int) + 1
-    out = []
-    for rows, lo, _ in layout:
-        maps = np.zeros((len(rows), h, w), np.float32)
+        lo = np.floor(lo / stride) * stride
+        maps = []
         for j, r in enumerate(rows):
+            w, h = np.ceil((hi[j] - lo[j]) / stride).astype(int) + 2 if len(r) else (1, 1)
+            m = np.zeros((h, w), np.float32)
             for u, v, weight in r:
                 for row in range(h):
                     for col in range(w):
                         du, dv = stride * col - (u - lo[j, 0]), stride * row - (v - lo[j, 1])
                         if abs(du) <= margin and abs(dv) <= margin:
                             g = min(weight, 1.0) * np.exp(-(du ** 2 + dv ** 2) / (2 * sigma ** 2))
-                            maps[j, row, col] = max(maps[j, row, col], g)
+                            m[row, col] = max(m[row, col], g)
+            maps.append(m)
         out.append((maps, lo))
     return out
 
@@ -112,9 +114,10 @@ def test_render_heatmaps_matches_the_cell_by_cell_formulation(seed):
     heatmaps = render_heatmaps(centres, STRIDE, SIGMA)
     assert len(heatmaps) == n_p
     for hm, (maps, origin) in zip(heatmaps, _reference_render(centres, STRIDE, SIGMA)):
-        assert hm.maps.dtype == np.float32 and hm.maps.shape == maps.shape and hm.stride == STRIDE
+        assert hm.cells.dtype == np.float32 and hm.stride == STRIDE
+        np.testing.assert_array_equal(hm.shape, [m.shape for m in maps])
         np.testing.assert_array_equal(hm.origin, origin)
-        np.testing.assert_allclose(hm.maps, maps, rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(hm.cells, np.concatenate([m.ravel() for m in maps]), rtol=1e-5, atol=1e-7)
 
 
 def test_render_heatmaps_of_nobody():
@@ -175,7 +178,7 @@ def _numpy_sample_at(stack: HeatmapStack, maps, u, jitter):
     nz = np.flatnonzero(stack.values)
     cum = np.concatenate([[0.0], np.cumsum(stack.values[nz], dtype=np.float64)])
     start = stack.start.ravel()
-    size = np.repeat(stack.shape[:, 0] * stack.shape[:, 1], stack.start.shape[1])
+    size = (stack.shape[..., 0] * stack.shape[..., 1]).ravel()
     first = np.searchsorted(nz, start)[maps]
     end = np.searchsorted(nz, start + size)[maps]
     before = cum[first]
@@ -183,7 +186,7 @@ def _numpy_sample_at(stack: HeatmapStack, maps, u, jitter):
     idx = np.minimum(np.clip(idx, first, np.maximum(end - 1, first)), max(len(nz) - 1, 0))
     cell = (nz[idx] if len(nz) else np.zeros_like(idx)) - start[maps]
     heatmap = maps // stack.start.shape[1]
-    row, col = np.divmod(cell, stack.shape[heatmap, 1])
+    row, col = np.divmod(cell, stack.shape.reshape(-1, 2)[maps, 1])
     origin = stack.origin.reshape(-1, 2)[maps]
     uv = np.stack([origin[:, 0] + stack.stride[heatmap] * (col + (jitter[:, 0] - 0.5)),
                    origin[:, 1] + stack.stride[heatmap] * (row + (jitter[:, 1] - 0.5))], axis=-1)
@@ -196,7 +199,7 @@ def _numpy_lookup(stack: HeatmapStack, uv):
     inv = 1.0 / stack.stride[:, None, None]
     c = (uv[..., 0] - stack.origin[:, :, None, 0]) * inv
     r = (uv[..., 1] - stack.origin[:, :, None, 1]) * inv
-    h, w = stack.shape[:, 0, None, None], stack.shape[:, 1, None, None]
+    h, w = stack.shape[..., 0, None], stack.shape[..., 1, None]
     inside = (c >= 0) & (c <= w - 1) & (r >= 0) & (r <= h - 1)
     c, r = np.where(inside, c, 0.0), np.where(inside, r, 0.0)
     c0 = np.minimum(c.astype(np.intp), np.maximum(w - 2, 0))
@@ -211,17 +214,18 @@ def _numpy_lookup(stack: HeatmapStack, uv):
     return np.where(inside, top * (1 - fr) + bottom * fr, 0.0)
 
 
-@pytest.mark.parametrize('dtype', [np.float32, np.float64])
-def test_stack_kernels_are_numpys_arithmetic(dtype):
+@pytest.mark.parametrize('dtype, trim', [(np.float32, False), (np.float64, False), (np.float32, True)])
+def test_stack_kernels_are_numpys_arithmetic(dtype, trim):
     rng = np.random.default_rng(3)
     stack = _random_stack(rng, dtype)
+    stack = stack.trimmed() if trim else stack  # maps of a heatmap on grids of their own sizes
     n_maps = stack.start.size
     maps = rng.integers(0, n_maps, 500)
     u, jitter = rng.random(500), rng.random((500, 2))
     np.testing.assert_array_equal(stack.sample_at(maps, u, jitter), _numpy_sample_at(stack, maps, u, jitter))
     # peaks: the first maximal cell's centre; empty maps (NaN, NaN, 0)
     peak = stack.peak()
-    for i, (start, (h, w), origin, stride) in enumerate(zip(stack.start.ravel(), np.repeat(stack.shape, 7, axis=0),
+    for i, (start, (h, w), origin, stride) in enumerate(zip(stack.start.ravel(), stack.shape.reshape(-1, 2),
                                                             stack.origin.reshape(-1, 2), np.repeat(stack.stride, 7))):
         cells = stack.values[start:start + h * w]
         best = int(np.argmax(cells))
@@ -233,6 +237,27 @@ def test_stack_kernels_are_numpys_arithmetic(dtype):
     uv[:, :, 0] = stack.origin  # cell [0, 0]
     uv[:, :, 1, 0] = np.nan
     np.testing.assert_array_equal(stack.lookup(uv), _numpy_lookup(stack, uv))
+
+
+def test_trimmed_maps_look_up_peak_and_draw_as_the_whole_maps():
+    rng = np.random.default_rng(4)
+    stack = _random_stack(rng)
+    cut = stack.trimmed()
+    assert len(cut.values) < len(stack.values)
+    assert (cut.shape <= stack.shape).all() and (cut.shape >= 1).all()
+    assert (cut.shape[:, 1] == 1).all()  # the empty map: one zero cell
+    np.testing.assert_allclose(cut.peak(), stack.peak(), rtol=1e-12)  # the origins moved by whole cells
+    uv = stack.origin[:, :, None] + stack.stride[:, None, None, None] * rng.uniform(-1, 7, (4, 7, 300, 2))
+    np.testing.assert_allclose(cut.lookup(uv), stack.lookup(uv), rtol=1e-6, atol=1e-12)
+    maps = rng.integers(0, stack.start.size, 500)
+    u, jitter = rng.random(500), rng.random((500, 2))
+    np.testing.assert_allclose(cut.sample_at(maps, u, jitter), stack.sample_at(maps, u, jitter), rtol=1e-12)
+    again = cut.trimmed()  # a map cut once keeps its zero ring
+    np.testing.assert_array_equal(again.values, cut.values)
+    np.testing.assert_array_equal(again.origin, cut.origin)
+    heatmap = cut.heatmap(2)
+    np.testing.assert_array_equal(HeatmapStack.of([heatmap]).peak()[0], cut.peak()[2])
+    assert heatmap.maps.shape == (7, *cut.shape[2].max(axis=0))
 
 
 def test_an_empty_stack():

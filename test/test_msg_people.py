@@ -28,17 +28,29 @@ def _person(seed: int, h: int, w: int) -> Person2D:
     return Person2D(kp, PersonHeatmap(maps, rng.uniform(-50, 900, (16, 2)), float(rng.uniform(2, 8))))
 
 
-def _assert_person(person: Person2D, back: Person2D, grid: tuple[int, int]):
+def _assert_person(person: Person2D, back: Person2D):
+    """back, decoded, holds person's maps quantised, each cut to its non-zero cells (and a zero
+    ring where the map has one) at the matching origin."""
     assert back.track_id == -1
     assert back.keypoints.shape == (16, 3)
     np.testing.assert_array_equal(back.keypoints, person.keypoints.astype(np.float32))
-    np.testing.assert_array_equal(back.heatmap.origin, person.heatmap.origin.astype(np.float32))
-    assert back.heatmap.stride == np.float32(person.heatmap.stride)
-    maps = back.heatmap.maps
-    assert maps.dtype == np.float32 and maps.shape == (16, *grid)
-    _, h, w = person.heatmap.maps.shape
-    assert np.abs(maps[:, :h, :w] - np.clip(person.heatmap.maps, 0, 1)).max() <= TOL
-    assert not maps[:, h:].any() and not maps[:, :, w:].any()  # zero padding
+    heat, got = person.heatmap, back.heatmap
+    assert got.stride == np.float32(heat.stride) and got.cells.dtype == np.float32
+    offset = np.rint((got.origin - heat.origin) / heat.stride).astype(int)  # (J, 2) columns, rows
+    np.testing.assert_allclose(got.origin, (heat.origin + heat.stride * offset).astype(np.float32))
+    maps = heat.maps
+    for j in range(16):
+        (c0, r0), (h, w) = offset[j], got.shape[j]
+        assert r0 >= 0 and c0 >= 0 and r0 + h <= maps.shape[1] and c0 + w <= maps.shape[2]
+        cut = np.zeros(maps.shape[1:], dtype=bool)
+        cut[r0:r0 + h, c0:c0 + w] = True
+        mine = got.cells[_map_start(got, j):_map_start(got, j) + h * w].reshape(h, w)
+        assert np.abs(mine - np.clip(maps[j, r0:r0 + h, c0:c0 + w], 0, 1)).max() <= TOL
+        assert not maps[j][~cut].any()  # only zeros were cut away
+
+
+def _map_start(heat: PersonHeatmap, j: int) -> int:
+    return int((heat.shape[:j, 0] * heat.shape[:j, 1]).sum())
 
 
 def _header(frame_id: str = 'cam1') -> Header:
@@ -52,15 +64,39 @@ PEOPLE = [_person(0, 30, 20), _person(1, 12, 41), _person(2, 5, 5)]
 def test_people_round_trip(n):
     people = PEOPLE[:n]
     msg = people_to_msg(people, _header())
-    grid = (30, 41) if n > 1 else (30, 20) if n else (0, 0)
+    cells = 16 * 30 * 20 if n else 0  # the largest record's, each record on its own grids
     assert msg.width == n and msg.header.frame_id == 'cam1'
     assert [f.name for f in msg.fields] == ['keypoints', 'origin', 'stride', 'grid', 'heatmap']
-    assert [f.count for f in msg.fields] == [48, 32, 1, 2, 16 * grid[0] * grid[1]]
-    assert msg.point_step == 4 * 48 + 4 * 32 + 4 + 4 + 16 * grid[0] * grid[1]
+    assert [f.count for f in msg.fields] == [48, 32, 1, 32, cells]
+    assert msg.point_step == 4 * 48 + 4 * 32 + 4 + 2 * 32 + cells
     back = msg_to_people(deserialize_message(serialize_message(msg), PointCloud2))
     assert len(back) == n
     for person, b in zip(people, back):
-        _assert_person(person, b, grid)
+        _assert_person(person, b)
+        assert (b.heatmap.shape == person.heatmap.shape).all()  # maps of random values: nothing to cut
+
+
+def test_maps_travel_cut_to_their_evidence():
+    """Zeros around a map's evidence stay home, bar one ring: look-ups, peaks and draws of the
+    decoded maps are those of the sent maps, quantised."""
+    rng = np.random.default_rng(5)
+    maps = np.zeros((16, 40, 50), np.float32)
+    maps[3, 10:13, 20:24] = rng.uniform(0.1, 1, (3, 4))  # inside: a ring of zeros kept
+    maps[4, 0:2, 45:50] = rng.uniform(0.1, 1, (2, 5))  # at the grid's top right: no ring there
+    maps[5, 39, 0] = 0.5
+    person = Person2D(PEOPLE[0].keypoints, PersonHeatmap(maps, np.array([100.0, 60.0]), 8.0))
+    msg = people_to_msg([person], _header())
+    assert msg.fields[-1].count == 5 * 6 + 3 * 6 + 2 * 2 + 13 * 1  # 13 empty maps: one cell each
+    back = msg_to_people(msg)[0]
+    _assert_person(person, back)
+    assert back.heatmap.shape[3].tolist() == [5, 6] and back.heatmap.origin[3].tolist() == [100 + 8 * 19, 60 + 8 * 9]
+    uv = rng.uniform([80, 40], [520, 400], (16, 2000, 2))
+    uv[3] = rng.uniform([100 + 8 * 18, 60 + 8 * 8], [100 + 8 * 26, 60 + 8 * 15], (2000, 2))  # about the edges
+    quantised = PersonHeatmap(np.rint(maps * 255) / np.float32(255), np.array([100.0, 60.0]), 8.0)
+    np.testing.assert_allclose(back.heatmap.lookup(uv), quantised.lookup(uv), atol=1e-6)
+    np.testing.assert_array_equal(back.heatmap.peak(), quantised.peak())
+    draws = [h.sample(np.random.default_rng(1), 50) for h in (back.heatmap, quantised)]
+    np.testing.assert_allclose(*draws, atol=1e-9)
 
 
 def test_quantisation_rounds_to_nearest_step():
@@ -76,10 +112,9 @@ def test_real_detections_round_trip():
     people = detect_people(frame, OpenPoseDetectorConfig())
     assert len(people) >= 2
     msg = people_to_msg(people, _header('cam0'))
-    grid = tuple(np.max([p.heatmap.maps.shape[1:] for p in people], axis=0))
+    assert msg.fields[-1].count < 16 * np.prod(people[0].heatmap.maps.shape[1:])  # the padding stays home
     for person, back in zip(people, msg_to_people(msg)):
-        _assert_person(person, back, grid)
-        # the padded map still peaks where the original did
+        _assert_person(person, back)
         np.testing.assert_allclose(back.heatmap.peak()[:, :2], person.heatmap.peak()[:, :2],
                                    atol=1e-3)
 
@@ -89,7 +124,7 @@ def test_bundles_round_trip():
     msg = bundles_to_msg(bundles, _header('world'))
     assert msg.width == 4
     assert [f.name for f in msg.fields[:3]] == ['person', 'camera', 'keypoints']
-    records = from_cloud(msg, people_dtype(16 * 30 * 41, BUNDLE_KEYS))
+    records = from_cloud(msg, people_dtype(16 * 30 * 20, BUNDLE_KEYS))
     assert records['person'].tolist() == [2, 7, 7, 4_000_000_000]
     assert records['camera'].tolist() == [4, 0, 3, 1]
     for m in (msg, deserialize_message(serialize_message(msg), PointCloud2)):
@@ -98,7 +133,7 @@ def test_bundles_round_trip():
         assert [sorted(views) for _, views in back] == [[4], [0, 3], [1]]
         for pid, views in back:
             for camera, person in views.items():
-                _assert_person(dict(bundles)[pid][camera], person, (30, 41))
+                _assert_person(dict(bundles)[pid][camera], person)
     # records in any order decode the same
     shuffled = to_cloud(records[::-1], _header('world'))
     assert [(pid, sorted(v)) for pid, v in msg_to_bundles(shuffled)] == [(2, [4]), (7, [0, 3]),
@@ -122,7 +157,9 @@ def _set(records, field, index, value):
 
 
 @pytest.mark.parametrize('change, match', [
-    (lambda r: _set(r, 'grid', 1, (29, 41)), r'grid mismatch: record 1 has \(29, 41\)'),
+    (lambda r: _set(r, 'grid', (1, 7), 0), r'record 1 joint 3: grid \(12, 0\), needs h, w >= 1'),
+    (lambda r: _set(r, 'grid', (2, 0), 2000),
+     r'record 2: its grids hold 10375 cells, more than the heatmap count 9600'),
     (lambda r: _set(r, 'keypoints', (0, 2), np.nan), 'record 0 joint 0: keypoint score is not finite'),
     (lambda r: _set(r, 'keypoints', (1, 3), np.inf), 'record 1 joint 1: keypoint u, v infinite'),
     (lambda r: _set(r, 'stride', 2, 0.0), 'record 2 heatmap stride'),
@@ -146,10 +183,10 @@ def test_people_decoder_rejects_nan_uv_with_score():
 
 def test_people_decoder_rejects_grid_count_mismatch():
     records = _people_records(PEOPLE[:1])
-    records['grid'] = (20, 30)  # same cell count, but 30 x 20 was declared by the field count
-    msg_to_people(to_cloud(records, _header()))  # 16 * 20 * 30 cells: consistent, decodes
-    records['grid'] = (20, 31)
-    with pytest.raises(ValueError, match=r'grid \(20, 31\): needs .* heatmap count'):
+    records['grid'] = (20, 30) * 16  # the same cells, read as maps of 20 x 30: consistent, decodes
+    msg_to_people(to_cloud(records, _header()))
+    records['grid'][0, 1] = 31
+    with pytest.raises(ValueError, match=r'record 0: its grids hold 9620 cells, more than the heatmap count 9600'):
         msg_to_people(to_cloud(records, _header()))
     empty = people_to_msg([], _header())
     empty.fields[-1].count = 16
@@ -170,12 +207,12 @@ def test_encoders_reject():
     with pytest.raises(ValueError, match=r'person 1 keypoints: expected \(16, 3\)'):
         people_to_msg([PEOPLE[0], bad_kp], _header())
     bad_maps = Person2D(PEOPLE[0].keypoints, PersonHeatmap(np.zeros((15, 4, 4)), np.zeros(2), 4.0))
-    with pytest.raises(ValueError, match='person 0 heatmap maps'):
+    with pytest.raises(ValueError, match='person 0 heatmap grids: expected 16'):
         people_to_msg([bad_maps], _header())
     nan_maps = Person2D(PEOPLE[0].keypoints, PersonHeatmap(np.full((16, 4, 4), np.nan), np.zeros(2), 4.0))
     with pytest.raises(ValueError, match='person 0 heatmap maps: non-finite'):
         people_to_msg([nan_maps], _header())
-    # maps are checked a grid size at a time: the error still names the first bad person
+    # maps are checked all at once: the error still names the first bad person
     heat = PEOPLE[1].heatmap
     inf_cell = Person2D(PEOPLE[1].keypoints, PersonHeatmap(heat.maps.copy(), heat.origin, heat.stride))
     inf_cell.heatmap.maps[3, 2, 7] = np.inf

@@ -10,7 +10,7 @@ import pytest
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.body import UP
-from mvpose_ros.core.heatmap import HeatmapStack
+from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig, parameter_specs
 
 
@@ -106,8 +106,8 @@ def test_inputs_of_any_memory_layout_give_the_same_skeletons():
 
     def odd(people: list) -> list:
         return [[replace(p, keypoints=_awkward(p.keypoints),
-                         heatmap=replace(p.heatmap, maps=_awkward(p.heatmap.maps),
-                                         origin=_awkward(np.array(p.heatmap.origin))))
+                         heatmap=PersonHeatmap.from_cells(_awkward(p.heatmap.cells), _awkward(p.heatmap.shape),
+                                                          _awkward(np.array(p.heatmap.origin)), p.heatmap.stride))
                  for p in views] for views in people]
 
     results = _both(raw, (Stage3D(cameras, config), Stage3D(odd_cameras, config)), odd)

@@ -13,22 +13,64 @@ from mvpose_ros.core.compiled import kernel, kernel_array
 MARGIN_SIGMAS = 3.0  # a rendered Gaussian is cut this many sigmas from its centre
 
 
-@dataclass
 class PersonHeatmap:
-    """J heatmaps of h x w cells each: cell [r, c] of map j is centred at pixel
-    origin[j] + stride * (c, r). Each map has its own origin, so that it covers only the region
-    of its joint (a person-sized grid per joint is ~99% zeros, and every step downstream, the
-    wire included, pays for its size)."""
+    """J heatmaps; map j is a grid of shape[j] = (h_j, w_j) cells whose cell [r, c] is centred at
+    pixel origin[j] + stride * (c, r). Each map has its own origin and size, so that it covers
+    only the region of its joint (a person-sized grid per joint is ~99% zeros, and every step
+    downstream, the wire included, pays for its size).
 
-    maps: np.ndarray  # (J, h, w) float32 in [0, 1]
-    origin: np.ndarray  # (J, 2) pixel (u, v) of the centre of cell [0, 0] of each map; (2,) = shared
-    stride: float  # pixels per cell
+    cells: (S,) every map's cells, map after map, row-major within a map (S = sum of h_j * w_j),
+    float32 in [0, 1]; shape: (J, 2) int; origin: (J, 2) pixels; stride: pixels per cell.
+    """
 
-    def __post_init__(self) -> None:
-        origin = np.asarray(self.origin, dtype=np.float64)
-        shape = (len(self.maps), 2)
+    __slots__ = ('cells', 'shape', 'origin', 'stride')
+
+    def __init__(self, maps: np.ndarray, origin: np.ndarray, stride: float) -> None:
+        """maps: (J, h, w), one grid size for every map; origin: (J, 2), or (2,) shared."""
+        maps = np.asarray(maps)
+        if maps.ndim != 3:
+            raise ValueError(f'heatmap maps: expected (J, h, w), got shape {maps.shape}')
+        origin = np.asarray(origin, dtype=np.float64)
         # broadcast only a shared origin: a decoder makes a heatmap per person and view each frame
-        self.origin = origin if origin.shape == shape else np.broadcast_to(origin, shape)
+        origin = origin if origin.shape == (len(maps), 2) else np.broadcast_to(origin, (len(maps), 2))
+        self._set(maps.reshape(-1), np.tile(np.array(maps.shape[1:], dtype=np.int64), (len(maps), 1)),
+                  origin, stride)
+
+    @classmethod
+    def from_cells(cls, cells: np.ndarray, shape: np.ndarray, origin: np.ndarray, stride: float) -> PersonHeatmap:
+        """A heatmap of maps of their own sizes: cells (S,), shape (J, 2), origin (J, 2) as the
+        attributes."""
+        heatmap = cls.__new__(cls)
+        heatmap._set(np.asarray(cells), np.asarray(shape, dtype=np.int64), np.asarray(origin, dtype=np.float64),
+                     stride)
+        return heatmap
+
+    def _set(self, cells: np.ndarray, shape: np.ndarray, origin: np.ndarray, stride: float) -> None:
+        if shape.ndim != 2 or shape.shape[1] != 2 or origin.shape != shape.shape:
+            raise ValueError(f'heatmap shape {shape.shape} and origin {origin.shape}: expected (J, 2) each')
+        if cells.ndim != 1 or len(cells) != int((shape[:, 0] * shape[:, 1]).sum()):
+            raise ValueError(f'heatmap cells {cells.shape}: expected ({int((shape[:, 0] * shape[:, 1]).sum())},), '
+                             f'the cells of maps of shape {shape.tolist()}')
+        self.cells, self.shape, self.origin, self.stride = cells, shape, origin, float(stride)
+
+    def __len__(self) -> int:
+        """J, the number of maps."""
+        return len(self.shape)
+
+    @property
+    def maps(self) -> np.ndarray:
+        """(J, h, w) every map on the largest grid, padded with zeros at the bottom and right."""
+        if len(self.shape) == 0:
+            return np.zeros((0, 0, 0), dtype=self.cells.dtype)
+        h, w = self.shape.max(axis=0)
+        if (self.shape == (h, w)).all():
+            return self.cells.reshape(len(self.shape), h, w)
+        out = np.zeros((len(self.shape), h, w), dtype=self.cells.dtype)
+        start = 0
+        for j, (mh, mw) in enumerate(self.shape):
+            out[j, :mh, :mw] = self.cells[start:start + mh * mw].reshape(mh, mw)
+            start += mh * mw
+        return out
 
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Bilinear value (J, N) of joint j's map at pixel uv[j, n] (uv: (J, N, 2)); 0 outside
@@ -38,9 +80,8 @@ class PersonHeatmap:
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """Draw n pixels per joint (J, n, 2) with each map as a pmf over its cells (probability
         proportional to the value), jittered uniformly within the cell; NaN rows for empty maps."""
-        n_j = len(self.maps)
-        u = rng.random((1, n_j, n))
-        return HeatmapStack.of([self]).sample(u, rng.random((1, n_j, n, 2)))[0]
+        u = rng.random((1, len(self), n))
+        return HeatmapStack.of([self]).sample(u, rng.random((1, len(self), n, 2)))[0]
 
     def peak(self) -> np.ndarray:
         """(J, 3): pixel u, v of the centre of each map's maximal cell and the maximum; an empty
@@ -52,30 +93,52 @@ class PersonHeatmap:
 class HeatmapStack:
     """N person heatmaps of J maps each (every person in every view of a frame), their cells
     flattened into one array, so that sampling, peaks and look-ups for all of them take one
-    compiled call instead of a few per heatmap. Grids may differ in size."""
+    compiled call instead of a few per heatmap. Every map has its own grid size."""
 
     values: np.ndarray  # (S,) every cell, map after map, row-major within a map
     start: np.ndarray  # (N, J) index in values of cell [0, 0] of each map
-    shape: np.ndarray  # (N, 2) rows h, columns w of each heatmap's grid
+    shape: np.ndarray  # (N, J, 2) rows h, columns w of each map's grid
     origin: np.ndarray  # (N, J, 2)
     stride: np.ndarray  # (N,)
 
     @classmethod
     def of(cls, heatmaps: Sequence[PersonHeatmap]) -> HeatmapStack:
         if not heatmaps:  # a frame with nobody in it
-            return cls(np.zeros(0, np.float32), np.zeros((0, 0), np.intp), np.zeros((0, 2), np.intp),
+            return cls(np.zeros(0, np.float32), np.zeros((0, 0), np.intp), np.zeros((0, 0, 2), np.intp),
                        np.zeros((0, 0, 2)), np.zeros(0))
-        n_j = len(heatmaps[0].maps)
-        if any(len(hm.maps) != n_j for hm in heatmaps):
+        n_j = len(heatmaps[0])
+        if any(len(hm) != n_j for hm in heatmaps):
             raise ValueError('heatmaps of a stack must have the same number of joints')
-        shape = np.array([hm.maps.shape[1:] for hm in heatmaps], dtype=np.intp).reshape(-1, 2)
-        size = shape[:, 0] * shape[:, 1]
-        first = np.concatenate([[0], np.cumsum(size * n_j)[:-1]]).astype(np.intp)
-        return cls(values=np.concatenate([hm.maps.ravel() for hm in heatmaps]),
-                   start=first[:, None] + size[:, None] * np.arange(n_j),
+        shape = np.concatenate([hm.shape for hm in heatmaps]).reshape(-1, n_j, 2)
+        size = (shape[..., 0] * shape[..., 1]).ravel()
+        start = np.zeros(len(size), dtype=np.intp)
+        np.cumsum(size[:-1], out=start[1:])
+        return cls(values=np.concatenate([hm.cells for hm in heatmaps]),
+                   start=start.reshape(-1, n_j),
                    shape=shape,
                    origin=np.array([hm.origin for hm in heatmaps], dtype=np.float64).reshape(-1, n_j, 2),
                    stride=np.array([hm.stride for hm in heatmaps], dtype=np.float64))
+
+    def heatmap(self, i: int) -> PersonHeatmap:
+        """Heatmap i of the stack (its cells a view of values)."""
+        first = self.start[i, 0]
+        end = first + int((self.shape[i, :, 0] * self.shape[i, :, 1]).sum())
+        return PersonHeatmap.from_cells(self.values[first:end], self.shape[i], self.origin[i], self.stride[i])
+
+    def trimmed(self) -> HeatmapStack:
+        """The stack with each map cut to the rows and columns of its non-zero cells plus one zero
+        cell on each side where its grid has one (so bilinear look-ups and every draw are those of
+        the whole map); an empty map keeps one cell. The zeros a renderer pads maps with to a
+        common grid are what this removes."""
+        n, n_j = self.start.shape
+        lo = np.empty((n * n_j, 2), dtype=np.int64)
+        shape = np.empty((n * n_j, 2), dtype=np.int64)
+        cut = _trim(*self._flat(), lo, shape)
+        size = shape[:, 0] * shape[:, 1]
+        start = np.zeros(len(size), dtype=np.intp)
+        np.cumsum(size[:-1], out=start[1:])
+        origin = self.origin + self.stride[:, None, None] * lo[:, ::-1].reshape(n, n_j, 2)
+        return HeatmapStack(cut, start.reshape(n, n_j), shape.reshape(n, n_j, 2), origin, self.stride)
 
     def sample(self, u: np.ndarray, jitter: np.ndarray) -> np.ndarray:
         """Pixels (N, J, K, 2) drawn from each map as a pmf over its cells, from uniform numbers
@@ -117,8 +180,8 @@ class HeatmapStack:
         cells = np.float32 if self.values.dtype == np.float32 else np.float64
         return (kernel_array(self.values, cells),
                 kernel_array(self.start, np.int64).reshape(-1),
-                kernel_array(np.repeat(self.shape[:, 0], n_j), np.int64),
-                kernel_array(np.repeat(self.shape[:, 1], n_j), np.int64),
+                kernel_array(self.shape[..., 0], np.int64).reshape(-1),
+                kernel_array(self.shape[..., 1], np.int64).reshape(-1),
                 kernel_array(self.origin, np.float64).reshape(-1, 2),
                 kernel_array(np.repeat(self.stride, n_j), np.float64))
 
@@ -126,6 +189,43 @@ class HeatmapStack:
 # a stack as the kernels take it (HeatmapStack._flat), cells float32 (as rendered) or float64
 _STACKS = [f'{cells}[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[::1]'
            for cells in ('float32', 'float64')]
+
+
+@kernel(*(f'{cells}[::1]({stack}, int64[:, ::1], int64[:, ::1])'
+          for cells, stack in zip(('float32', 'float64'), _STACKS)))
+def _trim(values, start, rows, cols, origin, stride, lo, shape):
+    """HeatmapStack.trimmed's cells: writes each map's first kept row and column lo (N * J, 2) and
+    its kept rows and columns shape (N * J, 2); returns the kept cells, map after map."""
+    n_maps = len(start)
+    empty = np.zeros(n_maps, np.bool_)
+    total = 0
+    for m in range(n_maps):
+        h, w = rows[m], cols[m]
+        r0, r1, c0, c1 = h, -1, w, -1
+        for r in range(h):
+            for c in range(w):
+                if values[start[m] + r * w + c] != 0:
+                    r0, r1 = min(r0, r), max(r1, r)
+                    c0, c1 = min(c0, c), max(c1, c)
+        if r1 < 0:  # an empty map keeps one zero cell at its origin
+            empty[m] = True
+            r0, r1, c0, c1 = 0, 0, 0, 0
+        else:
+            r0, r1, c0, c1 = max(r0 - 1, 0), min(r1 + 1, h - 1), max(c0 - 1, 0), min(c1 + 1, w - 1)
+        lo[m, 0], lo[m, 1] = r0, c0
+        shape[m, 0], shape[m, 1] = r1 - r0 + 1, c1 - c0 + 1
+        total += shape[m, 0] * shape[m, 1]
+    out = np.zeros(total, values.dtype)
+    k = 0
+    for m in range(n_maps):
+        if empty[m]:
+            k += 1
+            continue
+        for r in range(lo[m, 0], lo[m, 0] + shape[m, 0]):
+            first = start[m] + r * cols[m] + lo[m, 1]
+            out[k:k + shape[m, 1]] = values[first:first + shape[m, 1]]
+            k += shape[m, 1]
+    return out
 
 
 @kernel(*(f'void({stack}, int64[::1], float64[::1], float64[:, ::1], float64[:, ::1])' for stack in _STACKS))
@@ -229,33 +329,43 @@ def render_heatmaps(centres: np.ndarray, stride: float, sigma: float) -> list[Pe
     isotropic Gaussians (std sigma px) with peak weight (clipped to 1) at each row [u, v, weight]
     of centres[p, j] ((P, J, n, 3); rows with NaN or weight <= 0 are ignored, so padding is
     weight 0). Each Gaussian is cut to 0 beyond MARGIN_SIGMAS * sigma along u or v, so a map is
-    exactly 0 away from its evidence; a map's grid covers its centres plus that margin, in
-    cells of stride px centred on multiples of stride, all maps padded to the largest grid.
+    exactly 0 away from its evidence; each map's grid covers its centres plus that margin and
+    one more column and row, in cells of stride px centred on multiples of stride (a map without
+    evidence: one cell).
 
     Max (not sum) so that a map's value at a candidate is that candidate's own weight:
-    overlapping evidence does not inflate the data term and values stay in [0, 1]."""
+    overlapping evidence does not inflate the data term and values stay in [0, 1]. The extra
+    column and row are zero, so a map looks up as it would inside any larger grid of zeros."""
     centres = kernel_array(centres, np.float64)
     if len(centres) == 0:
         return []
-    lo = np.empty(centres.shape[:2] + (2,))
+    n_p, n_j = centres.shape[:2]
+    lo = np.empty((n_p, n_j, 2))
+    shape = np.empty((n_p * n_j, 2), dtype=np.int64)
     # Compiled: the layout and, for each row that counts, its Gaussian's exponents within the cut,
     # then the maps. numpy takes the exponentials: the compiled float32 exp differs from numpy's
     # in the last bits.
-    exponents, rows, weight, w, h = _gaussian_exponents(centres, float(stride), MARGIN_SIGMAS * sigma,
-                                                        np.float32(-0.5 / sigma ** 2), lo)
+    exponents, rows, weight = _gaussian_exponents(centres, float(stride), MARGIN_SIGMAS * sigma,
+                                                  np.float32(-0.5 / sigma ** 2), lo, shape)
     np.exp(exponents, out=exponents)
-    maps = _max_of_gaussians(exponents, rows, weight, len(centres), centres.shape[1], h, w)
-    return [PersonHeatmap(maps=maps[p], origin=lo[p], stride=float(stride)) for p in range(len(maps))]
+    size = shape[:, 0] * shape[:, 1]
+    start = np.zeros(len(size), dtype=np.int64)
+    np.cumsum(size[:-1], out=start[1:])
+    cells = _max_of_gaussians(exponents, rows, weight, n_j, start, shape[:, 1].copy(), int(size.sum()))
+    first = start.reshape(n_p, n_j)[:, 0]
+    end = np.append(first[1:], len(cells))
+    shape = shape.reshape(n_p, n_j, 2)
+    return [PersonHeatmap.from_cells(cells[first[p]:end[p]], shape[p], lo[p], stride) for p in range(n_p)]
 
 
-@kernel('Tuple((float32[::1], int64[:, ::1], float32[::1], int64, int64))(float64[:, :, :, ::1], float64, float64, '
-        'float32, float64[:, :, ::1])')
-def _gaussian_exponents(centres, stride, margin, inv, lo):
-    """render_heatmaps' layout and Gaussian exponents. Writes each map's origin lo (P, J, 2);
-    returns the float32 exponents, as numpy computed them, of each row that counts (weight > 0,
-    finite) along u at the cell columns u0:u1 within the cut, then along v at the cell rows v0:v1;
-    per such row (R, 7) p, j, u0, u1, v0, v1, start of its exponents, and (R,) its weight clipped
-    to 1, in float32; and the grid's w, h."""
+@kernel('Tuple((float32[::1], int64[:, ::1], float32[::1]))(float64[:, :, :, ::1], float64, float64, float32, '
+        'float64[:, :, ::1], int64[:, ::1])')
+def _gaussian_exponents(centres, stride, margin, inv, lo, shape):
+    """render_heatmaps' layout and Gaussian exponents. Writes each map's origin lo (P, J, 2) and
+    grid rows, columns shape (P * J, 2); returns the float32 exponents, as numpy computed them, of
+    each row that counts (weight > 0, finite) along u at the cell columns u0:u1 within the cut,
+    then along v at the cell rows v0:v1; per such row (R, 7) p, j, u0, u1, v0, v1, start of its
+    exponents, and (R,) its weight clipped to 1, in float32."""
     n_p, n_j, n = centres.shape[:3]
     hi = np.empty((n_p, n_j, 2))
     has = np.zeros((n_p, n_j), dtype=np.bool_)
@@ -284,17 +394,19 @@ def _gaussian_exponents(centres, stride, margin, inv, lo):
             if not has[p, j]:
                 lo[p, j] = anchor
                 hi[p, j] = anchor
-    grid = np.zeros(2, dtype=np.int64)
+    longest = 1
     for p in range(n_p):
         for j in range(n_j):
             for i in range(2):
                 lo[p, j, i] = np.floor(lo[p, j, i] / stride) * stride  # cells on the image's lattice
-                grid[i] = max(grid[i], int(np.ceil((hi[p, j, i] - lo[p, j, i]) / stride)))
-    size = grid + 1  # w, h
+                # the cells up to the margin, and one more: zero, as past a larger grid's end
+                cells = int(np.ceil((hi[p, j, i] - lo[p, j, i]) / stride)) + 2 if has[p, j] else 1
+                shape[p * n_j + j, 1 - i] = cells
+                longest = max(longest, cells)
     stride32, cut = np.float32(stride), np.float32(margin)
     rows = np.empty((n_rows, 7), dtype=np.int64)
     weight = np.empty(n_rows, dtype=np.float32)
-    exponents = np.empty(n_rows * (size[0] + size[1]), dtype=np.float32)
+    exponents = np.empty(n_rows * 2 * longest, dtype=np.float32)
     r, end = 0, 0
     for p in range(n_p):
         for j in range(n_j):
@@ -305,8 +417,9 @@ def _gaussian_exponents(centres, stride, margin, inv, lo):
                 rows[r, 0], rows[r, 1], rows[r, 6] = p, j, end
                 for i in range(2):
                     rel = np.float32((u if i == 0 else v) - lo[p, j, i])  # pixels from cell [0, 0]
-                    first, last = size[i], 0
-                    for x in range(size[i]):
+                    size = shape[p * n_j + j, 1 - i]
+                    first, last = size, 0
+                    for x in range(size):
                         d = stride32 * np.float32(x) - rel
                         if abs(d) <= cut:  # |d| grows away from rel: the cells within are a range
                             exponents[end] = inv * (d * d)
@@ -315,23 +428,26 @@ def _gaussian_exponents(centres, stride, margin, inv, lo):
                     rows[r, 2 + 2 * i], rows[r, 3 + 2 * i] = first, max(last, first)
                 weight[r] = np.float32(min(wt, 1.0))
                 r += 1
-    return exponents[:end], rows, weight, size[0], size[1]
+    return exponents[:end], rows, weight
 
 
-@kernel('float32[:, :, :, ::1](float32[::1], int64[:, ::1], float32[::1], int64, int64, int64, int64)')
-def _max_of_gaussians(gauss, rows, weight, n_p, n_j, h, w):
-    """Maps (P, J, h, w): the max over the rows (_gaussian_exponents' (R, 7) and weight (R,)) of
-    the outer product of weight * the row's Gaussian along v and its Gaussian along u (gauss:
-    their values); cells outside the row's cut are left alone (its Gaussian is 0 there)."""
-    maps = np.zeros((n_p, n_j, h, w), dtype=np.float32)
+@kernel('float32[::1](float32[::1], int64[:, ::1], float32[::1], int64, int64[::1], int64[::1], int64)')
+def _max_of_gaussians(gauss, rows, weight, n_j, start, cols, total):
+    """Cells (total,) of maps whose first cell is start[m] and columns cols[m] (map m = p * n_j +
+    j): the max over the rows (_gaussian_exponents' (R, 7) and weight (R,)) of the outer product
+    of weight * the row's Gaussian along v and its Gaussian along u (gauss: their values); cells
+    outside the row's cut are left alone (its Gaussian is 0 there)."""
+    cells = np.zeros(total, dtype=np.float32)
     for i in range(len(rows)):
-        p, j, u0, u1, v0, v1, start = rows[i]
+        p, j, u0, u1, v0, v1, first = rows[i]
+        m = p * n_j + j
         for r in range(v0, v1):
-            a = weight[i] * gauss[start + (u1 - u0) + (r - v0)]
+            a = weight[i] * gauss[first + (u1 - u0) + (r - v0)]
             if a == 0:
                 continue
             for c in range(u0, u1):
-                value = a * gauss[start + (c - u0)]
-                if value > maps[p, j, r, c]:
-                    maps[p, j, r, c] = value
-    return maps
+                value = a * gauss[first + (c - u0)]
+                at = start[m] + r * cols[m] + c
+                if value > cells[at]:
+                    cells[at] = value
+    return cells

@@ -495,7 +495,8 @@ def _gaussian(centre: np.ndarray, origin: np.ndarray, stride: float, shape: tupl
 def _trimmed(maps: np.ndarray, origin: np.ndarray, stride: float) -> PersonHeatmap:
     """The heatmap of maps (J, h, w) on the grid at origin (2,) with each map cut to the rows and
     columns holding its own evidence (its own origin), all padded with zeros to the largest of
-    these extents (one cell when every map is empty), as heatmap.render_heatmaps lays maps out."""
+    these extents (one cell when every map is empty); the people wire cuts each map to its own
+    evidence (HeatmapStack.trimmed)."""
     n_j, h, w = maps.shape
     rows, cols = maps.any(axis=2), maps.any(axis=1)  # (J, h), (J, w)
     has = rows.any(axis=1)

@@ -126,11 +126,11 @@ def copy_view(camera: Camera, person: Person2D, joints: np.ndarray, offset: np.n
     hm = person.heatmap
     origin = np.array(hm.origin, dtype=np.float64)
     origin[inside] += new[inside] - old[inside]
-    maps = hm.maps
-    if (~inside).any() and maps[~inside].any():
-        maps = maps.copy()
-        maps[~inside] = 0.0
-    return Person2D(keypoints, PersonHeatmap(maps=maps, origin=origin, stride=hm.stride))
+    outside = np.repeat(~inside, hm.shape[:, 0] * hm.shape[:, 1])  # per cell
+    cells = hm.cells
+    if cells[outside].any():
+        cells = np.where(outside, cells.dtype.type(0), cells)
+    return Person2D(keypoints, PersonHeatmap.from_cells(cells, hm.shape, origin, hm.stride))
 
 
 def copy_person(cameras: Sequence[Camera], person: ScenePerson, offset: np.ndarray,
