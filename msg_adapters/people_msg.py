@@ -101,9 +101,12 @@ def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
         bad = next(p for p, person in enumerate(people) if not np.isfinite(person.heatmap.cells).all())
         raise ValueError(f'{label} {bad} heatmap maps: non-finite values')
     stack = stack.trimmed()
-    with np.errstate(over='ignore'):  # an origin beyond float32 is named by the check
+    with np.errstate(over='ignore'):  # an origin moved beyond float32 is named below
         origin = stack.origin.astype(np.float32).reshape(n, 2 * J)
-    _check_people(keypoints, origin, stride, label)
+    beyond = ~np.isfinite(origin).all(axis=1)
+    if beyond.any():
+        p = int(np.argmax(beyond))
+        raise ValueError(f'{label} {p} heatmap origin: beyond float32 once its maps are cut to their evidence')
     cells = quantise(stack.values.astype(np.float32, copy=False))
     sizes = (stack.shape[..., 0] * stack.shape[..., 1]).sum(axis=1)
     n_cells = int(sizes.max())

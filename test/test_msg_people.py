@@ -218,6 +218,11 @@ def test_encoders_reject():
     inf_cell.heatmap.maps[3, 2, 7] = np.inf
     with pytest.raises(ValueError, match='person 2 heatmap maps: non-finite'):
         people_to_msg([PEOPLE[0], PEOPLE[2], inf_cell, nan_maps], _header())
+    far = np.zeros((16, 1, 8), np.float32)
+    far[:, 0, 7] = 0.5  # cut to columns 6 and 7: the origin moves 6 cells, past float32's largest
+    edge = Person2D(PEOPLE[0].keypoints, PersonHeatmap(far, np.full(2, 3.0e38), 1e37))
+    with pytest.raises(ValueError, match='person 0 heatmap origin: beyond float32 once its maps are cut'):
+        people_to_msg([edge], _header())
     with pytest.raises(ValueError, match='person 3: no views'):
         bundles_to_msg([(3, {})], _header())
     with pytest.raises(ValueError, match='person id 3: given twice'):

@@ -128,8 +128,8 @@ class HeatmapStack:
     def trimmed(self) -> HeatmapStack:
         """The stack with each map cut to the rows and columns of its non-zero cells plus one zero
         cell on each side where its grid has one (so bilinear look-ups and every draw are those of
-        the whole map); an empty map keeps one cell. The zeros a renderer pads maps with to a
-        common grid are what this removes."""
+        the whole map); an empty map keeps one cell. What goes are the zeros around a map's
+        evidence: the rest of a crop (the ONNX path), or padding to a common grid."""
         n, n_j = self.start.shape
         lo = np.empty((n * n_j, 2), dtype=np.int64)
         shape = np.empty((n * n_j, 2), dtype=np.int64)
