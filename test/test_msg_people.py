@@ -160,6 +160,7 @@ def _set(records, field, index, value):
     (lambda r: _set(r, 'grid', (1, 7), 0), r'record 1 joint 3: grid \(12, 0\), needs h, w >= 1'),
     (lambda r: _set(r, 'grid', (2, 0), 2000),
      r'record 2: its grids hold 10375 cells, more than the heatmap count 9600'),
+    (lambda r: _set(r, 'stride', 0, 3e37), r'record 0 joint 0: its map reaches pixel .*, beyond float32'),
     (lambda r: _set(r, 'keypoints', (0, 2), np.nan), 'record 0 joint 0: keypoint score is not finite'),
     (lambda r: _set(r, 'keypoints', (1, 3), np.inf), 'record 1 joint 1: keypoint u, v infinite'),
     (lambda r: _set(r, 'stride', 2, 0.0), 'record 2 heatmap stride'),
