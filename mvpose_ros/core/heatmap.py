@@ -119,12 +119,6 @@ class HeatmapStack:
                    origin=np.array([hm.origin for hm in heatmaps], dtype=np.float64).reshape(-1, n_j, 2),
                    stride=np.array([hm.stride for hm in heatmaps], dtype=np.float64))
 
-    def heatmap(self, i: int) -> PersonHeatmap:
-        """Heatmap i of the stack (its cells a view of values)."""
-        first = self.start[i, 0]
-        end = first + int((self.shape[i, :, 0] * self.shape[i, :, 1]).sum())
-        return PersonHeatmap.from_cells(self.values[first:end], self.shape[i], self.origin[i], self.stride[i])
-
     def trimmed(self) -> HeatmapStack:
         """The stack with each map cut to the rows and columns of its non-zero cells plus one zero
         cell on each side where its grid has one (so bilinear look-ups and every draw are those of
