@@ -266,6 +266,9 @@ def _update_temporal(table, total, tm, t):
     dtype = table.dtype
     n_prev, n_next, n_cur = np.empty(ma, dtype), np.empty(mc, dtype), np.empty(mb, dtype)
     pair = np.empty(ma * mc, dtype)
+    over_flat = np.empty(ma * mc, dtype)
+    over = over_flat.reshape(ma, mc)
+    to_prev, to_cur, to_next = np.empty(ma, dtype), np.empty(mb, dtype), np.empty(mc, dtype)
     scratch = np.empty(max(ma, mb, mc))
     new = np.empty(max(ma, mb, mc))
     for j in range(n_j):
@@ -276,10 +279,14 @@ def _update_temporal(table, total, tm, t):
         for a in range(ma):
             for c in range(mc):
                 pair[a * mc + c] = n_prev[a] * n_next[c]
-        over = np.dot(flat, n_cur).reshape(ma, mc)
-        _send(np.dot(over, n_next), total[t - 1, j], tm[0, t, j], new[:ma])
-        _send(np.dot(pair, flat), total[t, j], tm[1, t, j], new[:mb])
-        _send(np.dot(n_prev, over), total[t + 1, j], tm[2, t, j], new[:mc])
+        # into buffers made once: a product allocating its result cost as much as the product
+        np.dot(flat, n_cur, over_flat)
+        np.dot(over, n_next, to_prev)
+        np.dot(pair, flat, to_cur)
+        np.dot(n_prev, over, to_next)
+        _send(to_prev, total[t - 1, j], tm[0, t, j], new[:ma])
+        _send(to_cur, total[t, j], tm[1, t, j], new[:mb])
+        _send(to_next, total[t + 1, j], tm[2, t, j], new[:mc])
 
 
 @kernel('void(int64[:, ::1], float32[:, :, :, ::1], float64[:, :, ::1], float64[:, :, :, ::1])',
@@ -295,14 +302,17 @@ def _update_pairwise(edges, tables, total, pm):
     n_t, n_e, m = pm.shape[0], pm.shape[1], pm.shape[3]
     dtype = tables.dtype
     n_i, n_k = np.empty(m, dtype), np.empty(m, dtype)
+    to_i, to_k = np.empty(m, dtype), np.empty(m, dtype)
     scratch = np.empty(m)
     new = np.empty((n_e, 2, m))
     for t in range(n_t):
         for e in range(n_e):
             _cavity(total[t, edges[e, 0]], pm[t, e, 0], scratch, n_i)
             _cavity(total[t, edges[e, 1]], pm[t, e, 1], scratch, n_k)
-            _log_message_into(np.dot(tables[t, e], n_k), new[e, 0])  # BLAS, as numpy's matmul
-            _log_message_into(np.dot(n_i, tables[t, e]), new[e, 1])
+            np.dot(tables[t, e], n_k, to_i)  # BLAS, as numpy's matmul
+            np.dot(n_i, tables[t, e], to_k)
+            _log_message_into(to_i, new[e, 0])
+            _log_message_into(to_k, new[e, 1])
         for e in range(n_e):
             for side in range(2):
                 joint = edges[e, side]
