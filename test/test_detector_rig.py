@@ -23,6 +23,7 @@ from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.diagnostics_msg import msg_to_statuses
 from msg_adapters.image_msg import image_to_compressed_msg, to_bgr
 from msg_adapters.people_msg import msg_to_people
+from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
@@ -279,3 +280,44 @@ def test_the_first_set_waits_for_a_camera_info_taken_just_after_its_images(domai
     text = log.read_text()
     assert 'dropped: ' not in text and 'sets: 1 released, 1 detected' in text, text
     assert all(len(msg_to_people(o[stamp][0])) >= 2 for o in out)
+
+
+def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_project(domain, tmp_path):
+    """person_detector_every 2: the first set is searched whole (no skeletons yet); then a skeleton
+    on skeletons/live standing where nobody is (2.5 m, 0 m: shelves in all three cameras) makes the
+    next set search only around it, where MultiPose finds no one; the set after is whole again."""
+    names = ['left', 'middle', 'right']
+    rig = tmp_path / 'rig.yaml'
+    _explicit_rig(rig, names, [True, True, True])
+    jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
+    stamps = [1000 * MS + k * 40 * MS for k in range(3)]
+    joints = np.stack([2.5 + 0.05 * (np.arange(14) % 2 - 0.5), np.zeros(14), np.linspace(0.0, 0.6, 14)], axis=1)
+    log = tmp_path / 'detector.log'
+    overrides = [a for name in names for a in
+                 ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
+                  '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+    with probe(domain, 'rig_regions_probe') as (node, executor):
+        out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
+        for name, into in zip(names, out):
+            _collect(node, f'/rig/{name}/people2d', into)
+        pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
+        live = node.create_publisher(PointCloud2, '/rig/skeletons/live', DATA_QOS)
+        proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', '-p', 'sync_timeout:=20.0',
+                          '-p', 'person_detector_every:=2', *overrides)
+        try:
+            assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs + [live]), 30.0)
+            for k, stamp in enumerate(stamps):
+                if k == 1:
+                    live.publish(skeletons_to_msg(np.array([7]), joints[None], _header(stamps[0], 'world'),
+                                                  confidence=np.ones((1, 14))))
+                    assert live.wait_for_all_acked(Duration(seconds=10))
+                for c, pub in enumerate(pubs):
+                    pub.publish(CompressedImage(header=_header(stamp, f'{names[c]}_optical'), format=jpegs[c].format,
+                                                data=jpegs[c].data))
+                assert spin_until(executor, lambda: all(stamp in o for o in out), 60.0), log.read_text()
+        finally:
+            stop(proc)
+    people = [[len(msg_to_people(o[s][0])) for o in out] for s in stamps]
+    assert min(people[0]) >= 2 and people[1] == [0, 0, 0] and people[2] == people[0], people
+    assert 'Traceback' not in log.read_text()

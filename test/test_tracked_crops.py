@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
-from mvpose_ros.core.detection.tracked_crops import CropPlanner, carried_ears, projected_boxes
+from mvpose_ros.core.detection.tracked_crops import CropPlanner, carried_ears, people_region, projected_boxes
 from mvpose_ros.core.evaluation.datasets import calibration_file, data_root, dataset_dir, load_actors_gt, \
     load_actors_gt_2d
 from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
@@ -78,6 +78,20 @@ def test_multipose_runs_every_kth_set_and_while_no_skeleton_is_known():
     assert ran == [True, False, False, True, False, True, False]
     with pytest.raises(ValueError, match='person_detector_every 0 must be >= 1'):
         CropPlanner([cam], every=0)
+    # a camera whose intrinsics are not known yet runs MultiPose on its whole image
+    planner = CropPlanner([None, cam], every=3)
+    planner.update([None, None], [[], []])
+    planner.skeletons(skeleton)
+    plan = planner.plan()
+    assert plan[0] is None and plan[1].shape == (1, 4)
+
+
+def test_the_region_multipose_searches_holds_every_box_grown_by_the_margin_cut_to_the_image():
+    boxes = np.array([[100.0, 50.0, 200.0, 250.0], [400.0, 300.0, 440.0, 380.0]])
+    # first box grows by 25 / 50 px, the second by 10 / 20 px
+    np.testing.assert_allclose(people_region(boxes, (640, 480), 0.25), [75.0, 0.0, 450.0, 400.0])
+    np.testing.assert_allclose(people_region(boxes, (640, 480), 0.0), [100.0, 50.0, 440.0, 380.0])
+    np.testing.assert_allclose(people_region(boxes, (420, 390), 0.25), [75.0, 0.0, 419.5, 389.5])  # cut
 
 
 @pytest.fixture(scope='module')

@@ -19,14 +19,16 @@ second of the whole sequence; the sequence is solved as the rig graph's bp_solve
 (config/rig_template.yaml: a sliding window of sets, warm-started, the newest set out), so every
 set costs what it would there. MultiPose's runs of a set start while the set before finishes
 (OnnxPoseDetector.start_set: a worker the set's last image leaves idle takes the next set's
-first). With --person-detector-every K, MultiPose runs on every K-th set only and the sets between
-take their crops from the previous set's 3D skeletons (core.tracked_crops; a set then starts once
-the one before is solved). The files written and the score are those of the last set.
+first). With --person-detector-every K, MultiPose searches the whole image of every K-th set only;
+in the sets between, the previous set's 3D skeletons projected into each camera say where its
+people are (core.tracked_crops; a set then starts once the one before is solved): with --heatmaps
+multipose MultiPose searches only the region around them, with a smaller input at the same scale;
+with efficientpose they are EfficientPose's crops and MultiPose does not run. The files written and
+the score are those of the last set.
 
 --heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
---keypoint-sigma times the person's box diagonal) and runs no EfficientPose; its keypoints need
-MultiPose on every set, so --person-detector-every above 1 needs --heatmaps efficientpose (fused
-takes both; core.onnx_detector).
+--keypoint-sigma times the person's box diagonal) and runs no EfficientPose (fused takes both;
+core.onnx_detector).
 """
 from __future__ import annotations
 
@@ -90,8 +92,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f'{DEFAULTS.multipose_workers}; on two cores 2 with --threads 1 was faster)')
     p.add_argument('--sets', type=int, default=1, help='detect the images this many times as a sequence (default: 1)')
     p.add_argument('--person-detector-every', type=int, default=1,
-                   help='run MultiPose on every K-th set only; crops from the previous 3D skeletons between '
-                        '(default: 1, every set)')
+                   help='run MultiPose on the whole image of every K-th set only; between, where the previous '
+                        "set's 3D skeletons project: MultiPose on that region (heatmaps multipose) or EfficientPose "
+                        'on those crops (default: 1, every set)')
     p.add_argument('--heatmaps', choices=HEATMAP_SOURCES, default=DEFAULTS.heatmaps,
                    help="heatmap source: EfficientPose on crops, MultiPose's keypoints as Gaussians, or both fused "
                         f'(default: {DEFAULTS.heatmaps})')
@@ -170,10 +173,6 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
     if args.sets < 1:
         raise ValueError(f'--sets {args.sets} must be >= 1')
-    if args.heatmaps == 'multipose' and args.person_detector_every != 1:
-        raise ValueError(f'--person-detector-every {args.person_detector_every}: --heatmaps multipose takes every '
-                         'keypoint from MultiPose, which must then run on every set (crops between need '
-                         '--heatmaps efficientpose)')
     cameras, up, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
@@ -207,7 +206,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         times.append((t.multipose, t.efficientpose, t.heatmaps, end - detected, end - pending.started))
         found = ' '.join(f'cam{c}:{len(p)}' for c, p in enumerate(people))
         scored = f'; MPJPE {_mpjpe(result, args.data_root)}' if args.ground_truth == 'shelf' else ''
-        print(f'set {n}: MultiPose on {t.multipose_runs} images {1e3 * t.multipose:6.1f} ms, EfficientPose '
+        regions = f' ({t.multipose_regions} regions)' if t.multipose_regions else ''
+        print(f'set {n}: MultiPose on {t.multipose_runs} images{regions} {1e3 * t.multipose:6.1f} ms, EfficientPose '
               f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * t.heatmaps:5.1f} ms, '
               f'association and 3D {1e3 * (end - detected):5.1f} ms, total {1e3 * times[-1][4]:6.1f} ms; people '
               f'{found}; {len(result.person_ids)} in 3D{scored}', file=out)

@@ -21,7 +21,11 @@ Modes, by the parameter `camera`:
   keeps at most a sync_timeout's worth of frames per camera). The stamp of a set that reaches
   the association from no camera (dropped whole, short of `min_cameras`, or none of its images
   usable) goes out on `skeletons/dropped` (std_msgs/Header, the rig's world frame), as association
-  and bp_solver announce the frames they drop.
+  and bp_solver announce the frames they drop. With the onnx backend and `person_detector_every`
+  K > 1, MultiPose searches the whole images of every K-th set only; in the sets between, where the
+  newest skeletons on `skeletons/live` (of the rig's namespace) project: MultiPose searches only
+  that region (heatmaps multipose, core.tracked_crops.people_region) or EfficientPose takes those
+  crops.
 
 Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace)
 and frame_id. The rig's namespace is the node's own, except that a one-camera node whose
@@ -77,6 +81,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import rclpy.logging
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterException
@@ -90,13 +95,16 @@ from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_fr
 from msg_adapters.image_msg import check_camera_image, to_bgr
 from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
+from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
 from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
+from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, RigCamera
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
@@ -108,7 +116,7 @@ from mvpose_ros.nodes.health import NodeHealth
 from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, StartupError,
                                       camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
-from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, camera_topic
+from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
@@ -116,6 +124,9 @@ BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
 IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
 TYPE_RECHECK = 2.0  # s between graph look-ups of an image topic typed by its name
+# Skeletons older than this, against a set's stamp, place no one (the whole image is searched):
+# a few sets at the onnx backend's 2-5 sets per second, a walk of about a metre.
+TRACK_MAX_AGE_S = 1.0
 # parameter -> the detector configuration field it sets, applied live
 LIVE_DETECTOR = {'openpose': ('secondary_radius',),
                  'onnx': ('box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor')}
@@ -227,6 +238,12 @@ class HeatmapDetectorNode(Node):
                   'once, each with `threads` intra-op threads (two cores: 2 with threads 1 was faster)', 1, 64),
             Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
                   32, 4096),
+            Param('person_detector_every', 1, 'onnx, whole rig: MultiPose searches the whole image of every K-th '
+                  'set only; between, where the newest skeletons on skeletons/live project: MultiPose on that region '
+                  '(heatmaps multipose) or EfficientPose on those crops (MultiPose does not run)', 1, 1000),
+            Param('region_margin', onnx.region_margin, "onnx, person_detector_every > 1, heatmaps multipose: each "
+                  "person's projected box grows by this fraction of its size into the region MultiPose searches",
+                  0.0, 10.0),
             Param('box_margin', onnx.box_margin,
                   "onnx: each side of a person's box grows by this fraction of its size before the EfficientPose "
                   'crop', 0.0, 10.0, live=True),
@@ -284,6 +301,12 @@ class HeatmapDetectorNode(Node):
                 cam.input_topic = in_namespace(namespace, camera_topic(rc.name, OPENPOSE))
             self._cameras.append(cam)
         if self._whole_rig:
+            self._planner: CropPlanner | None = None
+            self._tracked: tuple[int, np.ndarray] | None = None  # (stamp ns, joints (P, 14, 3)) of the newest skeletons
+            if self._backend == 'onnx' and p['person_detector_every'] > 1:
+                self._planner = CropPlanner([c.camera for c in self._cameras], p['person_detector_every'])
+                self.create_subscription(PointCloud2, in_namespace(namespace, SKELETONS_LIVE), self._on_skeletons,
+                                         DATA_QOS)
             self._start_sets(p, rig.world_frame)
         for cam in self._cameras:
             self._subscribe(cam)
@@ -367,7 +390,8 @@ class HeatmapDetectorNode(Node):
                 box_margin=p['box_margin'], min_person_score=p['min_person_score'],
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
                 ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'], heatmaps=p['heatmaps'],
-                keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'])
+                keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'],
+                region_margin=p['region_margin'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
@@ -610,7 +634,11 @@ class HeatmapDetectorNode(Node):
                     self._drop(cam, stamp_ns(msg.header.stamp), str(image))
             images = [None if isinstance(image, ValueError) else image for image in images]
             sizes = [None if cam.camera is None else _size(cam.camera) for cam in self._cameras]
-            for cam, msg, people in zip(self._cameras, synced.items, self._detector.detect_set(images, sizes=sizes)):
+            plan = self._plan(synced.stamp_ns)
+            found = self._detector.detect_set(images, plan, None if plan is None else self._planner.previous, sizes)
+            if plan is not None:
+                self._planner.update(plan, found)
+            for cam, msg, people in zip(self._cameras, synced.items, found):
                 if people is not None:
                     outputs.append((cam, people_to_msg(people, msg.header)))
         else:
@@ -632,6 +660,27 @@ class HeatmapDetectorNode(Node):
         self.get_logger().debug(f'set {synced.index} stamp {synced.stamp_ns} ns: {len(outputs)} of '
                                 f'{len(self._cameras)} cameras, skew {synced.skew_ns / 1e6:.1f} ms, detected in '
                                 f'{1e3 * (time.perf_counter() - t0):.0f} ms; {dropped} sets dropped whole so far')
+
+    def _on_skeletons(self, msg: PointCloud2) -> None:
+        try:
+            skeletons = msg_to_skeletons(msg)
+        except ValueError as exc:
+            self._log.log(('skeletons', 'malformed'), f'skeletons/live stamp {stamp_ns(msg.header.stamp)} ns: {exc}; '
+                          f'not used to plan the next regions', 'error')
+            return
+        self._tracked = (stamp_ns(msg.header.stamp), skeletons.joints)
+
+    def _plan(self, stamp: int) -> list[np.ndarray | None] | None:
+        """With person_detector_every > 1, per camera None (MultiPose on the whole image) or where
+        the newest skeletons, if at most TRACK_MAX_AGE_S older than this set, put its people
+        (CropPlanner); None without."""
+        if self._planner is None:
+            return None
+        tracked = self._tracked
+        fresh = tracked is not None and (stamp - tracked[0]) / 1e9 <= TRACK_MAX_AGE_S
+        self._planner.cameras = [cam.camera for cam in self._cameras]
+        self._planner.skeletons(tracked[1] if fresh else np.zeros((0, NUM_JOINTS, 3)))
+        return self._planner.plan()
 
     def destroy_node(self) -> None:
         """Stop the worker (whole-rig mode) and log the totals, then destroy the node."""

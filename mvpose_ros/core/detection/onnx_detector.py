@@ -49,7 +49,7 @@ from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
 from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
 from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
                                                    load_session)
-from mvpose_ros.core.detection.tracked_crops import carried_ears
+from mvpose_ros.core.detection.tracked_crops import carried_ears, people_region
 from mvpose_ros.core.types import Person2D
 
 MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
@@ -86,7 +86,9 @@ class OnnxDetectorConfig:
     std of the Gaussians of MultiPose's keypoints there, as a fraction of the person's box
     diagonal. multipose_workers: images of a set MultiPose runs on at once, each run with `threads`
     intra-op threads: on two CPU cores two workers of threads 1 took 0.8x the time of one worker of
-    threads 0 (one run keeps both cores busy only part of the time)."""
+    threads 0 (one run keeps both cores busy only part of the time). region_margin: with heatmaps
+    'multipose' and given boxes, each box grows by this fraction of its size before MultiPose
+    searches the region holding them all (tracked_crops.people_region)."""
 
     model_dir: Path
     model: str = 'rt'
@@ -104,6 +106,7 @@ class OnnxDetectorConfig:
     heatmaps: str = 'multipose'
     keypoint_sigma: float = 0.025
     multipose_workers: int = 1
+    region_margin: float = 0.25
 
     def __post_init__(self) -> None:
         problems = []
@@ -117,8 +120,8 @@ class OnnxDetectorConfig:
             problems.append(f'threads {self.threads} and max_batch {self.max_batch} must be >= 0')
         if self.multipose_workers < 1:
             problems.append(f'multipose_workers {self.multipose_workers} must be >= 1')
-        if not self.box_margin >= 0:
-            problems.append(f'box_margin {self.box_margin} is negative')
+        if not (self.box_margin >= 0 and self.region_margin >= 0):
+            problems.append(f'box_margin {self.box_margin} and region_margin {self.region_margin} must be >= 0')
         if not (0 <= self.min_person_score <= 1 and 0 <= self.min_joint_score <= 1 and 0 <= self.heatmap_floor < 1):
             problems.append(f'min_person_score {self.min_person_score}, min_joint_score {self.min_joint_score} '
                             f'must lie in [0, 1] and heatmap_floor {self.heatmap_floor} in [0, 1)')
@@ -135,8 +138,8 @@ class DetectionTiming:
     """Wall seconds of the last set detected (detect, detect_set or finish): MultiPose (from the
     set's start to its last run's end: letterbox, waiting for a worker, runs, decode), EfficientPose
     (crops and runs), heatmaps (finish's own work besides EfficientPose: keypoints, Gaussians,
-    resampling), and total, from the start to the people; people found, and the images MultiPose
-    ran on (the others' crops were given)."""
+    resampling), and total, from the start to the people; people found, the images MultiPose
+    ran on (the others' crops were given), and of those the ones it searched in a region only."""
 
     multipose: float = 0.0
     efficientpose: float = 0.0
@@ -144,17 +147,18 @@ class DetectionTiming:
     total: float = 0.0
     people: int = 0
     multipose_runs: int = 0
+    multipose_regions: int = 0
 
 
 @dataclass
 class _Found:
     """MultiPose's people in the camera's pixels: keypoints (P, 17, 3) u, v, score; boxes (P, 4)
-    u0, v0, u1, v1 (edges, pixel-centre coordinates); size: the camera's (width, height);
-    done: time.perf_counter() when the run ended."""
+    u0, v0, u1, v1 (edges, pixel-centre coordinates); bounds: (4,) the edges of the part of the
+    image searched (the whole image, or a region); done: time.perf_counter() when the run ended."""
 
     keypoints: np.ndarray
     boxes: np.ndarray
-    size: tuple[int, int]
+    bounds: np.ndarray
     done: float
 
 
@@ -167,6 +171,7 @@ class PendingSet:
     boxes: list[np.ndarray | None]
     previous: Sequence[np.ndarray] | None
     finds: list[Future[_Found]]
+    regions: int
     started: float
 
 
@@ -210,14 +215,17 @@ class OnnxPoseDetector:
                    previous: Sequence[np.ndarray] | None = None,
                    sizes: Sequence[tuple[int, int] | None] | None = None) -> list[list[Person2D] | None]:
         """The people of each image (H, W, 3) uint8 BGR of a set (None for a camera without an
-        image: None out). boxes: per camera, None to find the people with MultiPose, else their
-        boxes (Q, 4) u0, v0, u1, v1 (pixel edges; tracked_crops.projected_boxes); previous: per
-        camera, the inference keypoints (R, 16, 3) of its people in the previous set, whose ears
-        given boxes carry; sizes: per camera, its (width, height) (None: the image's), of which a
-        smaller image is a shrunk copy (reduced_decoding): people come back in the camera's pixels.
-        ValueError naming the camera for an image that is not uint8 BGR, for boxes with heatmaps
-        'multipose' (its keypoints come from MultiPose's run on the image), and for a shrunk image
-        without it (crops are cut from the image)."""
+        image: None out). boxes: per camera, None to find the people with MultiPose in the whole
+        image, else where they are expected: boxes (Q, 4) u0, v0, u1, v1 (pixel edges;
+        tracked_crops.projected_boxes). With heatmaps 'multipose' MultiPose then searches only
+        the region around them (tracked_crops.people_region; the whole image when Q = 0), at no
+        fewer input pixels per image pixel than in the whole image, so a smaller input; else
+        EfficientPose takes them as its crops and MultiPose does not run. previous: per camera, the
+        inference keypoints (R, 16, 3) of its people in the previous set, whose ears given crops
+        carry; sizes: per camera, its (width, height) (None: the image's), of which a smaller image
+        is a shrunk copy (reduced_decoding): people come back in the camera's pixels. ValueError
+        naming the camera for an image that is not uint8 BGR, and for a shrunk image without
+        heatmaps 'multipose' (crops are cut from the image)."""
         return self.finish(self.start_set(images, boxes, previous, sizes))
 
     def reduced_decoding(self, width: int, height: int) -> int:
@@ -243,9 +251,6 @@ class OnnxPoseDetector:
         if len(boxes) != len(images) or (previous is not None and len(previous) != len(images)):
             raise ValueError(f'detect_set: {len(images)} images, {len(boxes)} box lists and '
                              f'{len(previous) if previous is not None else "no"} previous people lists')
-        if cfg.heatmaps == 'multipose' and any(b is not None for b in boxes):
-            raise ValueError("detect_set: heatmaps 'multipose' takes its keypoints from MultiPose on every image, "
-                             'not from given boxes (run the person detector on every set)')
         sizes = sizes if sizes is not None else [None] * len(images)
         if len(sizes) != len(images):
             raise ValueError(f'detect_set: {len(images)} images and {len(sizes)} sizes')
@@ -259,19 +264,25 @@ class OnnxPoseDetector:
                 raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
                                  f'got {bgr.dtype} {bgr.shape}')
         started = time.perf_counter()
-        finds = [self._start_find(bgr, size or (bgr.shape[1], bgr.shape[0]))
-                 for bgr, given, size in zip(images, boxes, sizes) if bgr is not None and given is None]
-        return PendingSet(list(images), list(boxes), previous, finds, started)
+        finds, regions = [], 0
+        for bgr, given, size in zip(images, boxes, sizes):
+            if bgr is None or not (given is None or cfg.heatmaps == 'multipose'):
+                continue
+            size = size or (bgr.shape[1], bgr.shape[0])
+            region = None if given is None or len(given) == 0 else people_region(given, size, cfg.region_margin)
+            finds.append(self._start_find(bgr, size, region))
+            regions += region is not None
+        return PendingSet(list(images), list(boxes), previous, finds, regions, started)
 
-    def _start_find(self, bgr: np.ndarray, size: tuple[int, int]) -> Future[_Found]:
+    def _start_find(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None) -> Future[_Found]:
         """_find_people on a free worker, waiting for one (at once without a pool)."""
         if self._pool is None:
             done: Future[_Found] = Future()
-            done.set_result(self._find_people(bgr, size))
+            done.set_result(self._find_people(bgr, size, region))
             return done
         self._free_workers.acquire()
         try:
-            future = self._pool.submit(self._find_people, bgr, size)
+            future = self._pool.submit(self._find_people, bgr, size, region)
         except BaseException:
             self._free_workers.release()
             raise
@@ -294,9 +305,9 @@ class OnnxPoseDetector:
         for c, (bgr, given) in enumerate(zip(images, boxes)):
             if bgr is None:
                 continue
-            if given is None:
+            if given is None or cfg.heatmaps == 'multipose':
                 found = next(finds)
-                inference = self._inference_keypoints(found.keypoints, found.size)
+                inference = self._inference_keypoints(found.keypoints, found.bounds)
                 sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
                 if cfg.heatmaps == 'multipose':
                     alone[c] = (inference, sigmas)
@@ -323,15 +334,22 @@ class OnnxPoseDetector:
         end = time.perf_counter()
         multipose = max((f.done for f in found_all), default=pending.started) - pending.started
         self.timing = DetectionTiming(multipose, t2 - t1, end - t2 + t1 - t0, end - pending.started,
-                                      sum(len(p) for p in out if p is not None), len(found_all))
+                                      sum(len(p) for p in out if p is not None), len(found_all), pending.regions)
         return out
 
-    def _find_people(self, bgr: np.ndarray, size: tuple[int, int]) -> _Found:
-        """MultiPose on the whole letterboxed frame: people scoring at least min_person_score whose
-        box holds image pixels, in the pixels of a camera of size (width, height), of which bgr is
-        a copy (shrunk where smaller)."""
-        side = self.config.input_size
-        lb = whole_image(bgr.shape[1], bgr.shape[0], side)
+    def _find_people(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None) -> _Found:
+        """MultiPose on the letterboxed frame, or on the region (4,) u0, v0, u1, v1 (camera pixel
+        edges) of it: people scoring at least min_person_score whose box holds pixels of the part
+        searched, in the pixels of a camera of size (width, height), of which bgr is a copy (shrunk
+        where smaller)."""
+        shrink = np.array(size, dtype=np.float64) / (bgr.shape[1], bgr.shape[0])  # camera px per bgr px
+        if region is None:
+            side = self.config.input_size
+            lb = whole_image(bgr.shape[1], bgr.shape[0], side)
+        else:
+            box = (np.asarray(region, dtype=np.float64).reshape(2, 2) + 0.5) / shrink - 0.5
+            side = region_input_side(box[1] - box[0], (bgr.shape[1], bgr.shape[0]), self.config.input_size)
+            lb = letterbox(bgr.shape[1], bgr.shape[0], box.reshape(4), side)
         rgb = lb.apply(bgr)[None, ..., ::-1].astype(np.int32)  # BGR -> RGB on the small input, not the image
         (out,) = self._multipose.run([MULTIPOSE.output_name], {MULTIPOSE.input_name: rgb})
         rows = out[0]
@@ -341,24 +359,24 @@ class OnnxPoseDetector:
         yx = rows[:, :n].reshape(-1, _MULTIPOSE_KEYPOINTS, 3)
         uv = lb.to_image(yx[..., 1::-1] * side - 0.5)
         corners = lb.to_image(rows[:, [n + 1, n, n + 3, n + 2]].reshape(-1, 2, 2) * side - 0.5)
+        x0, y0, x1, y1 = lb.roi
+        bounds = np.array([x0, y0, x1, y1], dtype=np.float64) - 0.5  # edges of the pixels searched
         if (bgr.shape[1], bgr.shape[0]) != tuple(size):  # a shrunk copy: to the camera's pixels, edges to edges
-            scale = np.array(size, dtype=np.float64) / (bgr.shape[1], bgr.shape[0])
-            uv, corners = (uv + 0.5) * scale - 0.5, (corners + 0.5) * scale - 0.5
+            uv, corners = (uv + 0.5) * shrink - 0.5, (corners + 0.5) * shrink - 0.5
+            bounds = (bounds + 0.5) * np.tile(shrink, 2) - 0.5
         keypoints = np.concatenate([uv, yx[..., 2:]], axis=-1)
         boxes = corners.reshape(-1, 4)
-        edge = np.array(size) - 0.5
-        keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > -0.5) & (boxes[:, :2] < edge)).all(axis=1)
-        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), tuple(size),
+        keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > bounds[:2]) & (boxes[:, :2] < bounds[2:])).all(axis=1)
+        return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), bounds,
                       time.perf_counter())
 
-    def _inference_keypoints(self, coco: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    def _inference_keypoints(self, coco: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         """MultiPose's COCO keypoints (P, 17, 3) as inference joints (P, 16, 3): those scoring below
-        min_joint_score or outside the camera's (width, height) image (letterbox padding) missing,
-        the ears too without `ears`."""
+        min_joint_score or outside the part of the image searched, bounds (4,) u0, v0, u1, v1
+        (letterbox padding), missing, the ears too without `ears`."""
         keypoints = to_inference(coco, 'coco17')
-        edge = np.array(size) - 0.5
         with np.errstate(invalid='ignore'):  # NaN rows are missing already
-            inside = ((keypoints[..., :2] >= -0.5) & (keypoints[..., :2] <= edge)).all(axis=-1)
+            inside = ((keypoints[..., :2] >= bounds[:2]) & (keypoints[..., :2] <= bounds[2:])).all(axis=-1)
         drop = (keypoints[..., 2] < self.config.min_joint_score) | ~inside
         if not self.config.ears:
             drop[:, _EARS] = True
@@ -418,6 +436,14 @@ class OnnxPoseDetector:
         if not (keypoints[:, 2] > 0).any():
             return None
         return Person2D(keypoints, _trimmed(maps, origin, float(cfg.stride)))
+
+
+def region_input_side(extent: np.ndarray, image: tuple[int, int], input_size: int) -> int:
+    """MultiPose's input side for a region of extent (2,) width, height of an image (width, height)
+    whose whole letterbox is input_size: at least as many input pixels per image pixel, rounded up
+    to the model's multiple of 32, at most input_size."""
+    side = input_size * float(np.max(extent)) / max(image)
+    return int(min(input_size, max(32, 32 * np.ceil(side / 32))))
 
 
 def keypoint_people(keypoints: np.ndarray, sigmas: np.ndarray, stride: float) -> list[Person2D]:

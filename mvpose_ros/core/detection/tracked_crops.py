@@ -1,9 +1,11 @@
-"""Person crops without the person detector: the previous set's 3D skeletons projected into each
-camera give a box around each person's joints, and the ears (which only MoveNet MultiPose gives)
-are carried from the camera's previous people along with their neck.
+"""Where people are expected, from the previous set's 3D skeletons projected into each camera: a
+box around each person's joints, and the ears (which only MoveNet MultiPose gives) carried from
+the camera's previous people along with their neck.
 
-Between two runs of MultiPose (every `person_detector_every`-th set) EfficientPose then works on
-these crops alone; someone who enters the view is found at the next MultiPose run.
+Between two runs of MultiPose on the whole image (every `person_detector_every`-th set),
+EfficientPose works on these boxes as its crops, or, with heatmaps 'multipose', MultiPose searches
+only the region around them (people_region); someone who enters the view elsewhere is found at the
+next whole-image run.
 """
 from __future__ import annotations
 
@@ -45,6 +47,16 @@ def projected_boxes(joints: np.ndarray, camera: Camera, margin: float = JOINT_BO
     return np.concatenate([np.maximum(lo - grow, -0.5), np.minimum(hi + grow, edge)], axis=1)
 
 
+def people_region(boxes: np.ndarray, size: tuple[int, int], margin: float) -> np.ndarray:
+    """(4,) u0, v0, u1, v1: the part of a camera's (width, height) image MultiPose searches for
+    people expected in boxes (Q >= 1, 4) (projected_boxes): each box grown on every side by margin
+    times its size (their motion since), then the box around them all, cut to the image."""
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    grow = margin * (boxes[:, 2:] - boxes[:, :2])
+    lo, hi = (boxes[:, :2] - grow).min(axis=0), (boxes[:, 2:] + grow).max(axis=0)
+    return np.concatenate([np.maximum(lo, -0.5), np.minimum(hi, np.array(size, dtype=np.float64) - 0.5)])
+
+
 def carried_ears(neck: np.ndarray, previous: np.ndarray, size: float, gate: float = EAR_GATE) -> np.ndarray:
     """(2, 3) r_ear, l_ear keypoints (u, v, score) of a person whose neck is now at neck (3,) (u, v,
     score), from the camera's previous people's inference keypoints previous (Q, 16, 3): the ears
@@ -71,9 +83,10 @@ def carried_ears(neck: np.ndarray, previous: np.ndarray, size: float, gate: floa
 class CropPlanner:
     """Which cameras of the next set run MultiPose and which get crops from skeletons: MultiPose
     runs on every camera of every `every`-th set, and of any set while no skeletons are known
-    (or the last ones held nobody); in between, every camera gets its projected_boxes."""
+    (or the last ones held nobody); in between, every camera gets its projected_boxes (a camera
+    whose intrinsics are not known yet, None in `cameras`, runs MultiPose)."""
 
-    def __init__(self, cameras: Sequence[Camera], every: int = 1) -> None:
+    def __init__(self, cameras: Sequence[Camera | None], every: int = 1) -> None:
         if every < 1:
             raise ValueError(f'person_detector_every {every} must be >= 1')
         self.cameras = list(cameras)
@@ -86,7 +99,7 @@ class CropPlanner:
         """Per camera, None (run MultiPose) or the boxes (Q, 4) of the next set's crops."""
         if self._since == 0 or self._since >= self.every or len(self._joints) == 0:
             return [None] * len(self.cameras)
-        return [projected_boxes(self._joints, camera) for camera in self.cameras]
+        return [None if camera is None else projected_boxes(self._joints, camera) for camera in self.cameras]
 
     def update(self, plan: Sequence[np.ndarray | None], people: Sequence[Sequence[Person2D] | None]) -> None:
         """After a set was detected with `plan`: its people per camera (None: no image), whose
