@@ -141,6 +141,22 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
     assert 'Traceback' not in text
 
 
+def _reliable_images(names: list[str]) -> list[str]:
+    """Node arguments subscribing each camera's images reliable and deep, so that every image sent
+    reaches the node: what is dropped, the node drops."""
+    return [a for name in names for a in
+            ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
+             '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+
+
+def _people_outputs(node, names: list[str]) -> list[dict[int, list[PointCloud2]]]:
+    """Per camera, its people2d messages by stamp, as they come."""
+    out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
+    for name, into in zip(names, out):
+        _collect(node, f'/rig/{name}/people2d', into)
+    return out
+
+
 def _dropped_since_start(arrays: list[DiagnosticArray], camera: str) -> int:
     """The input `camera`'s 'dropped since start' in the newest diagnostics that report it (0 before any)."""
     counts = [int(s.values['dropped since start']) for a in arrays for s in msg_to_statuses(a)
@@ -173,16 +189,11 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
     sets = 8
     stamps = [[1000 * MS + k * 40 * MS + offsets[c] + jitter[c][k] for k in range(sets)] for c in range(3)]
     log = tmp_path / 'detector.log'
-    # every image reaches the synchroniser here (reliable, deep): what is dropped, the node drops. A
-    # burst of images can overflow the transport, and reliable DDS repairs that only at its next
+    # A burst of images can overflow the transport, and reliable DDS repairs that only at its next
     # heartbeat (seconds): sync_timeout covers it, so a set waits for its late images.
-    overrides = [a for name in names for a in
-                 ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
-                  '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+    overrides = _reliable_images(names)
     with probe(domain, 'rig_sets_probe') as (node, executor):
-        out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
-        for name, into in zip(names, out):
-            _collect(node, f'/rig/{name}/people2d', into)
+        out = _people_outputs(node, names)
         dropped: list[Header] = []
         node.create_subscription(Header, '/rig/skeletons/dropped', dropped.append, DATA_QOS)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
@@ -250,18 +261,14 @@ def test_the_first_set_waits_for_a_camera_info_taken_just_after_its_images(domai
     jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
     stamp = 1000 * MS
     log = tmp_path / 'detector.log'
-    overrides = [a for name in names for a in
-                 ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
-                  '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+    overrides = _reliable_images(names)
     # The set waits for the CameraInfo at most sync_timeout. In one loaded suite run the node took
     # that CameraInfo 2.6 s after it was sent (most likely DDS holding it until the node had
     # discovered this probe's writer), and the default 0.5 s lost the set: the wait is what is
     # tested here, not how quick discovery is.
     overrides += ['-p', 'sync_timeout:=20.0']
     with probe(domain, 'rig_first_set_probe') as (node, executor):
-        out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
-        for name, into in zip(names, out):
-            _collect(node, f'/rig/{name}/people2d', into)
+        out = _people_outputs(node, names)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         info = node.create_publisher(CameraInfo, '/rig/right/camera_info', RELIABLE)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
@@ -293,13 +300,9 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
     stamps = [1000 * MS + k * 40 * MS for k in range(3)]
     joints = np.stack([2.5 + 0.05 * (np.arange(14) % 2 - 0.5), np.zeros(14), np.linspace(0.0, 0.6, 14)], axis=1)
     log = tmp_path / 'detector.log'
-    overrides = [a for name in names for a in
-                 ('-p', f'qos_overrides./rig/{name}/image/compressed.subscription.reliability:=reliable',
-                  '-p', f'qos_overrides./rig/{name}/image/compressed.subscription.depth:=30')]
+    overrides = _reliable_images(names)
     with probe(domain, 'rig_regions_probe') as (node, executor):
-        out: list[dict[int, list[PointCloud2]]] = [{} for _ in names]
-        for name, into in zip(names, out):
-            _collect(node, f'/rig/{name}/people2d', into)
+        out = _people_outputs(node, names)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         live = node.create_publisher(PointCloud2, '/rig/skeletons/live', DATA_QOS)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
