@@ -257,6 +257,23 @@ def test_trimmed_maps_look_up_peak_and_draw_as_the_whole_maps():
     np.testing.assert_array_equal(again.origin, cut.origin)
 
 
+def test_a_person_heatmap_trimmed_is_its_stacks_trimmed():
+    """PersonHeatmap.trimmed, as the ONNX backend cuts a crop's maps: the stack's cut of it, so it
+    looks up as the whole maps."""
+    maps = np.zeros((3, 20, 30), dtype=np.float32)
+    maps[0, 4:7, 10:14] = 0.5
+    maps[2, 15, 2] = 1.0
+    whole = PersonHeatmap(maps, np.array([100.0, 40.0]), 4.0)
+    cut = whole.trimmed()
+    stack = HeatmapStack.of([whole]).trimmed()
+    np.testing.assert_array_equal(cut.cells, stack.values)
+    np.testing.assert_array_equal(cut.shape, stack.shape[0])
+    np.testing.assert_array_equal(cut.origin, stack.origin[0])
+    assert cut.shape.tolist() == [[5, 6], [1, 1], [3, 3]] and cut.stride == 4.0
+    uv = np.random.default_rng(5).uniform([90.0, 30.0], [230.0, 130.0], (3, 200, 2))
+    np.testing.assert_allclose(cut.lookup(uv), whole.lookup(uv), rtol=1e-6, atol=1e-12)
+
+
 def test_an_empty_stack():
     stack = HeatmapStack.of([])
     assert stack.peak().shape == (0, 0, 3)

@@ -88,6 +88,12 @@ class PersonHeatmap:
         map gives (NaN, NaN, 0), the keypoint convention for a missing joint."""
         return HeatmapStack.of([self]).peak()[0]
 
+    def trimmed(self) -> PersonHeatmap:
+        """This heatmap with each map cut to its evidence (HeatmapStack.trimmed: the same look-ups
+        and draws)."""
+        stack = HeatmapStack.of([self]).trimmed()
+        return PersonHeatmap.from_cells(stack.values, stack.shape[0], stack.origin[0], self.stride)
+
 
 @dataclass
 class HeatmapStack:

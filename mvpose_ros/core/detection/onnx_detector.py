@@ -435,7 +435,8 @@ class OnnxPoseDetector:
         maps[(maps < cfg.heatmap_floor * peak) | (keypoints[:, 2] <= 0)[:, None, None]] = 0.0
         if not (keypoints[:, 2] > 0).any():
             return None
-        return Person2D(keypoints, _trimmed(maps, origin, float(cfg.stride)))
+        # a crop's maps cover the crop: each is cut to its evidence
+        return Person2D(keypoints, PersonHeatmap(maps, origin, float(cfg.stride)).trimmed())
 
 
 def region_input_side(extent: np.ndarray, image: tuple[int, int], input_size: int) -> int:
@@ -516,22 +517,3 @@ def _gaussian(centre: np.ndarray, origin: np.ndarray, stride: float, shape: tupl
     gu = np.where(np.abs(du) <= MARGIN_SIGMAS * sigma, np.exp(-0.5 * (du / sigma) ** 2), 0.0)
     gv = np.where(np.abs(dv) <= MARGIN_SIGMAS * sigma, np.exp(-0.5 * (dv / sigma) ** 2), 0.0)
     return (min(float(centre[2]), 1.0) * gv[:, None] * gu[None, :]).astype(np.float32)
-
-
-def _trimmed(maps: np.ndarray, origin: np.ndarray, stride: float) -> PersonHeatmap:
-    """The heatmap of maps (J, h, w) on the grid at origin (2,) with each map cut to the rows and
-    columns holding its own evidence (its own origin), all padded with zeros to the largest of
-    these extents (one cell when every map is empty); the people wire cuts each map to its own
-    evidence (HeatmapStack.trimmed)."""
-    n_j, h, w = maps.shape
-    rows, cols = maps.any(axis=2), maps.any(axis=1)  # (J, h), (J, w)
-    has = rows.any(axis=1)
-    r0 = np.where(has, rows.argmax(axis=1), 0)
-    c0 = np.where(has, cols.argmax(axis=1), 0)
-    r1 = np.where(has, h - rows[:, ::-1].argmax(axis=1), 1)
-    c1 = np.where(has, w - cols[:, ::-1].argmax(axis=1), 1)
-    out_h, out_w = int((r1 - r0).max()), int((c1 - c0).max())
-    padded = np.pad(maps, ((0, 0), (0, out_h), (0, out_w)))
-    cut = padded[np.arange(n_j)[:, None, None], (r0[:, None] + np.arange(out_h))[:, :, None],
-                 (c0[:, None] + np.arange(out_w))[:, None, :]]
-    return PersonHeatmap(cut, origin + stride * np.stack([c0, r0], axis=1).astype(np.float64), stride)
