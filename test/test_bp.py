@@ -203,11 +203,14 @@ def test_kernels_give_the_numpy_messages(t_len, n_joints, m, dtype):
 
 
 @pytest.mark.parametrize('shape', [(4, 3, 16), (2, 0, 5), (1, 2, 1)])
-def test_marginals_are_numpys_softmax_to_the_bit(shape):
+def test_marginals_are_numpys_softmax_to_an_ulp_of_exp(shape):
+    """numpy's arithmetic; only exp may round differently: numpy's vectorised exp on AVX-512 CPUs
+    differs from libm's (the kernel's) by an ulp for about 5% of values, so a few ulps are allowed."""
     rng = np.random.default_rng(8)
     data = rng.uniform(1e-3, 1.0, shape)
     chain = ChainBP.build(data, [None] * shape[0])
     x = chain.total
     e = np.exp(x - x.max(axis=-1, keepdims=True))
-    np.testing.assert_array_equal(chain.marginals(), e / e.sum(axis=-1, keepdims=True))
-    np.testing.assert_array_equal(chain.marginals_at(shape[0] - 1), (e / e.sum(axis=-1, keepdims=True))[-1])
+    np.testing.assert_array_max_ulp(chain.marginals(), e / e.sum(axis=-1, keepdims=True), maxulp=4)
+    np.testing.assert_array_max_ulp(chain.marginals_at(shape[0] - 1), (e / e.sum(axis=-1, keepdims=True))[-1],
+                                    maxulp=4)

@@ -199,7 +199,8 @@ def _log(data: np.ndarray) -> np.ndarray:
 
 @kernel('float64[:, ::1](float64[:, ::1])')
 def _softmax_rows(x):
-    """Each row of x (N, M) exponentiated and normalised, numpy's arithmetic to the bit."""
+    """Each row of x (N, M) exponentiated and normalised, numpy's arithmetic (exp is libm's: numpy's
+    vectorised exp on AVX-512 CPUs rounds some values an ulp differently)."""
     out = np.empty_like(x)
     for i in range(x.shape[0]):
         top = x[i].max()
