@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import importlib
 import time
-from typing import Any
+from typing import Any, Iterator
 
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -50,7 +50,7 @@ from std_msgs.msg import Empty
 from msg_adapters.cdr_header import NS, header_stamp_ns, with_header_stamp
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
-from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped
+from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped, preloaded_passes
 from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.health.monitor import NodeMonitor, node_status
@@ -131,6 +131,8 @@ class BagPlayerNode(Node):
                   0.001, 3600.0),
             Param('ack_timeout', 0.0, 'rate 0: s without an ack after which the oldest frame in flight is given up '
                   '(0 = wait forever)', 0.0, 3600.0, live=True),
+            Param('preload_mib', 256.0, 'MiB of messages read into memory before playing: a bag within it replays '
+                  'from memory, every loop; of a larger one the rest is read while playing', 0.0, 1e6),
         ])
 
     def _configure(self) -> None:
@@ -173,15 +175,17 @@ class BagPlayerNode(Node):
             self.create_subscription(Empty, p['start_topic'], self._on_start, START_QOS)
 
         self._unit = 'sets' if p['sets'] else 'frames'
-        if p['sets']:
-            cameras = images or inputs
-            if not cameras:
-                raise StartupError(f'parameter sets: {self._bag} has no image (or cam<c>/openpose) topic to '
-                                   f'synchronise')
-            self._frames = looped(lambda: group_sets(read_bag(self._bag, self._topics), cameras, p['max_skew'],
-                                                     p['sync_timeout'], has_header), self._loops)
-        else:
-            self._frames = looped(lambda: group_frames(read_bag(self._bag, self._topics)), self._loops)
+        cameras = images or inputs
+        if p['sets'] and not cameras:
+            raise StartupError(f'parameter sets: {self._bag} has no image (or cam<c>/openpose) topic to '
+                               f'synchronise')
+
+        def read_pass() -> Iterator[Frame]:
+            messages = read_bag(self._bag, self._topics)
+            if p['sets']:
+                return group_sets(messages, cameras, p['max_skew'], p['sync_timeout'], has_header)
+            return group_frames(messages)
+        self._frames = looped(preloaded_passes(read_pass, int(p['preload_mib'] * 2 ** 20)), self._loops)
         self._next = None  # the (loop, offset, frame) to publish next
         self._first_ns = None
         self._start = 0.0
