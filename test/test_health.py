@@ -59,6 +59,18 @@ def test_every_input_silent_is_only_warn_and_a_slow_camera_is_warn():
     assert _levels(slow, 10.0) == [Level.OK, Level.OK, Level.WARN]  # 10 Hz < 0.5 x 25 Hz
 
 
+def test_typical_interval_is_the_median_gap_of_the_window_and_ignores_bursts_and_older_arrivals():
+    monitor = _inputs([25.0], 10.0)[0]
+    assert monitor.typical_interval(10.0, 5.0) == pytest.approx(0.04)
+    for t in (10.0, 10.001, 10.002):  # a burst after a stall moves the median little
+        monitor.received(t)
+    assert monitor.typical_interval(10.0, 5.0) == pytest.approx(0.04)
+    assert monitor.typical_interval(20.0, 5.0) is None  # nothing in the window: no pace known
+    slow = _inputs([2.0], 10.0)[0]
+    assert slow.typical_interval(10.0, 5.0) == pytest.approx(0.5)
+    assert InputMonitor('cam0', 0.0).typical_interval(1.0, 5.0) is None
+
+
 def test_drops_above_the_thresholds_are_warn_then_error():
     monitors = _inputs([25.0] * 2, 10.0)
     for k in range(10):  # 10 of the last 125 messages: 8 %

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import time
 
 import numpy as np
 import pytest
@@ -308,6 +309,40 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     assert 'bundles stamp 12160000000 ns came after stamp 12200000000 ns: late or duplicate, dropped' in text
     assert 'bundles stamp 12200000000 ns came after stamp 12200000000 ns: late or duplicate, dropped' in text
     assert 'bundles stamp 12640000000 ns' in text and 'published with no people' in text
+
+
+def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input_ends(domain, shelf, tmp_path):
+    """Default idle_flush (automatic): bundles every ~0.1 s, then none. The frames still held back by
+    the lag come out once the input has been silent for IDLE_PERIODS (3) times its typical interval,
+    as the node logs it: about 0.3 s here, set by the input's pace (the fixed wait was 1 s)."""
+    cameras, raw = shelf
+    frames = list(range(300, 312))
+    associator = Associator(cameras, AssociationConfig())
+    wire = []
+    for f in frames:
+        people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
+        wire.append(bundles_to_msg([(o.person_id, o.views) for o in associator.update(f, people)],
+                                   _header(f, 'world')))
+    log = tmp_path / 'bp.log'
+    with probe(domain, 'bp_probe') as (node, executor):
+        skeletons: dict[int, list] = {}
+        _collect(node, '/skeletons', PointCloud2, skeletons)
+        pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+        proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=3')
+        try:
+            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            sent = []
+            for msg in wire:
+                pub.publish(msg)
+                sent.append(time.monotonic())
+                spin_until(executor, lambda: False, 0.1)  # the input's pace, not a wait for a result
+            assert spin_until(executor, lambda: len(skeletons) == len(frames)), log.read_text()
+        finally:
+            stop(proc)
+    flushes = [float(x) for x in re.findall(r'no input for ([0-9.]+) s: output the 3 pending frames', log.read_text())]
+    assert len(flushes) == 1, log.read_text()
+    assert flushes[0] == pytest.approx(3 * np.median(np.diff(sent)), rel=0.5)
+    assert sorted(skeletons) == frames and all(len(v) == 1 for v in skeletons.values())
 
 
 def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_them(domain, shelf, tmp_path):

@@ -18,11 +18,15 @@ duplicate, or out of order), which is logged and dropped; a message larger than 
 of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged), and not even
 deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD. With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
-decoded and published. A bundle that has waited more than `max_wait` seconds since DDS received
-it (solving slower than the input: a crowd on a small machine) is dropped unsolved, logged,
-counted, and its stamp published on skeletons/dropped (std_msgs/Header, the world frame: that
-frame gets no skeletons, so a subscriber need not wait for it), so the queue and the latency stay
-bounded (the node runs rclpy's single-threaded executor for that receipt time: nodes.runtime.run).
+decoded and published; by default (0) that wait is IDLE_PERIODS times the input's typical
+interval (the median between DDS receipts over the last PACE_WINDOW_S s; 1 / frame_rate before two
+came), so a replay's last frames come out a few frame periods after its end, not a fixed second
+later, and a slow input (sets seconds apart) still gets its lag. A bundle that has waited more
+than `max_wait` seconds since DDS received it (solving slower than the input: a crowd on a small
+machine) is dropped unsolved, logged, counted, and its stamp published on skeletons/dropped
+(std_msgs/Header, the world frame: that frame gets no skeletons, so a subscriber need not wait for
+it), so the queue and the latency stay bounded (the node runs rclpy's single-threaded executor for
+that receipt time: nodes.runtime.run).
 A rig without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
 published with no people (logged).
 
@@ -70,6 +74,10 @@ from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, dec
                                       load_rig_parameter, rig_parameters, run)
 
 IDLE_CHECK_S = 0.1
+# automatic idle_flush: the pending frames are output after this many typical input intervals
+# without input (3: a set or two lost upstream, and the jitter of a loaded graph, do not trigger it)
+IDLE_PERIODS = 3
+PACE_WINDOW_S = 5.0  # s of receipts the typical interval is the median over
 REPORT_EVERY = 100  # frames between timing lines
 # published once and kept for late subscribers (RViz opened after the solver)
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -87,8 +95,9 @@ class BpSolverNode(Node):
         p = declare(self, [
             *rig_parameters(),
             *parameter_specs(SOLVER_PARAMETERS),
-            Param('idle_flush', 1.0, 's without input after which every pending frame is output', 0.01, 3600.0,
-                  live=True),
+            Param('idle_flush', 0.0, 's without input after which every pending frame is output (0: '
+                                     f'{IDLE_PERIODS} x the median time between the inputs of the last '
+                                     f'{PACE_WINDOW_S:g} s)', 0.0, 3600.0, live=True),
             Param('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
                                           'keep it above the time between two frames', 0.0, 3600.0, live=True),
             Param('max_wait', 5.0, 's a bundle may wait after DDS received it; an older one is dropped unsolved '
@@ -111,6 +120,7 @@ class BpSolverNode(Node):
                                       config.solver, rig.up)
         self._byte_limit: int | None = None  # of a bundles message, once every camera's size is known
         self._idle = p['idle_flush']
+        self._period = 1.0 / p['frame_rate']
         self._marker_lifetime = p['marker_lifetime']
         self._max_wait = p['max_wait']
         self._cameras_sent = False
@@ -174,13 +184,14 @@ class BpSolverNode(Node):
         its bytes exceed what the rig's cameras can send, else deserialised and solved."""
         self._last_input = arrival = time.monotonic()
         waited = (time.time_ns() - info['received_timestamp']) / 1e9
+        received = arrival - max(0.0, waited)  # the input's own pace, not the pace this node takes it at
         try:
             stamp = header_stamp_ns(cdr)
         except ValueError as exc:
-            self._bundles_in.received(arrival, None)
+            self._bundles_in.received(received, None)
             self._drop_malformed(arrival, cdr, None, exc)
             return
-        self._bundles_in.received(arrival, stamp)
+        self._bundles_in.received(received, stamp)
         if self._max_wait and waited > self._max_wait:
             self._bundles_in.dropped(arrival, 'behind')
             self._log.log(('bundles', 'behind'), f'bundles stamp {stamp} ns waited {waited:.2f} s since it was '
@@ -276,9 +287,11 @@ class BpSolverNode(Node):
     def _on_timer(self) -> None:
         if not self._cameras_sent:
             self._publish_cameras()
-        if self._stamps and time.monotonic() - self._last_input >= self._idle:
+        now = time.monotonic()
+        idle = self._idle or IDLE_PERIODS * (self._bundles_in.typical_interval(now, PACE_WINDOW_S) or self._period)
+        if self._stamps and now - self._last_input >= idle:
             results = self._inference.flush()
-            self.get_logger().info(f'no input for {self._idle} s: output the {len(results)} pending frames')
+            self.get_logger().info(f'no input for {idle:.2f} s: output the {len(results)} pending frames')
             for result in results:
                 self._publish(result, self._stamps.pop(result.frame))
 

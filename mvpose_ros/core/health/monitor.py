@@ -71,6 +71,11 @@ class InputMonitor:
         if stamp_ns is not None:
             self.newest_stamp = stamp_ns if self.newest_stamp is None else max(self.newest_stamp, stamp_ns)
 
+    def typical_interval(self, now: float, window: float) -> float | None:
+        """Median time (s) between its arrivals of the last `window` s; None with fewer than two."""
+        times = np.array([t for t, _ in self._arrivals.items if t >= now - window])
+        return float(np.median(np.diff(times))) if times.size > 1 else None
+
     def dropped(self, now: float, reason: str) -> None:
         """One of its messages was dropped (late, malformed, ...)."""
         self._drops.add(now, reason)
