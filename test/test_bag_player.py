@@ -180,6 +180,30 @@ def test_loops_shift_stamps_on_and_clock_follows(probe, tmp_path):
     assert [stamp for stamp, _, _ in by_topic['/clock']] == expected
 
 
+@pytest.mark.parametrize('preload_mib', [256.0, 0.0])
+def test_a_bag_within_preload_mib_is_read_before_it_plays_and_loops_from_memory(probe, tmp_path, preload_mib):
+    """The bag's files are deleted once the player is up: read into memory, it still plays both loops;
+    read while playing (preload_mib 0), it cannot, and says so in one line (exit 2)."""
+    node, executor = probe
+    frames = range(300, 304)
+    bag = _make_bag(tmp_path / 'bag', frames, cameras=1, camera_info=False)
+    received = []
+    subs = [_listen(node, '/cam0/openpose', PointCloud2, received)]
+    proc, log = _player(tmp_path, f'bag:={bag}', 'rate:=4.0', 'loops:=2', f'start_topic:={START}',
+                        f'preload_mib:={preload_mib}')
+    assert _spin_until(executor, lambda: 'playing' in log.read_text() or proc.poll() is not None), log.read_text()
+    for f in bag.iterdir():
+        f.unlink()
+    _start_when_matched(node, executor, proc, log, subs)
+    if preload_mib:
+        assert _run_to_end(executor, proc, lambda: len(received) >= 2 * len(frames)) == 0, log.read_text()
+        assert [bytes(m.data).decode() for _, _, m, _ in received] == [f'{f}/0' for f in frames] * 2
+    else:
+        assert _run_to_end(executor, proc, lambda: True) == 2, log.read_text()
+        fatal = [line for line in log.read_text().splitlines() if 'FATAL' in line]
+        assert len(fatal) == 1 and str(bag) in fatal[0] and received == [], log.read_text()
+
+
 def test_rate_zero_runs_at_most_max_in_flight_frames_ahead_of_acks(probe, tmp_path):
     node, executor = probe
     frames = range(300, 310)

@@ -22,7 +22,7 @@ from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from mvpose_ros.core.evaluation.datasets import shelf_cameras, dataset_cameras, calibration_file
 from mvpose_ros.bags import recipes
-from mvpose_ros.bags.io import bag_summary, has_header, read_bag, typestore, write_bag
+from mvpose_ros.bags.io import bag_size, bag_summary, has_header, read_bag, typestore, write_bag
 from mvpose_ros.bags.recipes import campus_image, campus_recipe, shelf_recipe
 from mvpose_ros.cli.make_bag import main as make_bag
 from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir
@@ -294,6 +294,14 @@ def scrambled_chunk(data: bytes) -> bytes:
     start = len(out) // 20
     out[start:start + 4096] = bytes(b ^ 0x5A for b in out[start:start + 4096])
     return bytes(out)
+
+
+def test_bag_size_is_the_bytes_of_its_files(shelf_bag, tmp_path):
+    files = [f for f in shelf_bag.iterdir() if f.is_file()]
+    assert bag_size(shelf_bag) == sum(f.stat().st_size for f in files) > 0
+    assert {f.suffix for f in files} >= {'.yaml', '.mcap'}
+    with pytest.raises(FileNotFoundError, match='bag not found'):
+        bag_size(tmp_path / 'missing')
 
 
 @pytest.mark.parametrize('how', [truncated, garbage, scrambled_chunk])

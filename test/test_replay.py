@@ -4,8 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.bags.replay import (FRAME_PERIOD_NS, Frame, InFlight, due_s, group_frames, loop_offset_ns, looped,
-                                    preloaded_passes)
+from mvpose_ros.bags.replay import FRAME_PERIOD_NS, Frame, InFlight, due_s, group_frames, loop_offset_ns, looped
 
 S = 1_000_000_000
 
@@ -39,41 +38,6 @@ def test_loop_offsets_keep_the_frame_spacing_across_the_seam():
     assert loop_offset_ns(2, first, first) == 2 * FRAME_PERIOD_NS
     with pytest.raises(ValueError):
         loop_offset_ns(-1, first, last)
-
-
-def test_a_bag_within_the_preload_budget_is_read_once_and_replayed_from_memory():
-    stamps = [300 * FRAME_PERIOD_NS + k * FRAME_PERIOD_NS for k in range(6)]
-    reads = []
-    read_frames = []
-
-    def read_pass():
-        reads.append(1)
-        for frame in group_frames(_messages(stamps)):
-            read_frames.append(frame.stamp_ns)
-            yield frame
-
-    frame_bytes = sum(len(m[3]) for m in _messages(stamps[:1]))
-    whole = preloaded_passes(read_pass, 6 * frame_bytes)
-    assert len(reads) == 1 and read_frames == stamps  # read before anything plays
-    out = list(looped(whole, 3))
-    assert len(reads) == 1 and [f.stamp_ns for _, _, f in out] == stamps * 3
-
-    reads.clear()
-    read_frames.clear()
-    part = preloaded_passes(read_pass, 2 * frame_bytes)  # the first three frames go over the budget
-    assert read_frames == stamps[:3]
-    out = list(looped(part, 2))
-    assert len(reads) == 2 and [f.stamp_ns for _, _, f in out] == stamps * 2
-    assert list(looped(preloaded_passes(read_pass, 0), 1))[0][2].stamp_ns == stamps[0]
-
-
-def test_damage_in_a_preloaded_bag_is_raised_before_anything_plays():
-    def read_pass():
-        yield from group_frames(_messages([S]) + _messages([2 * S]))
-        raise ValueError('bag: damaged bag (chunk 3)')
-
-    with pytest.raises(ValueError, match='damaged'):
-        preloaded_passes(read_pass, 2 ** 20)
 
 
 def test_looped_replays_every_frame_with_strictly_increasing_stamps():

@@ -160,6 +160,14 @@ def bag_summary(path: str | Path) -> BagSummary:
                           reader.end_time - 1 if count else None, dict(custom))
 
 
+def bag_size(path: str | Path) -> int:
+    """Bytes of the bag's files as stored (chunks compressed or not); FileNotFoundError when absent."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f'bag not found: {path}')
+    return sum(f.stat().st_size for f in path.iterdir() if f.is_file()) if path.is_dir() else path.stat().st_size
+
+
 def read_bag(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
     """(topic, msgtype, log stamp ns, CDR bytes) of every message, in log-time order.
 

@@ -8,15 +8,12 @@ cameras' image messages grouped by approximate synchronisation of their header s
 own rule, core.association.approximate_sync, with the graph's max_skew), with the messages that go
 with them (each camera's CameraInfo); see group_sets. Loop k >= 1
 replays the bag with every stamp moved on by k * (last - first + one frame period), so the stream
-stays strictly increasing and keeps its frame spacing across the seam. A bag is read into memory
-before it plays, up to a budget (preloaded_passes): reading it while playing decompresses its chunks
-between two frames, on the cores the graph is working on.
+stays strictly increasing and keeps its frame spacing across the seam.
 """
 from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import dataclass, field
-from itertools import chain
 from typing import Callable, Iterable, Iterator, Sequence
 
 from msg_adapters.cdr_header import NS, header_stamp_ns
@@ -126,25 +123,6 @@ def group_sets(messages: Iterable[tuple[str, str, int, bytes]], cameras: Sequenc
     if held is not None:
         held.messages += [e[2] for e in extras]
         yield held
-
-
-def preloaded_passes(read_pass: Callable[[], Iterator[Frame]], budget_bytes: int) -> Callable[[], Iterable[Frame]]:
-    """A frames_of_pass for `looped` that reads one pass of read_pass() now: when its messages
-    take at most budget_bytes, every pass replays it from memory; else the pass read so far (just
-    over the budget) goes first, followed by the rest of that pass as it is read, and each later pass
-    calls read_pass() again. Damage found while reading raises here, before anything is played."""
-    head: list[Frame] = []
-    size = 0
-    rest = read_pass()
-    for frame in rest:
-        head.append(frame)
-        size += sum(len(cdr) for _, _, cdr in frame.messages)
-        if size > budget_bytes:
-            break
-    else:
-        return lambda: head
-    first = [chain(head, rest)]
-    return lambda: first.pop() if first else read_pass()
 
 
 def loop_offset_ns(loop: int, first_ns: int, last_ns: int, period_ns: int = FRAME_PERIOD_NS) -> int:
