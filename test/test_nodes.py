@@ -312,9 +312,10 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
 
 
 def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input_ends(domain, shelf, tmp_path):
-    """Default idle_flush (automatic): bundles every ~0.1 s, then none. The frames still held back by
-    the lag come out once the input has been silent for IDLE_PERIODS (3) times its typical interval,
-    as the node logs it: about 0.3 s here, set by the input's pace (the fixed wait was 1 s)."""
+    """Default idle_flush (automatic): a first bundle, answered (the node is up and matched), then
+    bundles every ~0.1 s, then none. The frames still held back by the lag come out once, when the
+    input has been silent for IDLE_PERIODS (3) times its typical interval, as the node logs it:
+    about 0.3 s here, set by the input's pace (the fixed wait was 1 s)."""
     cameras, raw = shelf
     frames = list(range(300, 312))
     associator = Associator(cameras, AssociationConfig())
@@ -326,13 +327,17 @@ def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
         skeletons: dict[int, list] = {}
+        live: dict[int, list] = {}
         _collect(node, '/skeletons', PointCloud2, skeletons)
+        _collect(node, '/skeletons/live', PointCloud2, live)
         pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
         proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=3')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            pub.publish(wire[0])
+            assert spin_until(executor, lambda: frames[0] in live), log.read_text()
             sent = []
-            for msg in wire:
+            for msg in wire[1:]:
                 pub.publish(msg)
                 sent.append(time.monotonic())
                 spin_until(executor, lambda: False, 0.1)  # the input's pace, not a wait for a result

@@ -19,9 +19,9 @@ of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged)
 deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD. With no input
 for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
 decoded and published; by default (0) that wait is IDLE_PERIODS times the input's typical
-interval (the median between DDS receipts over the last PACE_WINDOW_S s; 1 / frame_rate before two
-came), so a replay's last frames come out a few frame periods after its end, not a fixed second
-later, and a slow input (sets seconds apart) still gets its lag. A bundle that has waited more
+interval (the median between DDS receipts over the last PACE_WINDOW_S s, at least 1 / frame_rate),
+so a replay's last frames come out a few frame periods after its end, not a fixed second later,
+and a slow input (sets seconds apart) still gets its lag. A bundle that has waited more
 than `max_wait` seconds since DDS received it (solving slower than the input: a crowd on a small
 machine) is dropped unsolved, logged, counted, and its stamp published on skeletons/dropped
 (std_msgs/Header, the world frame: that frame gets no skeletons, so a subscriber need not wait for
@@ -181,8 +181,15 @@ class BpSolverNode(Node):
     def _on_bundles(self, cdr: bytes, info: dict[str, int]) -> None:
         """A bundles message as bytes with its DDS receipt time: dropped unread when it waited longer
         than max_wait (so a backlog drains at once) or came late, answered with no people unread when
-        its bytes exceed what the rig's cameras can send, else deserialised and solved."""
-        self._last_input = arrival = time.monotonic()
+        its bytes exceed what the rig's cameras can send, else deserialised and solved. The input
+        counts as idle from the end of this call: a slow solve is not a silent input."""
+        try:
+            self._take(cdr, info)
+        finally:
+            self._last_input = time.monotonic()
+
+    def _take(self, cdr: bytes, info: dict[str, int]) -> None:
+        arrival = time.monotonic()
         waited = (time.time_ns() - info['received_timestamp']) / 1e9
         received = arrival - max(0.0, waited)  # the input's own pace, not the pace this node takes it at
         try:
@@ -288,7 +295,10 @@ class BpSolverNode(Node):
         if not self._cameras_sent:
             self._publish_cameras()
         now = time.monotonic()
-        idle = self._idle or IDLE_PERIODS * (self._bundles_in.typical_interval(now, PACE_WINDOW_S) or self._period)
+        # never below the nominal period: messages a reader takes in only once it has matched the
+        # writer come together at start-up, and would make the input look faster than it is
+        typical = max(self._bundles_in.typical_interval(now, PACE_WINDOW_S) or 0.0, self._period)
+        idle = self._idle or IDLE_PERIODS * typical
         if self._stamps and now - self._last_input >= idle:
             results = self._inference.flush()
             self.get_logger().info(f'no input for {idle:.2f} s: output the {len(results)} pending frames')
