@@ -20,7 +20,7 @@ from mvpose_ros.cli.graph import main as graph_main
 from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,
                                      rig_graph_nodes, rig_played_connections, rig_sync, write_overrides)
-from mvpose_ros.graph.report import rig_prediction_lines, rig_report, set_skews_ms
+from mvpose_ros.graph.report import count_under_sets, rig_prediction_lines, rig_report, set_skews_ms
 from mvpose_ros.package_files import package_path
 
 S = 1_000_000_000
@@ -186,6 +186,25 @@ def test_lockstep_nodes_and_their_overrides_file(tmp_path):
     assert paced['rate'] == 1.0 and paced['sets'] is False and 'max_in_flight' not in paced
     written = load_params(write_overrides(nodes, tmp_path / 'o.yaml'))
     assert written['/**/heatmap_detector'] == detector and written['/**/bag_player'] == player
+
+
+def test_a_set_that_came_out_under_a_later_members_stamp_counts_as_that_set():
+    """Set 1's earliest image was lost: the graph stamped the set with its next member's stamp."""
+    stamps = [S + k * PERIOD for k in range(3)]
+    later = stamps[1] + 7 * MS
+    set_of_member = {m: s for s in stamps for m in (s, s + 7 * MS, s + 13 * MS)}
+    out = Skeletons(np.array([3]), np.zeros((1, 14, 3)), np.full((1, 14), 0.5))
+    node = SimpleNamespace(outputs={stamps[0]: out, later: out}, output_at={stamps[0]: 900 * MS, later: 960 * MS},
+                           live_at={later: 950 * MS}, dropped=set(), info_at={stamps[0]: 800 * MS, stamps[1]: 840 * MS},
+                           received={stamps[0]: 1, later: 1}, bad=[])
+    quiet = SimpleNamespace(write=lambda s: None)
+    unexpected = '1 /skeletons stamps are not set stamps of the bag'
+    assert rig_report(stamps, [0] * 3, node, {}, 20 * MS, False, quiet) == [unexpected]
+    assert count_under_sets(node, set_of_member) == 1
+    assert node.received == {stamps[0]: 1, stamps[1]: 1} and set(node.outputs) == {stamps[0], stamps[1]}
+    assert node.output_at[stamps[1]] == 960 * MS and node.live_at == {stamps[1]: 950 * MS}
+    assert rig_report(stamps, [0] * 3, node, {}, 20 * MS, False, quiet) == []
+    assert count_under_sets(node, set_of_member) == 0
 
 
 def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():

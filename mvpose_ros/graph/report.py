@@ -256,6 +256,23 @@ def set_skews_ms(set_stamps: Sequence[int], people_stamps: Mapping[str, Sequence
     return np.array(out)
 
 
+def count_under_sets(node: Recorded, set_of_member: Mapping[int, int]) -> int:
+    """Re-key, in the recorder's own dicts, what came out under a stamp that is a member of a bag
+    set but not the set's stamp: the graph stamps a set with its earliest member it received, so a
+    set whose earliest image never reached it (lost on a best-effort link) comes out under a later
+    member's. set_of_member: every member's stamp -> its set's stamp (ns). Returns how many stamps
+    moved; a set that also came out under its own stamp keeps that output and counts twice."""
+    set_stamps = set(set_of_member.values())
+    moved = [s for s in node.received if s not in set_stamps and s in set_of_member]
+    for member in moved:
+        stamp = set_of_member[member]
+        node.received[stamp] = node.received.get(stamp, 0) + node.received.pop(member)
+        for kept in (node.outputs, node.output_at, node.live_at):
+            if member in kept:
+                kept.setdefault(stamp, kept.pop(member))
+    return len(moved)
+
+
 def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Recorded,
                people_stamps: Mapping[str, Sequence[int]], max_skew_ns: int, lockstep: bool, out: TextIO) -> list[str]:
     """Print sets in / processed / dropped, the synchronisation skew and the latency of a rig run

@@ -32,8 +32,8 @@ from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, RUNNER_S
                                      rig_connections, rig_graph_nodes, rig_played_connections, rig_sync, runner_section,
                                      unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
-from mvpose_ros.graph.report import (OUTPUT_NAME, frame_of, print_periods, print_restarts, report, restart_effects,
-                                     rig_prediction_lines, rig_report, score, score_sets)
+from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, print_periods, print_restarts, report,
+                                     restart_effects, rig_prediction_lines, rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
@@ -243,6 +243,10 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
                             quiet=RATE_QUIET_S, watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
+    moved = count_under_sets(node, {m: s.stamp_ns for s in sets for m in s.members.values()})
+    if moved:
+        print(f'{moved} sets came out under a later member\'s stamp (their earliest image never reached the '
+              f'graph): counted as those sets', file=out)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
                           round(run.max_skew * 1e9), run.lockstep, out)
     print_restarts(restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate),
