@@ -311,19 +311,24 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     assert 'bundles stamp 12640000000 ns' in text and 'published with no people' in text
 
 
-def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input_ends(domain, shelf, tmp_path):
-    """Default idle_flush (automatic): a first bundle, answered (the node is up and matched), then
-    bundles every ~0.1 s, then none. The frames still held back by the lag come out once, when the
-    input has been silent for IDLE_PERIODS (3) times its typical interval, as the node logs it:
-    about 0.3 s here, set by the input's pace (the fixed wait was 1 s)."""
-    cameras, raw = shelf
-    frames = list(range(300, 312))
+def _bundles_wire(cameras, raw, frames: list[int]) -> list[PointCloud2]:
+    """The bundles messages association would send for these Shelf frames, in order."""
     associator = Associator(cameras, AssociationConfig())
     wire = []
     for f in frames:
         people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
         wire.append(bundles_to_msg([(o.person_id, o.views) for o in associator.update(f, people)],
                                    _header(f, 'world')))
+    return wire
+
+
+def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input_ends(domain, shelf, tmp_path):
+    """Default idle_flush (automatic): a first bundle, answered (the node is up and matched), then
+    bundles every ~0.1 s, then none. The frames still held back by the lag come out once, when the
+    input has been silent for IDLE_PERIODS (3) times its typical interval, as the node logs it:
+    about 0.3 s here, set by the input's pace (the fixed wait was 1 s)."""
+    frames = list(range(300, 312))
+    wire = _bundles_wire(*shelf, frames)
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
         skeletons: dict[int, list] = {}
@@ -350,22 +355,17 @@ def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input
     assert sorted(skeletons) == frames and all(len(v) == 1 for v in skeletons.values())
 
 
-def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_them(domain, shelf, tmp_path):
+def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_them(domain, shelf_openpose, tmp_path):
     """A burst of bundles far faster than solving, max_wait 50 ms: a bundle that waited longer
     since DDS received it is dropped unsolved, so the queue drains; every bundle is either solved
     (its causal estimate, then its lagged output) or dropped, counted in the node's totals and its
     stamp published on skeletons/dropped, and the first of the burst, which waited for nothing (the
     node already spinning: a frame before it was handled), is solved. Bundles are handled in order, so a later one
     solved says the burst is done (a sentinel that itself waited too long is dropped: the next goes)."""
-    cameras, raw = shelf
-    frames = list(range(300, 312))
-    sentinel_frames = list(range(312, 316))
-    associator = Associator(cameras, AssociationConfig())
-    wire = []
-    for f in frames + sentinel_frames:
-        people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
-        wire.append(bundles_to_msg([(o.person_id, o.views) for o in associator.update(f, people)],
-                                   _header(f, 'world')))
+    # 39 bundles after the first: even at 1-2 ms a solve on a fast machine, the burst outlasts max_wait
+    frames = list(range(300, 340))
+    sentinel_frames = list(range(340, 344))
+    wire = _bundles_wire(*shelf_openpose, frames + sentinel_frames)
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
         live: dict[int, list] = {}
