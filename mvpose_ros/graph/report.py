@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import AbstractSet, Mapping, Protocol, Sequence, TextIO
+from typing import AbstractSet, Mapping, MutableMapping, Protocol, Sequence, TextIO
 
 import numpy as np
 
@@ -256,7 +256,16 @@ def set_skews_ms(set_stamps: Sequence[int], people_stamps: Mapping[str, Sequence
     return np.array(out)
 
 
-def count_under_sets(node: Recorded, set_of_member: Mapping[int, int]) -> int:
+class Rekeyable(Protocol):
+    """What count_under_sets changes of a recorder (graph.recorder.SkeletonRecorder)."""
+
+    outputs: MutableMapping[int, object]
+    output_at: MutableMapping[int, int]
+    live_at: MutableMapping[int, int]
+    received: MutableMapping[int, int]
+
+
+def count_under_sets(node: Rekeyable, set_of_member: Mapping[int, int]) -> int:
     """Re-key, in the recorder's own dicts, what came out under a stamp that is a member of a bag
     set but not the set's stamp: the graph stamps a set with its earliest member it received, so a
     set whose earliest image never reached it (lost on a best-effort link) comes out under a later

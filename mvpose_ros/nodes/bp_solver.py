@@ -97,7 +97,8 @@ class BpSolverNode(Node):
             *parameter_specs(SOLVER_PARAMETERS),
             Param('idle_flush', 0.0, 's without input after which every pending frame is output (0: '
                                      f'{IDLE_PERIODS} x the median time between the inputs of the last '
-                                     f'{PACE_WINDOW_S:g} s)', 0.0, 3600.0, live=True),
+                                     f'{PACE_WINDOW_S:g} s, at least {IDLE_PERIODS} / frame_rate)', 0.0, 3600.0,
+                  live=True),
             Param('marker_lifetime', 1.0, 's a skeleton marker stays in RViz without a newer one (0: forever); '
                                           'keep it above the time between two frames', 0.0, 3600.0, live=True),
             Param('max_wait', 5.0, 's a bundle may wait after DDS received it; an older one is dropped unsolved '
