@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Sequence, TextIO
 
-from mvpose_ros.bags.io import bag_summary, write_bag
+from mvpose_ros.bags.io import bag_size, bag_summary, write_bag
 from mvpose_ros.bags.recipes import RECIPES, RIG_FILE, CameraFault, Recipe, make_recipe
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.bump import AXES
@@ -66,10 +66,6 @@ def camera_fault(args: argparse.Namespace) -> CameraFault | None:
     if args.from_frame is None:
         raise ValueError('--rotate-camera and --unplug-camera need --from-frame')
     return CameraFault(camera, args.from_frame, args.degrees if args.rotate_camera is not None else None, args.axis)
-
-
-def _size_mb(path: Path) -> float:
-    return sum(f.stat().st_size for f in path.iterdir() if f.is_file()) / 1e6
 
 
 def _stale_reason(output: Path, recipe: Recipe, fingerprint: str) -> str | None:
@@ -131,7 +127,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     summary = bag_summary(output)
     print(f'{output}: {recipe.name} bag, {summary.message_count} messages on {len(summary.topics)} '
           f'topics, stamps {summary.first_ns / 1e9:.2f}..{summary.last_ns / 1e9:.2f} s, '
-          f'{_size_mb(output):.1f} MB, made in {seconds:.1f} s', file=out)
+          f'{bag_size(output) / 1e6:.1f} MB, made in {seconds:.1f} s', file=out)
     _write_rig(output, recipe, out)
     return 0
 

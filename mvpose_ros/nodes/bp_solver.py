@@ -295,12 +295,14 @@ class BpSolverNode(Node):
     def _on_timer(self) -> None:
         if not self._cameras_sent:
             self._publish_cameras()
+        if not self._stamps:
+            return
         now = time.monotonic()
         # never below the nominal period: messages a reader takes in only once it has matched the
         # writer come together at start-up, and would make the input look faster than it is
         typical = max(self._bundles_in.typical_interval(now, PACE_WINDOW_S) or 0.0, self._period)
         idle = self._idle or IDLE_PERIODS * typical
-        if self._stamps and now - self._last_input >= idle:
+        if now - self._last_input >= idle:
             results = self._inference.flush()
             self.get_logger().info(f'no input for {idle:.2f} s: output the {len(results)} pending frames')
             for result in results:
