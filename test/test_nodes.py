@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from rclpy.publisher import Publisher
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, PointCloud2, PointField
 from std_msgs.msg import Header
@@ -311,6 +312,15 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     assert 'bundles stamp 12640000000 ns' in text and 'published with no people' in text
 
 
+def _solver_io(node) -> tuple[dict[int, list], dict[int, list], Publisher]:
+    """On the probe node: frame -> messages of skeletons and of skeletons/live, and a bundles publisher."""
+    skeletons: dict[int, list] = {}
+    live: dict[int, list] = {}
+    _collect(node, '/skeletons', PointCloud2, skeletons)
+    _collect(node, '/skeletons/live', PointCloud2, live)
+    return skeletons, live, node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+
+
 def _bundles_wire(cameras, raw, frames: list[int]) -> list[PointCloud2]:
     """The bundles messages association would send for these Shelf frames, in order."""
     associator = Associator(cameras, AssociationConfig())
@@ -324,18 +334,15 @@ def _bundles_wire(cameras, raw, frames: list[int]) -> list[PointCloud2]:
 
 def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input_ends(domain, shelf, tmp_path):
     """Default idle_flush (automatic): a first bundle, answered (the node is up and matched), then
-    bundles every ~0.1 s, then none. The frames still held back by the lag come out once, when the
-    input has been silent for IDLE_PERIODS (3) times its typical interval, as the node logs it:
-    about 0.3 s here, set by the input's pace (the fixed wait was 1 s)."""
+    bundles every ~0.1 s, then none. The frames still held back by the lag come out when the input
+    has been silent for IDLE_PERIODS (3) times its typical interval, as the node logs it: about 0.3
+    s here, set by the input's pace (the fixed wait was 1 s). Every frame comes out once, whether or
+    not a stall of this test's own process made the node flush earlier too."""
     frames = list(range(300, 312))
     wire = _bundles_wire(*shelf, frames)
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
-        skeletons: dict[int, list] = {}
-        live: dict[int, list] = {}
-        _collect(node, '/skeletons', PointCloud2, skeletons)
-        _collect(node, '/skeletons/live', PointCloud2, live)
-        pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+        skeletons, live, pub = _solver_io(node)
         proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=3')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
@@ -350,8 +357,8 @@ def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input
         finally:
             stop(proc)
     flushes = [float(x) for x in re.findall(r'no input for ([0-9.]+) s: output the 3 pending frames', log.read_text())]
-    assert len(flushes) == 1, log.read_text()
-    assert flushes[0] == pytest.approx(3 * np.median(np.diff(sent)), rel=0.5)
+    assert flushes, log.read_text()
+    assert flushes[-1] == pytest.approx(3 * np.median(np.diff(sent)), rel=0.5)
     assert sorted(skeletons) == frames and all(len(v) == 1 for v in skeletons.values())
 
 
@@ -368,14 +375,10 @@ def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_the
     wire = _bundles_wire(*shelf_openpose, frames + sentinel_frames)
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
-        live: dict[int, list] = {}
-        skeletons: dict[int, list] = {}
-        _collect(node, '/skeletons/live', PointCloud2, live)
-        _collect(node, '/skeletons', PointCloud2, skeletons)
+        skeletons, live, pub = _solver_io(node)
         gone: dict[int, list[Header]] = {}
         node.create_subscription(Header, '/skeletons/dropped',
                                  lambda m: gone.setdefault(frame_of_stamp(m.stamp), []).append(m), DATA_QOS)
-        pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
         proc = start_node('bp_solver', domain, log, '-p', 'max_wait:=0.05', '-p', 'idle_flush:=0.3')
         try:
             assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
