@@ -251,3 +251,11 @@ def test_sets_are_scored_one_line_each_against_the_frame_they_show(tmp_path):
     assert f'actor {actors[1] + 1} 100.0 mm (id {5 + actors[1]})' in text[1]
     assert text[2] == 'set   2: ' + ', '.join(f'actor {a + 1} not found' for a in actors)
     assert 'found in 2 of 3 sets' in text[3]
+    assert f'Actor {first}: found in 2 sets, MPJPE mean 50.0 mm, min 0.0, max 100.0; ids' in text[4]
+    # a set the bag has without some camera is named so, and kept apart in the summary
+    lines.clear()
+    score_sets(path, 572, None, SimpleNamespace(write=lines.append), {0: [], 1: ['back', 'door'], 2: []})
+    text = ''.join(lines).splitlines()
+    assert text[0].startswith('set   0: ') and text[1].startswith('set   1 (without back, door): ')
+    assert (f'Actor {first}: found in 2 sets, MPJPE mean 50.0 mm, min 0.0, max 100.0; in the 1 with every camera '
+            f'mean 0.0, max 0.0; ids') in text[4]

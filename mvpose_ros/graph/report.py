@@ -324,15 +324,20 @@ def rig_prediction_lines(set_stamps: Sequence[int], outputs: Mapping[int, Skelet
             for index, stamp in enumerate(set_stamps) if stamp in outputs]
 
 
-def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextIO) -> None:
+def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextIO,
+               absent: Mapping[int, Sequence[str]] | None = None) -> None:
     """Every set of a rig predictions file scored against Shelf's actorsGT frame `frame` (a bag of
     that one scene repeated): per annotated actor, the sets it is found in, MPJPE (mean, min, max
     over those sets) and the ids it got (the same id throughout is the tracking working), after a
-    line per set."""
+    line per set. absent: set index -> the cameras that set lacks in the bag (a late or dropped
+    frame), named on its line; the summary then also gives the sets with every camera apart, the
+    ones comparable with all the cameras' images."""
     gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [frame])
     actors = np.flatnonzero(gt.present[0]).tolist()
     records = [json.loads(line) for line in Path(predictions).read_text(encoding='utf-8').splitlines() if line]
+    absent = absent or {}
     errors: dict[int, list[float]] = {a: [] for a in actors}
+    whole: dict[int, list[float]] = {a: [] for a in actors}  # sets with every camera
     ids: dict[int, set[int]] = {a: set() for a in actors}
     complete = 0
     for rec in records:
@@ -344,6 +349,8 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
             if ev.missed[a] == 0:
                 found += 1
                 errors[actor].append(float(ev.mpjpe[a]))
+                if not absent.get(rec['frame']):
+                    whole[actor].append(float(ev.mpjpe[a]))
                 truth = gt.poses[0, actor]
                 nearest = int(np.argmin(np.linalg.norm(joints - truth, axis=-1).mean(axis=-1)))
                 ids[actor].add(int(people[nearest]['id']))
@@ -351,10 +358,16 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
             else:
                 line.append(f'actor {actor + 1} not found')
         complete += found == len(actors)
-        print(f'set {rec["frame"]:3d}: {", ".join(line)}', file=out)
+        lacking = absent.get(rec['frame'])
+        without = f' (without {", ".join(lacking)})' if lacking else ''
+        print(f'set {rec["frame"]:3d}{without}: {", ".join(line)}', file=out)
     print(f'ground truth Shelf frame {frame} (actors {", ".join(str(a + 1) for a in actors)}): every annotated '
           f'actor found in {complete} of {len(records)} sets', file=out)
     for actor in actors:
         e = np.array(errors[actor])
         stats = f'MPJPE mean {e.mean():.1f} mm, min {e.min():.1f}, max {e.max():.1f}' if e.size else 'MPJPE -'
+        w = np.array(whole[actor])
+        if any(absent.values()):
+            stats += (f'; in the {w.size} with every camera mean {w.mean():.1f}, max {w.max():.1f}' if w.size
+                      else '; in none with every camera')
         print(f'Actor {actor + 1}: found in {e.size} sets, {stats}; ids {sorted(ids[actor])}', file=out)

@@ -263,7 +263,9 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped', file=err)
         return 128 + outcome.interrupted
     if args.ground_truth == 'shelf' and lines:
-        score_sets(predictions, args.frame, root, out)
+        names = {c.image: c.name for c in rig.cameras}
+        score_sets(predictions, args.frame, root, out,
+                   {s.index: [n for t, n in names.items() if t not in s.members] for s in sets})
     return _verdict(outcome, problems, settings.timeout, err)
 
 
