@@ -9,7 +9,9 @@ Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose, a
 with --heatmaps efficientpose or fused), associates them across the cameras, samples the 3D
 hypotheses and runs BP on this one frame, and writes the skeletons as one predictions line
 (`<output>/skeletons.jsonl`) and one overlay PNG per camera (`<output>/cam<c>.png`: the
-reprojected 3D skeletons in each person's colour over the 2D detections in thin white). Prints
+reprojected 3D skeletons in each person's colour over the 2D detections in thin white). A camera
+given `-` instead of an image is left out, as a camera that sent nothing (what a rig gives with
+one of its cameras down). Prints
 the time of each stage of the set (MultiPose, EfficientPose, heatmaps, association and 3D); with
 --ground-truth shelf, the per-actor MPJPE and PCP of the frame against Shelf's actorsGT.
 
@@ -61,6 +63,7 @@ from mvpose_ros.graph.config import RIG_TEMPLATE, load_params
 from mvpose_ros.package_files import package_path
 
 PROG = 'mvpose-images'
+NO_IMAGE = '-'  # in --images: this camera has no image in the set
 DEFAULTS = OnnxDetectorConfig(model_dir=Path())
 
 
@@ -72,7 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     rig.add_argument('--calibration', type=Path, help='calibration json (Shelf layout): each camera at the size of '
                                                       'its image')
     p.add_argument('--images', required=True, nargs='+', type=Path,
-                   help='one image per camera, in the rig\'s camera order')
+                   help=f'one image per camera, in the rig\'s camera order; {NO_IMAGE} for a camera without one '
+                        '(left out of the set, as a camera that sent nothing)')
     p.add_argument('--output', type=Path, default=Path('out/images'), help='folder for skeletons.jsonl and '
                    'the overlays (default: out/images)')
     p.add_argument('--frame', type=int, default=0, help='frame number written with the skeletons (default: 0)')
@@ -112,19 +116,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _rig_and_images(args: argparse.Namespace) -> tuple[list[Camera], np.ndarray, list[np.ndarray]]:
-    """The rig's cameras, its up (3,) and the images: checked against the sizes a rig file gives,
-    or giving a calibration json (which records neither: +z up) each camera's size."""
+def _rig_and_images(args: argparse.Namespace) -> tuple[list[Camera], np.ndarray, list[np.ndarray | None]]:
+    """The rig's cameras, its up (3,) and the images (None for a camera given NO_IMAGE): checked
+    against the sizes a rig file gives, or giving a calibration json (which records neither: +z
+    up) each camera its image's size (a camera without one: the first image's)."""
+    given = [str(path) != NO_IMAGE for path in args.images]
+    if sum(given) < 2:
+        raise ValueError(f'--images: {sum(given)} of {len(given)} cameras have an image; 3D needs at least two')
     if args.rig is not None:
         rig = load_rig_file(args.rig, data_root=data_root(args.data_root))
         cameras = rig.calibrated_cameras()
         _same_count(args.images, cameras)
-        return cameras, rig.up, [read_image(path, cam) for path, cam in zip(args.images, cameras)]
-    images = [read_image(path) for path in args.images]
-    height, width = images[0].shape[:2]
+        return cameras, rig.up, [read_image(path, cam) if has else None
+                                 for path, cam, has in zip(args.images, cameras, given)]
+    images = [read_image(path) if has else None for path, has in zip(args.images, given)]
+    height, width = next(im for im in images if im is not None).shape[:2]
     cameras = load_rig(args.calibration, width, height)
     _same_count(args.images, cameras)
-    return [replace(cam, width=im.shape[1], height=im.shape[0]) for cam, im in zip(cameras, images)], UP, images
+    return [cam if im is None else replace(cam, width=im.shape[1], height=im.shape[0])
+            for cam, im in zip(cameras, images)], UP, images
 
 
 def _same_count(paths: Sequence[Path], cameras: Sequence[Camera]) -> None:
@@ -181,7 +191,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                                                    keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps,
                                                    multipose_workers=args.multipose_workers))
     planner = CropPlanner(cameras, args.person_detector_every)
-    detector.detect(images[0])  # warm-up: onnxruntime's first run allocates; not a steady-state latency
+    # warm-up: onnxruntime's first run allocates; not a steady-state latency
+    detector.detect(next(im for im in images if im is not None))
     source = 'MultiPose keypoints' if args.heatmaps == 'multipose' else f'{args.heatmaps} {args.model.upper()}'
     print(f'{PROG}: {len(cameras)} cameras, heatmaps {source}, MultiPose input '
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
@@ -204,7 +215,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         end = time.perf_counter()
         t = detector.timing
         times.append((t.multipose, t.efficientpose, t.heatmaps, end - detected, end - pending.started))
-        found = ' '.join(f'cam{c}:{len(p)}' for c, p in enumerate(people))
+        found = ' '.join(f'cam{c}:{NO_IMAGE if p is None else len(p)}' for c, p in enumerate(people))
         scored = f'; MPJPE {_mpjpe(result, args.data_root)}' if args.ground_truth == 'shelf' else ''
         regions = f' ({t.multipose_regions} regions)' if t.multipose_regions else ''
         print(f'set {n}: MultiPose on {t.multipose_runs} images{regions} {1e3 * t.multipose:6.1f} ms, EfficientPose '
@@ -220,18 +231,19 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / 'skeletons.jsonl').write_text(frame_line(result) + '\n', encoding='utf-8')
     colours = [person_colour(pid) for pid in result.person_ids]
-    for c, (cam, bgr) in enumerate(zip(cameras, images)):
-        path = args.output / f'cam{c}.png'
+    drawn = [c for c, bgr in enumerate(images) if bgr is not None]
+    for c in drawn:
+        cam, bgr, path = cameras[c], images[c], args.output / f'cam{c}.png'
         if not cv2.imwrite(str(path), overlay(bgr, cam, people[c], result.joints, colours)):
             raise OSError(f'{path}: could not write the overlay')
-    print(f'wrote {args.output / "skeletons.jsonl"} and {len(cameras)} overlays cam0..cam{len(cameras) - 1}.png',
-          file=out)
+    print(f'wrote {args.output / "skeletons.jsonl"} and {len(drawn)} overlays '
+          f'{", ".join(f"cam{c}.png" for c in drawn)}', file=out)
     if args.ground_truth == 'shelf':
         _score(result, args.data_root, out)
     return 0
 
 
-def _started_ahead(detector: OnnxPoseDetector, images: list[np.ndarray], sets: int) -> Iterator[PendingSet]:
+def _started_ahead(detector: OnnxPoseDetector, images: list[np.ndarray | None], sets: int) -> Iterator[PendingSet]:
     """`sets` sets of the same images, each started (OnnxPoseDetector.start_set) by a feeder thread
     as soon as MultiPose has a worker free for it, one set at most waiting started."""
     ready: queue.Queue[PendingSet | Exception] = queue.Queue(maxsize=1)
