@@ -160,6 +160,8 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
     # two passes: the second moved on by the bag's log span plus a period, as the player moves it
     span = 2 * PERIOD + 5 * MS + PERIOD
     assert [s.stamp_ns for s in sets] == [S + k * PERIOD + p * span for p in range(2) for k in range(3)]
+    # and so are its members: an output under a member's stamp is counted as that pass's set
+    assert [sorted(s.members.values()) for s in sets] == [[s.stamp_ns, s.stamp_ns + 5 * MS] for s in sets]
     assert [s.index for s in sets] == list(range(6)) and settings.cameras == 2 and run.loops == 2
     assert rig_connections(rig) == {'/rig/a/image': ('sub',), 'a/people2d': ('pub', 'sub'), '/rig/b/image': ('sub',),
                                     'b/people2d': ('pub', 'sub'), 'people/bundles': ('pub', 'sub'),
