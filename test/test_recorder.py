@@ -54,3 +54,28 @@ def test_recorder_process_records_every_frame_of_a_gated_player(tmp_path, monkey
     assert summary['complete'] and summary['bad'] == []
     assert len(summary['topics']['/skeletons']) == len(FRAMES)
     assert [len(summary['topics'][f'/cam{c}/people2d']) for c in range(CAMERAS)] == [len(FRAMES)] * CAMERAS
+
+
+def test_accounted_follows_the_outputs_and_drops_that_come(monkeypatch):
+    """Whether every wanted stamp has an output or was dropped: worked out again only once either
+    has grown, and right after every change."""
+    import rclpy
+
+    from mvpose_ros.graph.recorder import SkeletonRecorder
+    with ros_domain(monkeypatch, profile=None):
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        try:
+            node = SkeletonRecorder(context=context)
+            wanted = {1, 2, 3}
+            assert not node.accounted(wanted) and not node.accounted(wanted)
+            node.outputs.update({1: None, 2: None})
+            assert not node.accounted(wanted)
+            node.dropped.add(3)
+            assert node.accounted(wanted)
+            assert not node.accounted({1, 2, 3, 4})  # another set of stamps: not the answer kept
+            node.outputs[4] = None
+            assert node.accounted({1, 2, 3, 4}) and node.accounted({1, 2})
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)

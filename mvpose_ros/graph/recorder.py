@@ -41,6 +41,7 @@ from typing import AbstractSet, Any, Mapping, Sequence, TextIO
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -71,6 +72,11 @@ TIMING_TOPIC = camera_topic(0, CAMERA_INFO)  # a frame's latency is timed from i
 OUTPUT_TOPIC = SKELETONS
 START_TOPIC = 'bag_player/start'  # the player's start signal (its parameter start_topic)
 SPIN_S = 0.05
+# Readers and writers without rclpy's default QoS event handlers (a warning on an incompatible QoS
+# or type), but for the skeletons reader: each handler is a waitable that the Python executor
+# sets up at every wait, and without them the runner takes a third of the CPU it took on a rig
+# (five camera_info readers at the cameras' rate), CPU the graph's nodes share.
+NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
 def graph_topics(cameras: int) -> dict[str, Any]:
@@ -98,7 +104,7 @@ class SkeletonRecorder(Node):
         stamps are kept in `people_stamps` (by the topic as given); watch_topics: topics (as given,
         PointCloud2: the nodes' outputs) that `arm` can watch, each read from its first `arm` on
         (reading every node's output all along cost the runner 8% of a core at 25 Hz)."""
-        super().__init__(name, context=context)
+        super().__init__(name, context=context, start_parameter_services=False)
         self.frame_rate = frame_rate
         self.stream = stream
         self.info_at: dict[int, int] = {}
@@ -106,22 +112,25 @@ class SkeletonRecorder(Node):
         self.output_at: dict[int, int] = {}
         self.live_at: dict[int, int] = {}  # stamp -> receipt (ns) of its skeletons/live
         self.dropped: set[int] = set()  # stamps the graph dropped (skeletons/dropped)
+        self._not_accounted: tuple[int, int, int] | None = None  # accounted()'s last no: (wanted, outputs, dropped)
         self.received: Counter[int] = Counter()
         self.bad: list[str] = []
         self.last_activity = 0.0  # monotonic s of the last message, for stall timeouts
         self.last_output = 0.0  # monotonic s of the last skeletons message
         self.sizes: dict[str, list[tuple[int, int]]] = {}  # fully qualified topic -> (stamp ns, bytes)
         self._gate: Publisher | None = None
-        self._infos = [self.create_subscription(CameraInfo, t, self._on_info, timing_qos) for t in timing_topics]
+        self._infos = [self.create_subscription(CameraInfo, t, self._on_info, timing_qos, raw=True,
+                                                event_callbacks=NO_EVENTS) for t in timing_topics]
         self.people_stamps: dict[str, list[int]] = {t: [] for t in people_topics}
         for topic in people_topics:
             self.create_subscription(PointCloud2, topic, lambda cdr, t=topic: self._on_people(t, cdr), DATA_QOS,
-                                     raw=True)
+                                     raw=True, event_callbacks=NO_EVENTS)
         self._outputs = [self.create_subscription(PointCloud2, OUTPUT_TOPIC, self._on_skeletons, DATA_QOS,
                                                   raw=True)]
         # timed when there, not waited for: only bp_solver publishes it
-        self.create_subscription(PointCloud2, SKELETONS_LIVE, self._on_live, DATA_QOS, raw=True)
-        self.create_subscription(Header, SKELETONS_DROPPED, self._on_dropped, DATA_QOS)
+        self.create_subscription(PointCloud2, SKELETONS_LIVE, self._on_live, DATA_QOS, raw=True,
+                                 event_callbacks=NO_EVENTS)
+        self.create_subscription(Header, SKELETONS_DROPPED, self._on_dropped, DATA_QOS, event_callbacks=NO_EVENTS)
         # (topic, since ns) -> receipt ns of the topic's first message after `since`, once heard
         self.first_after: dict[tuple[str, int], int] = {}
         self._armed: set[tuple[str, int]] = set()
@@ -132,14 +141,16 @@ class SkeletonRecorder(Node):
             self.sizes[name] = []
             if topic != OUTPUT_TOPIC:
                 self._outputs.append(self.create_subscription(
-                    msg_type, topic, lambda cdr, t=name, m=msg_type: self._measure(t, m, cdr), DATA_QOS, raw=True))
+                    msg_type, topic, lambda cdr, t=name, m=msg_type: self._measure(t, m, cdr), DATA_QOS, raw=True,
+                    event_callbacks=NO_EVENTS))
         self._output_name = self.resolve_topic_name(OUTPUT_TOPIC)
         self._statuses: dict[str, Status] = {}  # name -> the latest status of that name on /diagnostics
-        self.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, DIAGNOSTICS_QOS)
+        self.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, DIAGNOSTICS_QOS,
+                                 event_callbacks=NO_EVENTS)
 
-    def _on_info(self, msg: CameraInfo, info: Any) -> None:
+    def _on_info(self, cdr: bytes, info: Any) -> None:
         self.last_activity = time.monotonic()
-        self.info_at.setdefault(stamp_ns(msg.header.stamp), info['received_timestamp'])
+        self.info_at.setdefault(header_stamp_ns(cdr), info['received_timestamp'])
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         try:
@@ -176,7 +187,7 @@ class SkeletonRecorder(Node):
         if topic in self._watchable and topic not in self._watched:
             self._watched.add(topic)
             self.create_subscription(PointCloud2, topic, lambda cdr, info, t=topic: self._heard(t, info), DATA_QOS,
-                                     raw=True)
+                                     raw=True, event_callbacks=NO_EVENTS)
 
     def _heard(self, topic: str, info: Any) -> None:
         at = info['source_timestamp']
@@ -208,10 +219,15 @@ class SkeletonRecorder(Node):
             self.stream.flush()
 
     def accounted(self, wanted: AbstractSet[int]) -> bool:
-        """Whether every stamp of `wanted` has its output or was dropped. The plain subset
-        test goes first: it stops at the first stamp missing, where a union would copy every output
-        at each call (callers ask at every spin, tens of thousands of stamps in a long run)."""
-        return wanted <= self.outputs.keys() or (bool(self.dropped) and wanted - self.dropped <= self.outputs.keys())
+        """Whether every stamp of `wanted` has its output or was dropped. Callers ask at every spin,
+        with tens of thousands of stamps in a long run: the answer is worked out again only once an
+        output or a dropped stamp has come since it was last no (both only grow)."""
+        seen = (id(wanted), len(self.outputs), len(self.dropped))
+        if seen == self._not_accounted:
+            return False
+        done = wanted <= self.outputs.keys() or (bool(self.dropped) and wanted - self.dropped <= self.outputs.keys())
+        self._not_accounted = None if done else seen
+        return done
 
     def missing_links(self, expected: Mapping[str, Sequence[str]]) -> list[str]:
         """Expected endpoints not yet in the ROS graph, e.g. 'subscriber of /cam3/openpose'."""
@@ -246,7 +262,8 @@ class SkeletonRecorder(Node):
     def open_gate(self, topic: str = START_TOPIC) -> None:
         """Let a player waiting on `topic` (its start_topic) play: one latched message."""
         if self._gate is None:
-            self._gate = self.create_publisher(Empty, topic, START_QOS)
+            self._gate = self.create_publisher(Empty, topic, START_QOS,
+                                               event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
             self._gate.publish(Empty())
 
 
