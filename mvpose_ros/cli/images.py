@@ -11,9 +11,9 @@ hypotheses and runs BP on this one frame, and writes the skeletons as one predic
 (`<output>/skeletons.jsonl`) and one overlay PNG per camera (`<output>/cam<c>.png`: the
 reprojected 3D skeletons in each person's colour over the 2D detections in thin white). A camera
 given `-` instead of an image is left out, as a camera that sent nothing (what a rig gives with
-one of its cameras down). Prints
-the time of each stage of the set (MultiPose, EfficientPose, heatmaps, association and 3D); with
---ground-truth shelf, the per-actor MPJPE and PCP of the frame against Shelf's actorsGT.
+one of its cameras down). Prints the time of each stage of the set (MultiPose, EfficientPose,
+heatmaps, association and 3D); with --ground-truth shelf, the per-actor MPJPE and PCP of the
+frame against Shelf's actorsGT.
 
 --sets N detects the same images N times as a sequence of sets (a still scene) and prints each
 set's stage times (total: from the set's start to its skeletons), their medians and the sets per
