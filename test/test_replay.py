@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.bags.replay import FRAME_PERIOD_NS, Frame, InFlight, due_s, group_frames, loop_offset_ns, looped
+from mvpose_ros.bags.replay import (FRAME_PERIOD_NS, Frame, InFlight, SyncSet, due_s, group_frames, loop_offset_ns,
+                                    looped)
 
 S = 1_000_000_000
 
@@ -93,3 +94,11 @@ def test_in_flight_limits_frames_ahead_of_downstream():
 
 def test_frame_defaults_to_no_messages():
     assert Frame(5).messages == []
+
+
+def test_a_set_moved_to_a_later_pass_moves_its_members_with_it():
+    s = SyncSet(1_000, [('/a', 'T', b'x')], index=3, members={'/a': 1_000, '/b': 1_005}, skew_ns=5)
+    later = s.moved(500, 13)
+    assert (later.stamp_ns, later.index, later.members, later.skew_ns, later.messages) == (
+        1_500, 13, {'/a': 1_500, '/b': 1_505}, 5, [])
+    assert s.members == {'/a': 1_000, '/b': 1_005}  # the first pass's set is left as it was

@@ -66,6 +66,12 @@ class SyncSet(Frame):
     members: dict[str, int] = field(default_factory=dict)
     skew_ns: int = 0
 
+    def moved(self, offset_ns: int, index: int) -> SyncSet:
+        """This set as a later pass of the bag plays it: every stamp, its members' too, moved by
+        offset_ns (loop_offset_ns), numbered index; no messages."""
+        return SyncSet(self.stamp_ns + offset_ns, index=index,
+                       members={t: m + offset_ns for t, m in self.members.items()}, skew_ns=self.skew_ns)
+
 
 def group_sets(messages: Iterable[tuple[str, str, int, bytes]], cameras: Sequence[str], max_skew: float,
                timeout: float = 0.5, stamped: Callable[[str], bool] = lambda msgtype: True) -> Iterator[SyncSet]:

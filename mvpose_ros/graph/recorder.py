@@ -112,7 +112,8 @@ class SkeletonRecorder(Node):
         self.output_at: dict[int, int] = {}
         self.live_at: dict[int, int] = {}  # stamp -> receipt (ns) of its skeletons/live
         self.dropped: set[int] = set()  # stamps the graph dropped (skeletons/dropped)
-        self._not_accounted: tuple[int, int, int] | None = None  # accounted()'s last no: (wanted, outputs, dropped)
+        # accounted()'s last no: the stamps asked about, and how many outputs and drops there were
+        self._not_accounted: tuple[AbstractSet[int], tuple[int, int]] | None = None
         self.received: Counter[int] = Counter()
         self.bad: list[str] = []
         self.last_activity = 0.0  # monotonic s of the last message, for stall timeouts
@@ -222,11 +223,11 @@ class SkeletonRecorder(Node):
         """Whether every stamp of `wanted` has its output or was dropped. Callers ask at every spin,
         with tens of thousands of stamps in a long run: the answer is worked out again only once an
         output or a dropped stamp has come since it was last no (both only grow)."""
-        seen = (id(wanted), len(self.outputs), len(self.dropped))
-        if seen == self._not_accounted:
+        seen = (len(self.outputs), len(self.dropped))
+        if self._not_accounted is not None and self._not_accounted[0] is wanted and self._not_accounted[1] == seen:
             return False
         done = wanted <= self.outputs.keys() or (bool(self.dropped) and wanted - self.dropped <= self.outputs.keys())
-        self._not_accounted = None if done else seen
+        self._not_accounted = None if done else (wanted, seen)
         return done
 
     def missing_links(self, expected: Mapping[str, Sequence[str]]) -> list[str]:

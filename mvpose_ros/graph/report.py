@@ -341,6 +341,7 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
     ids: dict[int, set[int]] = {a: set() for a in actors}
     complete = 0
     for rec in records:
+        lacking = absent.get(rec['frame'])
         people = rec['people']
         joints = np.array([p['joints'] for p in people], dtype=float).reshape(-1, 14, 3)
         ev = evaluate({frame: joints}, gt, actors)
@@ -349,7 +350,7 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
             if ev.missed[a] == 0:
                 found += 1
                 errors[actor].append(float(ev.mpjpe[a]))
-                if not absent.get(rec['frame']):
+                if not lacking:
                     whole[actor].append(float(ev.mpjpe[a]))
                 truth = gt.poses[0, actor]
                 nearest = int(np.argmin(np.linalg.norm(joints - truth, axis=-1).mean(axis=-1)))
@@ -358,7 +359,6 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
             else:
                 line.append(f'actor {actor + 1} not found')
         complete += found == len(actors)
-        lacking = absent.get(rec['frame'])
         without = f' (without {", ".join(lacking)})' if lacking else ''
         print(f'set {rec["frame"]:3d}{without}: {", ".join(line)}', file=out)
     print(f'ground truth Shelf frame {frame} (actors {", ".join(str(a + 1) for a in actors)}): every annotated '

@@ -177,9 +177,7 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     # later passes: stamps moved on as the player moves them (by its sets in lockstep, else by log time)
     first, last = (sets[0].stamp_ns, sets[-1].stamp_ns) if args.lockstep else (summary.first_ns, summary.last_ns)
     n = len(sets)
-    shifts = [loop_offset_ns(k, first, last) for k in range(1, args.loops)]
-    sets += [SyncSet(s.stamp_ns + shift, index=k * n + s.index, members={t: m + shift for t, m in s.members.items()},
-                     skew_ns=s.skew_ns) for k, shift in enumerate(shifts, start=1) for s in sets[:n]]
+    sets += [s.moved(loop_offset_ns(k, first, last), k * n + s.index) for k in range(1, args.loops) for s in sets[:n]]
     rate = 0.0 if args.lockstep else float(section['rate'] if args.rate is None else args.rate)
     if not (rate > 0 or args.lockstep):
         raise ValueError(f'--rate must be > 0 (or use --lockstep), got {rate:g}')
