@@ -17,11 +17,17 @@ from typing import Callable, Iterable, Iterator, Mapping
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Empty
 
+from msg_adapters.diagnostics_msg import msg_to_statuses
+from mvpose_ros.core.health.links import LINKS, WRITERS
+
 from mvpose_ros.graph.session import DDS_QOS_FROM_XML_ENV
 from mvpose_ros.nodes.bag_player import START_QOS
+from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
+from mvpose_ros.topics import DIAGNOSTICS
 
 REPO = Path(__file__).resolve().parents[1]
 FASTDDS_PROFILE = REPO / 'config' / 'fastdds.xml'
@@ -150,6 +156,26 @@ def matched(endpoints: Iterable) -> bool:
     them sees it: a reader that has matched a writer no longer drops what it sends)."""
     return all((e.get_subscription_count() if hasattr(e, 'get_subscription_count') else e.get_publisher_count()) > 0
                for e in endpoints)
+
+
+class NodeLinks:
+    """The links the nodes report on /diagnostics (core.health.links), as a probe reads them. A
+    test's writer seeing a node's reader does not say that reader has matched the writer, and a
+    volatile reader gets nothing sent before it has: wait for `reads` too."""
+
+    def __init__(self, node: Node) -> None:
+        self._values: dict[str, dict[str, str]] = {}  # node name -> its latest links values
+        node.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, DIAGNOSTICS_QOS)
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg_to_statuses(msg):
+            if status.name.endswith(f': {LINKS}'):
+                self._values[status.name[:-len(LINKS) - 2]] = status.values
+
+    def reads(self, node: str, topic: str) -> bool:
+        """Whether `node` (as its statuses name it: 'bp_solver', 'cam1/heatmap_detector') reports its
+        reader of `topic` (fully qualified) matched to a writer."""
+        return int(self._values.get(node, {}).get(WRITERS + topic, '0')) > 0
 
 
 def open_start_gate(node: Node, topic: str = 'bag_player/start'):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import time
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -27,7 +28,7 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, 
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.stage import StageConfig
 from mvpose_ros.nodes.runtime import DATA_QOS
-from ros_harness import probe, spin_until, start_node, stop
+from ros_harness import NodeLinks, matched, probe, spin_until, start_node, stop
 
 FIRST = 300  # first frame of the OpenPose files
 
@@ -55,13 +56,14 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(dom
     log = tmp_path / 'detector.log'
     with probe(domain, 'detector_probe') as (node, executor):
         out: dict[int, list] = {}
-        _collect(node, '/cam1/people2d', PointCloud2, out)
+        sub = _collect(node, '/cam1/people2d', PointCloud2, out)
         pub = node.create_publisher(PointCloud2, '/cam1/openpose', DATA_QOS)
         info = node.create_publisher(CameraInfo, '/cam1/camera_info', DATA_QOS)
+        links = NodeLinks(node)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/cam1', '-p', 'camera:=1')
         try:
-            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
-            assert spin_until(executor, lambda: info.get_subscription_count() > 0), log.read_text()
+            assert spin_until(executor, lambda: matched([pub, info, sub])
+                              and links.reads('cam1/heatmap_detector', '/cam1/openpose')), log.read_text()
             info.publish(camera_to_info(cameras[1], _header(300, 'cam1')))  # agrees: nothing said
             wrong = camera_to_info(dataclasses.replace(cameras[1], K=cameras[1].K * [[1.1], [1], [1]]),
                                    _header(301, 'cam1'))
@@ -269,18 +271,13 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
 
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
-        skeletons: dict[int, list] = {}
         markers: dict[int, list] = {}
-        live: dict[int, list] = {}
-        _collect(node, '/skeletons', PointCloud2, skeletons)
-        _collect(node, '/skeletons/live', PointCloud2, live)
+        # markers are built only while the node has a subscriber
         marker_sub = _collect(node, '/skeletons/markers', MarkerArray, markers)
-        pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+        skeletons, live, pub, linked = _solver_io(node, marker_sub)
         proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=2', '-p', 'idle_flush:=0.3')
         try:
-            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
-            # markers are built only while the node has a subscriber
-            assert spin_until(executor, lambda: marker_sub.get_publisher_count() > 0), log.read_text()
+            assert spin_until(executor, linked), log.read_text()
             for f in frames:
                 pub.publish(wire[f])
                 if f == 305:
@@ -312,13 +309,16 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     assert 'bundles stamp 12640000000 ns' in text and 'published with no people' in text
 
 
-def _solver_io(node) -> tuple[dict[int, list], dict[int, list], Publisher]:
-    """On the probe node: frame -> messages of skeletons and of skeletons/live, and a bundles publisher."""
+def _solver_io(node, *readers) -> tuple[dict[int, list], dict[int, list], Publisher, Callable[[], bool]]:
+    """On the probe node: frame -> messages of skeletons and of skeletons/live, a bundles publisher,
+    and whether bp_solver and the probe are linked both ways (with `readers`, the probe's other
+    readers of it): before that, what either sends may be lost."""
     skeletons: dict[int, list] = {}
     live: dict[int, list] = {}
-    _collect(node, '/skeletons', PointCloud2, skeletons)
-    _collect(node, '/skeletons/live', PointCloud2, live)
-    return skeletons, live, node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+    subs = [_collect(node, '/skeletons', PointCloud2, skeletons), _collect(node, '/skeletons/live', PointCloud2, live)]
+    pub = node.create_publisher(PointCloud2, '/people/bundles', DATA_QOS)
+    links = NodeLinks(node)
+    return skeletons, live, pub, lambda: matched([pub, *subs, *readers]) and links.reads('bp_solver', '/people/bundles')
 
 
 def _bundles_wire(cameras, raw, frames: list[int]) -> list[PointCloud2]:
@@ -342,10 +342,10 @@ def test_bp_solver_outputs_the_last_frames_a_few_input_intervals_after_the_input
     wire = _bundles_wire(*shelf, frames)
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
-        skeletons, live, pub = _solver_io(node)
+        skeletons, live, pub, linked = _solver_io(node)
         proc = start_node('bp_solver', domain, log, '-p', 'window:=6', '-p', 'lag:=3')
         try:
-            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            assert spin_until(executor, linked), log.read_text()
             pub.publish(wire[0])
             assert spin_until(executor, lambda: frames[0] in live), log.read_text()
             sent = []
@@ -375,13 +375,13 @@ def test_bp_solver_drops_bundles_that_waited_longer_than_max_wait_and_counts_the
     wire = _bundles_wire(*shelf_openpose, frames + sentinel_frames)
     log = tmp_path / 'bp.log'
     with probe(domain, 'bp_probe') as (node, executor):
-        skeletons, live, pub = _solver_io(node)
         gone: dict[int, list[Header]] = {}
-        node.create_subscription(Header, '/skeletons/dropped',
-                                 lambda m: gone.setdefault(frame_of_stamp(m.stamp), []).append(m), DATA_QOS)
+        dropped_sub = node.create_subscription(
+            Header, '/skeletons/dropped', lambda m: gone.setdefault(frame_of_stamp(m.stamp), []).append(m), DATA_QOS)
+        skeletons, live, pub, linked = _solver_io(node, dropped_sub)
         proc = start_node('bp_solver', domain, log, '-p', 'max_wait:=0.05', '-p', 'idle_flush:=0.3')
         try:
-            assert spin_until(executor, lambda: pub.get_subscription_count() > 0), log.read_text()
+            assert spin_until(executor, linked), log.read_text()
             # a frame alone first, so the burst finds the node spinning: a node still starting up
             # lets its first bundle wait (60 and 120 ms on a loaded machine) and may drop it
             pub.publish(wire[0])
