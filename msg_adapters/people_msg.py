@@ -1,8 +1,13 @@
 """Encodings B and C: 2D people of one camera (keypoints and quantised heatmaps, one record per
-person) and per-3D-person bundles of views (one record per (person, camera))."""
+person) and per-3D-person bundles of views (one record per (person, camera)).
+
+The association node matches keypoints only: it reads B as WirePersons (msg_to_wire_people), whose
+heatmaps stay the quantised cells that came, and sends each matched view's record on into C as it
+came (wire_bundles_to_msg), instead of decoding every map to float and encoding it again."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from sensor_msgs.msg import PointCloud2
@@ -157,17 +162,23 @@ def _records_from_msg(msg: PointCloud2, keys: Sequence[tuple[str, str]]) -> np.n
     return records
 
 
+def _keypoints_of(records: np.ndarray) -> np.ndarray:
+    """(P, 16, 3) float64 keypoints of records (P,) of B's fields, after checking the records'
+    keypoints, origins and strides."""
+    keypoints = records['keypoints'].reshape(len(records), J, 3)
+    _check_people(keypoints, records['origin'], records['stride'], 'record')
+    return keypoints.astype(np.float64)
+
+
 def _people_from_records(records: np.ndarray) -> list[Person2D]:
     """Person2D (track_id -1) of each record (P,) of B's fields, values validated."""
     n = len(records)
-    keypoints = records['keypoints'].reshape(n, J, 3)
-    _check_people(keypoints, records['origin'], records['stride'], 'record')
+    keypoints = _keypoints_of(records)
     if n == 0:
         return []
     grid = records['grid'].reshape(n, J, 2).astype(np.int64)
     sizes = (grid[..., 0] * grid[..., 1]).sum(axis=1)
     cells = np.divide(records['heatmap'], np.float32(255), dtype=np.float32)
-    keypoints = keypoints.astype(np.float64)
     origin = records['origin'].astype(np.float64).reshape(n, J, 2)
     return [Person2D(keypoints=keypoints[p],
                      heatmap=PersonHeatmap.from_cells(cells[p, :sizes[p]], grid[p], origin[p],
@@ -185,14 +196,32 @@ def msg_to_people(msg: PointCloud2) -> list[Person2D]:
     return _people_from_records(_records_from_msg(msg, ()))
 
 
+@dataclass(eq=False)
+class WirePerson:
+    """A 2D person of an encoding B message with its keypoints decoded (core.types.Keypoints2D, as
+    association needs) and its heatmaps left as they came: row `row` of its message's records."""
+
+    keypoints: np.ndarray  # (16, 3) float64
+    records: np.ndarray  # (P,) the message's records, B's fields, shared by its people
+    row: int
+    track_id: int = -1
+
+
+def msg_to_wire_people(msg: PointCloud2) -> list[WirePerson]:
+    """Decode encoding B as msg_to_people does, every field checked alike, but without its maps:
+    each person's heatmap cells stay in the records, for wire_bundles_to_msg."""
+    records = _records_from_msg(msg, ())
+    keypoints = _keypoints_of(records)
+    return [WirePerson(keypoints[p], records, p) for p in range(len(records))]
+
+
 def _is_int(x: object) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
 
 
-def bundles_to_msg(bundles: Sequence[tuple[int, dict[int, Person2D]]],
-                   header: Header) -> PointCloud2:
-    """Encoding C: one record per (person id, camera), sorted by person id then camera. Person
-    ids must be distinct, each bundle must hold at least one view."""
+def _views_in_order(bundles: Sequence[tuple[int, dict[int, object]]]) -> tuple[list[int], list[int], list]:
+    """Encoding C's rows of bundles: person ids, cameras and views, sorted by person id then
+    camera; person ids must be distinct, each bundle must hold at least one view."""
     for person_id, views in bundles:
         if not _is_int(person_id) or not 0 <= person_id <= UINT32_MAX:
             raise ValueError(f'bundle person id {person_id!r}: not an integer in UINT32')
@@ -210,10 +239,46 @@ def bundles_to_msg(bundles: Sequence[tuple[int, dict[int, Person2D]]],
             ids.append(person_id)
             cameras.append(camera)
             people.append(person)
+    return ids, cameras, people
+
+
+def bundles_to_msg(bundles: Sequence[tuple[int, dict[int, Person2D]]],
+                   header: Header) -> PointCloud2:
+    """Encoding C: one record per (person id, camera), sorted by person id then camera. Person
+    ids must be distinct, each bundle must hold at least one view."""
+    ids, cameras, people = _views_in_order(bundles)
     records = _people_records(people, BUNDLE_KEYS, 'bundle view')
     records['person'] = ids
     records['camera'] = cameras
     return to_cloud(records, header)
+
+
+def wire_bundles_to_msg(bundles: Sequence[tuple[int, dict[int, WirePerson]]],
+                        header: Header) -> PointCloud2:
+    """Encoding C as bundles_to_msg, each view's record copied from the B message it came in.
+    Decoded, it gives the maps bundles_to_msg would give of those people (the same look-ups and
+    draws: the detector's trimmed, quantised cells, not cut again)."""
+    ids, cameras, people = _views_in_order(bundles)
+    n = len(people)
+    sources: dict[int, tuple[np.ndarray, list[int], list[int]]] = {}  # records' id -> records, rows out, rows in
+    for i, person in enumerate(people):
+        _, out_rows, in_rows = sources.setdefault(id(person.records), (person.records, [], []))
+        out_rows.append(i)
+        in_rows.append(person.row)
+    sizes = np.zeros(n, dtype=np.int64)
+    for records, out_rows, in_rows in sources.values():
+        grid = records['grid'][in_rows].reshape(len(in_rows), J, 2).astype(np.int64)
+        sizes[out_rows] = (grid[..., 0] * grid[..., 1]).sum(axis=1)
+    out = np.zeros(n, dtype=people_dtype(int(sizes.max(initial=0)), BUNDLE_KEYS))
+    width = out['heatmap'].shape[1]
+    for records, out_rows, in_rows in sources.values():
+        for name in ('keypoints', 'origin', 'stride', 'grid'):
+            out[name][out_rows] = records[name][in_rows]
+        cells = min(width, records['heatmap'].shape[1])
+        out['heatmap'][out_rows, :cells] = records['heatmap'][in_rows, :cells]
+    out['person'] = ids
+    out['camera'] = cameras
+    return to_cloud(out, header)
 
 
 def msg_to_bundles(msg: PointCloud2) -> list[tuple[int, dict[int, Person2D]]]:

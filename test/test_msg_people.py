@@ -1,5 +1,6 @@
 """Encodings B (2D people of one camera) and C (per-person view bundles): round trips with
-heatmaps of different sizes, real detector output, and rejection of malformed messages."""
+heatmaps of different sizes, real detector output, and rejection of malformed messages; bundles
+forwarded from the records that came (the association node's way) against bundles encoded again."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,9 +10,13 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles, msg_to_people,
-                                     people_dtype, people_to_msg)
+                                     msg_to_wire_people, people_dtype, people_to_msg, wire_bundles_to_msg)
 from msg_adapters.records import from_cloud, to_cloud
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.association.associator import Associator
+from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.evaluation.offline import detect_sequence
+from mvpose_ros.core.inference.solver import Inference3D
+from mvpose_ros.core.stage import StageConfig
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
@@ -166,10 +171,11 @@ def _set(records, field, index, value):
     (lambda r: _set(r, 'stride', 2, 0.0), 'record 2 heatmap stride'),
     (lambda r: _set(r, 'origin', (0, 1), np.nan), 'record 0 heatmap origin'),
 ])
-def test_people_decoder_rejects(change, match):
+@pytest.mark.parametrize('decode', [msg_to_people, msg_to_wire_people])
+def test_people_decoder_rejects(change, match, decode):
     records = change(_people_records(PEOPLE))
     with pytest.raises(ValueError, match=match):
-        msg_to_people(to_cloud(records, _header()))
+        decode(to_cloud(records, _header()))
 
 
 def test_people_decoder_rejects_nan_uv_with_score():
@@ -193,6 +199,60 @@ def test_people_decoder_rejects_grid_count_mismatch():
     empty.fields[-1].count = 16
     with pytest.raises(ValueError, match='heatmap count 16: more than the 0 data bytes'):
         msg_to_people(empty)
+
+
+def _same_maps(a: PersonHeatmap, b: PersonHeatmap) -> bool:
+    """Whether two decoded heatmaps give the same look-ups and draws: equal once cut to their
+    evidence."""
+    a, b = a.trimmed(), b.trimmed()
+    return (np.array_equal(a.cells, b.cells) and np.array_equal(a.shape, b.shape)
+            and np.array_equal(a.origin, b.origin) and a.stride == b.stride)
+
+
+def test_wire_bundles_carry_the_records_that_came():
+    cams = [people_to_msg(PEOPLE, _header('cam0')), people_to_msg(PEOPLE[1:], _header('cam1'))]
+    wire = [msg_to_wire_people(m) for m in cams]
+    decoded = [msg_to_people(m) for m in cams]
+    np.testing.assert_array_equal(wire[1][0].keypoints, decoded[1][0].keypoints)
+    assert all(p.track_id == -1 for ps in wire for p in ps)
+    views = [(9, {0: 0, 1: 1}), (3, {1: 0}), (5, {0: 2})]  # person id, {camera: index in that camera}
+    forwarded = wire_bundles_to_msg([(pid, {c: wire[c][i] for c, i in v.items()}) for pid, v in views],
+                                    _header('world'))
+    encoded = bundles_to_msg([(pid, {c: decoded[c][i] for c, i in v.items()}) for pid, v in views],
+                             _header('world'))
+    assert forwarded.fields == encoded.fields and forwarded.width == encoded.width == 4
+    back, again = msg_to_bundles(forwarded), msg_to_bundles(encoded)
+    assert [(pid, sorted(v)) for pid, v in back] == [(3, [1]), (5, [0]), (9, [0, 1])]
+    for (pid, views_back), (_, views_again) in zip(back, again):
+        for c, person in views_back.items():
+            np.testing.assert_array_equal(person.keypoints, views_again[c].keypoints)
+            assert _same_maps(person.heatmap, views_again[c].heatmap)
+    with pytest.raises(ValueError, match='person id 3: given twice'):
+        wire_bundles_to_msg([(3, {0: wire[0][0]}), (3, {1: wire[1][0]})], _header())
+    assert msg_to_bundles(wire_bundles_to_msg([], _header('world'))) == []
+
+
+def test_wire_bundles_give_the_3d_stage_the_same_skeletons(shelf_openpose):
+    """On real Shelf frames at the graph's settings, bp_solver's 3D stage gives the same ids and
+    joints from the association's forwarded bundles as from bundles decoded and encoded again."""
+    cameras, raw = shelf_openpose
+    seq = detect_sequence(cameras, raw, list(SHELF_TEST_FRAMES[120:150]), OpenPoseDetectorConfig(stride=8.0))
+    config = StageConfig.from_params({'window': 6, 'lag': 3})
+    outputs = []
+    for decode, encode in ((msg_to_people, bundles_to_msg), (msg_to_wire_people, wire_bundles_to_msg)):
+        associator, solver = Associator(cameras, config.association), Inference3D(cameras, config.solver)
+        results = []
+        for frame, per_camera in zip(seq.frames, seq.people):
+            people = [decode(people_to_msg(ps, _header(f'cam{c}'))) for c, ps in enumerate(per_camera)]
+            bundles = [(o.person_id, o.views) for o in associator.update(frame, people)]
+            results += solver.push(frame, msg_to_bundles(encode(bundles, _header('world'))))
+        outputs.append(results + solver.flush())
+    before, after = outputs
+    assert len(before) == len(seq.frames) and sum(len(r.person_ids) for r in before) > 60
+    for a, b in zip(before, after, strict=True):
+        assert a.frame == b.frame and list(a.person_ids) == list(b.person_ids)
+        np.testing.assert_array_equal(a.joints, b.joints)
+        np.testing.assert_array_equal(a.confidence, b.confidence)
 
 
 def test_bundles_decoder_rejects_repeated_view():

@@ -8,11 +8,21 @@ them into people with stable ids; inference turns each person of a frame into a 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.heatmap import PersonHeatmap, render_heatmap
+
+
+class Keypoints2D(Protocol):
+    """What association needs of a 2D person: keypoints (16, 3) u, v pixels, score (as Person2D's)
+    and a per-camera track_id it sets. A Person2D is one; the association node passes people whose
+    heatmaps stay in the messages they came in, as association never looks at them."""
+
+    keypoints: np.ndarray
+    track_id: int
 
 
 @dataclass

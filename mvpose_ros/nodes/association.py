@@ -13,7 +13,9 @@ a smaller one are dropped, and that set's stamp is published on skeletons/droppe
 the world frame: that frame gets no skeletons, so a subscriber need not wait for it). Every set
 yields exactly one bundle message, empty when nobody is seen twice, stamped with the set's stamp
 (its earliest member stamp) in the rig's world frame.
-Frames are numbered by set order, not by stamp x rate. Inputs are read as bytes: the stamp,
+Frames are numbered by set order, not by stamp x rate. Only keypoints are matched: each view's
+record, heatmaps included, goes into the bundle as it came (people_msg.WirePerson), not decoded
+and encoded again. Inputs are read as bytes: the stamp,
 frame_id and size are checked before the message is deserialised. A message larger than a
 people2d of its camera can be (people_msg.max_people_bytes of the camera's image size) is dropped
 before it is deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD, else
@@ -45,7 +47,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from msg_adapters.cdr_header import CLOUD_OVERHEAD, Oversize, deserialise_cloud, header_frame_id, header_stamp_ns
-from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_people
+from msg_adapters.people_msg import max_people_bytes, msg_to_wire_people, wire_bundles_to_msg
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros import topics
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
@@ -221,7 +223,7 @@ class AssociationNode(Node):
             if len(msg.data) > limit:
                 raise Oversize(f'{len(msg.data)} data bytes, more than a people2d of a {seen_by.width}x'
                                f'{seen_by.height} camera carries ({limit})')
-            people = msg_to_people(msg)
+            people = msg_to_wire_people(msg)
         except ValueError as exc:
             self._drop(camera, stamp, 'oversize' if isinstance(exc, Oversize) else 'malformed', str(exc))
             return
@@ -260,7 +262,7 @@ class AssociationNode(Node):
         t0 = time.perf_counter()
         observations = self._associator.update(synced.index, synced.items)
         bundles = [(obs.person_id, obs.views) for obs in observations]
-        self._publisher.publish(bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
+        self._publisher.publish(wire_bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
         self._observe(synced, time.perf_counter() - t0)
         if self._state is not None:
             self._save_ids()

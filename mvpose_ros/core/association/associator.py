@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Generic, Sequence, TypeVar
 
 import numpy as np
 
@@ -15,7 +15,7 @@ from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
 from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
-from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.types import Keypoints2D
 from mvpose_ros.core.association.tracking import IouTracker
 from mvpose_ros.core.association.view_consistency import consistent_views
 
@@ -41,12 +41,15 @@ class AssociationConfig:
             raise ValueError(f'max_view_residual must be >= 0, got {self.max_view_residual}')
 
 
+P = TypeVar('P', bound=Keypoints2D)  # the 2D people associated: Person2D, or as they came on the wire
+
+
 @dataclass
-class PersonObservation:
+class PersonObservation(Generic[P]):
     """One person at one instant: the skeleton seen by each camera (index into the rig)."""
 
     person_id: int
-    views: dict[int, Person2D]
+    views: dict[int, P]
     centre: np.ndarray
 
 
@@ -123,7 +126,7 @@ class Associator:
         for tracker in self._trackers:
             tracker.min_iou = config.track_iou
 
-    def update(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[PersonObservation]:
+    def update(self, frame: int, people: Sequence[Sequence[P] | None]) -> list[PersonObservation[P]]:
         """people[c]: camera c's skeletons at this instant, or None when that camera is missing."""
         present = [list(p) if p is not None else [] for p in people]
         for tracker, skeletons, raw in zip(self._trackers, present, people):

@@ -20,7 +20,7 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera, line_distance
-from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.types import Keypoints2D
 
 
 TIE_M = 1e-9  # metres: two mean ray distances closer than this are taken as equal
@@ -53,7 +53,7 @@ class ViewRays:
     dirs: np.ndarray
 
     @classmethod
-    def of(cls, cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]]) -> ViewRays:
+    def of(cls, cameras: Sequence[Camera], people: Sequence[Sequence[Keypoints2D]]) -> ViewRays:
         """The rays of people[c], camera c's skeletons (one back-projection per camera)."""
         counts = [len(p) for p in people]
         owner = np.repeat(np.arange(len(cameras)), counts)
@@ -218,7 +218,7 @@ def _greedy_clusters(dist, owner, max_distance):
     return members[:count], sizes[:kept]
 
 
-def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
+def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Keypoints2D]],
                        config: MatchingConfig, rays: ViewRays | None = None) -> np.ndarray:
     """Mean ray-to-ray distance between every two skeletons of all cameras at once (N, N), N = all
     skeletons in camera order; inf within a camera and where too few joints are shared. rays: the
@@ -232,7 +232,7 @@ def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Pers
                                 rays.owner.astype(np.int64), config.min_shared)
 
 
-def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Person2D]],
+def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Keypoints2D]],
                   config: MatchingConfig, rays: ViewRays | None = None) -> list[dict[int, int]]:
     """Group skeletons across cameras into people seen by at least two cameras.
 

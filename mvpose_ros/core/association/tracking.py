@@ -7,7 +7,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from mvpose_ros.core.compiled import kernel, kernel_array
-from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.types import Keypoints2D
 
 
 @kernel('float64[:, ::1](float64[:, ::1], float64[:, ::1])')
@@ -72,7 +72,7 @@ class IouTracker:
         self._ids: list[int] = []
         self._next_id = 0
 
-    def update(self, people: Sequence[Person2D]) -> None:
+    def update(self, people: Sequence[Keypoints2D]) -> None:
         """Set `track_id` on each person of the new frame (one-to-one, highest total IoU)."""
         boxes = keypoint_boxes(np.array([p.keypoints for p in people])) if len(people) else np.zeros((0, 4))
         ids = [-1] * len(people)
