@@ -9,11 +9,12 @@ Detects the 2D people of every image with the ONNX backend (MoveNet MultiPose, a
 with --heatmaps efficientpose or fused), associates them across the cameras, samples the 3D
 hypotheses and runs BP on this one frame, and writes the skeletons as one predictions line
 (`<output>/skeletons.jsonl`) and one overlay PNG per camera (`<output>/cam<c>.png`: the
-reprojected 3D skeletons in each person's colour over the 2D detections in thin white). A camera
+reprojected 3D skeletons in each person's colour over the 2D detections in thin white; with
+--ground-truth shelf also the frame's annotated poses, thin yellow, labelled `GT <actor>`). A camera
 given `-` instead of an image is left out, as a camera that sent nothing (what a rig gives with
 one of its cameras down). Prints the time of each stage of the set (MultiPose, EfficientPose,
 heatmaps, association and 3D); with --ground-truth shelf, the per-actor MPJPE and PCP of the
-frame against Shelf's actorsGT.
+frame against Shelf's actorsGT, and each actor's error per joint.
 
 --sets N detects the same images N times as a sequence of sets (a still scene) and prints each
 set's stage times (total: from the set's start to its skeletons), their medians and the sets per
@@ -46,11 +47,11 @@ from typing import Iterator, Sequence, TextIO
 import cv2
 import numpy as np
 
-from mvpose_ros.core.geometry.body import HEAD_MODELS, NUM_JOINTS, UP
+from mvpose_ros.core.geometry.body import HEAD_MODELS, JOINT_NAMES, NUM_JOINTS, UP
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table
+from mvpose_ros.core.evaluation.datasets import GroundTruth, data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table, match_actors
 from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.detection.onnx_detector import (HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector,
                                                      PendingSet)
@@ -142,26 +143,38 @@ def _same_count(paths: Sequence[Path], cameras: Sequence[Camera]) -> None:
         raise ValueError(f'--images: {len(paths)} images for {len(cameras)} cameras in the rig')
 
 
+def _annotated(frame: int, root: str | None) -> GroundTruth:
+    """Shelf's actorsGT at this one frame."""
+    return load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [frame])
+
+
 def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
     """Per-actor MPJPE and PCP of this frame against Shelf's actorsGT, for every actor annotated in
     it (the standard Shelf protocol scores actors 1-3 over frames 300-600, but one frame can lack
-    one of them and show actor 4: frame 572 annotates actors 1, 3 and 4)."""
-    gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [result.frame])
+    one of them and show actor 4: frame 572 annotates actors 1, 3 and 4), and each actor's error
+    per joint: where an estimate and the annotation part, the overlays show which one the image
+    agrees with."""
+    gt = _annotated(result.frame, root)
     actors = np.flatnonzero(gt.present[0]).tolist()
     if not actors:
         print(f'ground truth: no actor is annotated in Shelf frame {result.frame}', file=out)
         return
-    ev = evaluate({result.frame: result.joints}, gt, actors)
+    predictions = {result.frame: result.joints}
+    ev = evaluate(predictions, gt, actors)
     print(format_table(ev), file=out)
+    joint_mm = 1e3 * match_actors(predictions, gt, actors).joint_err[0]  # (A, 14)
     for a, actor in enumerate(ev.actors):
         found = 'found' if ev.missed[a] == 0 else 'NOT found'
         pcp = ', '.join(f'PCP {form} {ev.pcp(form, actor):.1f}%' for form in FORMS)
         print(f'Actor {actor + 1}: {found}, MPJPE {ev.mpjpe[a]:.1f} mm, {pcp}', file=out)
+        if ev.missed[a] == 0:
+            print(f'Actor {actor + 1} per joint (mm): '
+                  + ', '.join(f'{name} {e:.0f}' for name, e in zip(JOINT_NAMES, joint_mm[a])), file=out)
 
 
 def _mpjpe(result: FrameResult, root: str | None) -> str:
     """Each annotated actor's MPJPE in this frame, one short line ('actor 1 65.6 mm, ...')."""
-    gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [result.frame])
+    gt = _annotated(result.frame, root)
     actors = np.flatnonzero(gt.present[0]).tolist()
     if not actors:
         return 'no actor annotated'
@@ -231,10 +244,15 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / 'skeletons.jsonl').write_text(frame_line(result) + '\n', encoding='utf-8')
     colours = [person_colour(pid) for pid in result.person_ids]
+    truth, labels = None, []
+    if args.ground_truth == 'shelf':
+        gt = _annotated(args.frame, args.data_root)
+        annotated = np.flatnonzero(gt.present[0])
+        truth, labels = gt.poses[0, annotated], [f'GT {a + 1}' for a in annotated]
     drawn = [c for c, bgr in enumerate(images) if bgr is not None]
     for c in drawn:
         cam, bgr, path = cameras[c], images[c], args.output / f'cam{c}.png'
-        if not cv2.imwrite(str(path), overlay(bgr, cam, people[c], result.joints, colours)):
+        if not cv2.imwrite(str(path), overlay(bgr, cam, people[c], result.joints, colours, truth, labels)):
             raise OSError(f'{path}: could not write the overlay')
     print(f'wrote {args.output / "skeletons.jsonl"} and {len(drawn)} overlays '
           f'{", ".join(f"cam{c}.png" for c in drawn)}', file=out)

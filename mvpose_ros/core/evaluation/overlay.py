@@ -1,5 +1,7 @@
 """Overlay images: 3D skeletons reprojected into a camera image, each person in its own colour,
-over that camera's 2D detections drawn thinly."""
+over that camera's 2D detections drawn thinly, and where a dataset annotates the frame its
+ground truth in one fixed colour, so an annotation and an estimate that disagree can be told apart
+at a glance."""
 from __future__ import annotations
 
 import colorsys
@@ -8,11 +10,12 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from mvpose_ros.core.geometry.body import BONES, NUM_JOINTS
+from mvpose_ros.core.geometry.body import BONES, NUM_JOINTS, TOP_HEAD
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import Person2D
 
 DETECTION_BGR = (255, 255, 255)
+GROUND_TRUTH_BGR = (0, 255, 255)  # yellow, and drawn thinner than the estimates and with open joints
 GOLDEN_RATIO_CONJUGATE = (5.0 ** 0.5 - 1.0) / 2.0
 _SHIFT = 4  # cv2 sub-pixel drawing: coordinates in 1/16 px
 _BONES = np.array(BONES)  # (B, 2) joints of each bone, the 14 dataset joints
@@ -54,10 +57,30 @@ def draw_skeletons(bgr: np.ndarray, camera: Camera, joints: np.ndarray,
             cv2.circle(bgr, tuple(point.tolist()), (width + 2) << _SHIFT, colour, -1, cv2.LINE_AA, _SHIFT)
 
 
+def draw_ground_truth(bgr: np.ndarray, camera: Camera, truth: np.ndarray, labels: Sequence[str]) -> None:
+    """Each annotated pose (A, 14, 3) metres reprojected through camera, bones in GROUND_TRUTH_BGR
+    at half the skeletons' width, joints as open circles and its label (e.g. 'GT 4') at the top
+    of its head, in place."""
+    width = max(1, round(bgr.shape[1] / 600))
+    scale = bgr.shape[1] / 1500
+    for xyz, label in zip(np.asarray(truth, dtype=np.float64), labels):
+        uv = camera.project(xyz)
+        cv2.polylines(bgr, list(_segments(uv)), False, GROUND_TRUTH_BGR, width, cv2.LINE_AA, _SHIFT)
+        for point in np.round(uv[np.isfinite(uv).all(axis=1)] * (1 << _SHIFT)).astype(np.int32):
+            cv2.circle(bgr, tuple(point.tolist()), (width + 3) << _SHIFT, GROUND_TRUTH_BGR, width, cv2.LINE_AA, _SHIFT)
+        if np.isfinite(uv[TOP_HEAD]).all():
+            corner = (int(uv[TOP_HEAD, 0]) + 4 * width, int(uv[TOP_HEAD, 1]) - 4 * width)
+            cv2.putText(bgr, label, corner, cv2.FONT_HERSHEY_SIMPLEX, scale, GROUND_TRUTH_BGR, width, cv2.LINE_AA)
+
+
 def overlay(bgr: np.ndarray, camera: Camera, people: Sequence[Person2D], joints: np.ndarray,
-            colours: Sequence[tuple[float, float, float]]) -> np.ndarray:
-    """A copy of bgr with the 2D detections (thin, white) and the reprojected 3D skeletons."""
+            colours: Sequence[tuple[float, float, float]], truth: np.ndarray | None = None,
+            truth_labels: Sequence[str] = ()) -> np.ndarray:
+    """A copy of bgr with the 2D detections (thin, white), the reprojected 3D skeletons and, when
+    given, the annotated poses truth (A, 14, 3) labelled truth_labels (draw_ground_truth)."""
     out = np.array(bgr, copy=True)
     draw_detections(out, people)
     draw_skeletons(out, camera, joints, colours)
+    if truth is not None:
+        draw_ground_truth(out, camera, truth, truth_labels)
     return out

@@ -1,0 +1,42 @@
+"""Overlay images: the estimate in its person's colour and, where given, the annotated pose in the
+ground-truth colour, each where its joints project."""
+from __future__ import annotations
+
+import numpy as np
+
+from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR, overlay, person_colour
+from mvpose_ros.core.evaluation.video import look_at
+
+
+def _person(x: float) -> np.ndarray:
+    """A standing stick person (14, 3) at (x, 0), z up."""
+    z = np.array([0.0, 0.45, 0.9, 0.9, 0.45, 0.0, 0.9, 1.15, 1.4, 1.4, 1.15, 0.9, 1.5, 1.75])
+    dx = np.array([-0.1, -0.1, -0.1, 0.1, 0.1, 0.1, -0.3, -0.25, -0.2, 0.2, 0.25, 0.3, 0.0, 0.0])
+    return np.column_stack([dx + x, np.zeros(14), z])
+
+
+def _near(img: np.ndarray, uv: np.ndarray, bgr: tuple[int, int, int], radius: int) -> bool:
+    """Some pixel within radius of uv (2,) has colour bgr (within anti-aliasing)."""
+    u, v = np.round(uv).astype(int)
+    patch = img[v - radius:v + radius + 1, u - radius:u + radius + 1].reshape(-1, 3).astype(int)
+    return bool((np.abs(patch - np.array(bgr)).sum(axis=1) < 60).any())
+
+
+def test_the_ground_truth_is_drawn_in_its_colour_at_its_joints_and_not_over_the_estimate():
+    camera = look_at(np.array([0.0, -6.0, 1.0]), np.array([0.0, 0.0, 1.0]), np.array([0, 0, 1.0]), 800, 600)
+    estimate, truth = _person(-0.8), _person(0.8)
+    image = np.zeros((600, 800, 3), np.uint8)
+    colour = tuple(int(255 * c) for c in reversed(person_colour(3)))  # (b, g, r)
+
+    plain = overlay(image, camera, [], estimate[None], [person_colour(3)])
+    drawn = overlay(image, camera, [], estimate[None], [person_colour(3)], truth[None], ['GT 2'])
+
+    assert not (image != 0).any()  # a copy is drawn on
+    for uv in camera.project(truth):
+        assert _near(drawn, uv, GROUND_TRUTH_BGR, 6) and not _near(plain, uv, GROUND_TRUTH_BGR, 6)
+    for uv in camera.project(estimate):
+        assert _near(drawn, uv, colour, 4) and not _near(drawn, uv, GROUND_TRUTH_BGR, 6)
+    # the label stands beside the annotated head top
+    top = camera.project(truth[13])
+    label = drawn[int(top[1]) - 40:int(top[1]), int(top[0]):int(top[0]) + 80]
+    assert (np.abs(label.astype(int) - GROUND_TRUTH_BGR).sum(axis=2) < 60).sum() > 30
