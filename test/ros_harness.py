@@ -15,15 +15,14 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator, Mapping
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import Empty
 
 from msg_adapters.diagnostics_msg import msg_to_statuses
 from mvpose_ros.core.health.links import LINKS, WRITERS
-
 from mvpose_ros.graph.session import DDS_QOS_FROM_XML_ENV
 from mvpose_ros.nodes.bag_player import START_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
