@@ -3,13 +3,14 @@ in their ids' colours."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import cv2
 import numpy as np
 
 from mvpose_ros.cli.render import main
 from mvpose_ros.core.evaluation.datasets import shelf_cameras
-from mvpose_ros.core.evaluation.overlay import person_colour
+from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR, person_colour
 from mvpose_ros.core.evaluation.video import Scene, look_at, render_frame, virtual_camera
 from mvpose_ros.core.types import FrameResult
 
@@ -58,3 +59,44 @@ def test_render_command_writes_a_video_of_every_frame_and_a_still(tmp_path):
     assert cv2.imread(str(still)).shape == frame.shape
     assert main([str(predictions), '--output', str(tmp_path / 'v.gif')]) == 2
     assert main([str(predictions), '--output', str(video), '--still', '999']) == 2
+
+
+def test_the_ground_truth_is_drawn_in_both_views_where_a_frame_has_it():
+    rig = shelf_cameras(None)
+    result = FrameResult(7, [2], _person((0.0, 0.0))[None], np.ones((1, 14)))
+    truth = _person((0.6, 0.0))
+    view = virtual_camera([result], rig, np.array([0, 0, 1.0]), 640, 480)
+    scene = Scene(view, rig, [c.name for c in rig], np.array([0, 0, 1.0]), camera=1)
+    plain = render_frame(scene, result, None)
+    drawn = render_frame(replace(scene, truth=lambda frame: (truth[None], [f'GT {frame}'])), result, None)
+    nothing = render_frame(replace(scene, truth=lambda frame: (np.zeros((0, 14, 3)), [])), result, None)
+    assert np.array_equal(nothing, plain)
+    panel = cv2.resize(np.zeros((rig[1].height, rig[1].width, 3), np.uint8), (drawn.shape[1] - 640, 480))
+    scale = panel.shape[1] / rig[1].width
+    for uv, offset in ((view.project(truth), 0), (rig[1].project(truth) * scale, 640)):
+        for u, v in np.round(uv).astype(int)[[8, 9, 13]]:  # shoulders and head top
+            patch = drawn[v - 4:v + 5, offset + u - 4:offset + u + 5].reshape(-1, 3).astype(int)
+            assert (np.abs(patch - GROUND_TRUTH_BGR).sum(axis=1) < 90).any()
+            assert not (np.abs(plain[v - 4:v + 5, offset + u - 4:offset + u + 5].reshape(-1, 3).astype(int)
+                               - GROUND_TRUTH_BGR).sum(axis=1) < 90).any()
+
+
+def test_render_command_draws_shelf_annotations_and_refuses_frames_it_lacks(tmp_path, capsys):
+    def predictions(frames):
+        path = tmp_path / f'p{frames[0]}.jsonl'
+        path.write_text(''.join(json.dumps({'frame': f, 'people': [{'id': 1, 'joints': _person((0, 0)).tolist()}]})
+                                + '\n' for f in frames))
+        return str(path)
+
+    stills = {}
+    for flag in ([], ['--ground-truth', 'shelf']):
+        still = tmp_path / f'still{len(flag)}.png'
+        assert main([predictions([571, 572]), '--output', str(tmp_path / 'v.mp4'), '--size', '320x240',
+                     '--still', '572', '--still-output', str(still), *flag]) == 0
+        stills[bool(flag)] = cv2.imread(str(still))
+    # frame 572 annotates actors 1, 3 and 4: drawn in the ground-truth colour, nowhere without the flag
+    colour = (np.abs(stills[True].astype(int) - GROUND_TRUTH_BGR).sum(axis=2) < 60).sum()
+    assert colour > 100 and (np.abs(stills[False].astype(int) - GROUND_TRUTH_BGR).sum(axis=2) < 60).sum() < colour / 10
+    capsys.readouterr()
+    assert main([predictions([99999]), '--output', str(tmp_path / 'w.mp4'), '--ground-truth', 'shelf']) == 2
+    assert "--ground-truth shelf: the predictions' frames are not all Shelf frames" in capsys.readouterr().err

@@ -3,22 +3,25 @@
 
     mvpose-render out/shelf_graph.jsonl --output out/shelf.mp4 [--rig config/rigs/shelf.yaml]
         [--camera 2 --images '<data root>/data/shelf/frames/cam{camera}_{frame:06d}.png']
-        [--still 572 --still-output docs/shelf_skeletons.png]
+        [--still 572 --still-output docs/shelf_skeletons.png] [--ground-truth shelf]
 
 The virtual camera looks at where the people are from the side of the rig's cameras; with
 --camera C the rig camera C's view is drawn beside it, over its image where --images has one
 for that frame (a pattern with {camera} and {frame}). --still N also writes frame N as a PNG.
+--ground-truth shelf draws Shelf's annotated poses of each frame (the predictions' frame numbers
+are Shelf's) in both views, thin yellow and labelled `GT <actor>`, as `mvpose-images` does.
 """
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import cv2
+import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.predictions import read_results
 from mvpose_ros.core.evaluation.video import Scene, render_frame, virtual_camera, write_video
 from mvpose_ros.core.geometry.rig import load_rig_file
@@ -40,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "'frames/cam{camera}_{frame:06d}.png'")
     p.add_argument('--still', type=int, metavar='FRAME', help='also write this frame as a PNG')
     p.add_argument('--still-output', type=Path, help='where --still goes (default: beside --output)')
+    p.add_argument('--ground-truth', choices=('shelf',),
+                   help="also draw this dataset's annotated poses of each frame (the predictions' frames being "
+                        'its frame numbers)')
     return p
 
 
@@ -61,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         return cv2.imread(str(path)) if path.is_file() else None
 
     scene = Scene(virtual_camera(results, cameras, rig.up, width, height), cameras, rig.names, rig.up,
-                  args.camera, image if args.images else None)
+                  args.camera, image if args.images else None,
+                  _annotations([r.frame for r in results], args.data_root) if args.ground_truth else None)
     n = write_video(args.output, frames, scene, args.fps)
     print(f'wrote {n} frames to {args.output}')
     if args.still is not None:
@@ -73,6 +80,21 @@ def run(args: argparse.Namespace) -> int:
         cv2.imwrite(str(still), render_frame(scene, *match[0]))
         print(f'wrote {still}')
     return 0
+
+
+def _annotations(frames: Sequence[int], root: str | None) -> Callable[[int], tuple[np.ndarray, list[str]]]:
+    """frame -> Shelf's annotated poses (A, 14, 3) of the actors annotated in that frame of `frames`
+    and their labels ('GT <actor>')."""
+    try:
+        gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', sorted(set(frames)))
+    except IndexError as exc:
+        raise ValueError(f"--ground-truth shelf: the predictions' frames are not all Shelf frames ({exc})") from None
+    index = {int(f): i for i, f in enumerate(gt.frames)}
+
+    def truth(frame: int) -> tuple[np.ndarray, list[str]]:
+        present = np.flatnonzero(gt.present[index[frame]])
+        return gt.poses[index[frame], present], [f'GT {a + 1}' for a in present]
+    return truth
 
 
 def main(argv: Sequence[str] | None = None) -> int:

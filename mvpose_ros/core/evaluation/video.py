@@ -12,8 +12,8 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from mvpose_ros.core.evaluation.overlay import draw_skeletons, person_colour
-from mvpose_ros.core.geometry.body import TOP_HEAD
+from mvpose_ros.core.evaluation.overlay import draw_ground_truth, draw_skeletons, person_colour
+from mvpose_ros.core.geometry.body import NUM_JOINTS, TOP_HEAD
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import FrameResult
 
@@ -114,8 +114,10 @@ def _caption(img: np.ndarray, text: str) -> None:
 
 @dataclass
 class Scene:
-    """What every frame is drawn with: the virtual camera, the rig (cameras and names), up, and
-    optionally a rig camera to project into with image(frame) -> BGR or None where none exists."""
+    """What every frame is drawn with: the virtual camera, the rig (cameras and names), up,
+    optionally a rig camera to project into with image(frame) -> BGR or None where none exists, and
+    optionally truth(frame) -> the annotated poses (A, 14, 3) and their labels, drawn as
+    overlay.draw_ground_truth draws them (A may be 0)."""
 
     view: Camera
     rig: Sequence[Camera]
@@ -123,6 +125,7 @@ class Scene:
     up: np.ndarray
     camera: int | None = None
     image: Callable[[int], np.ndarray | None] | None = None
+    truth: Callable[[int], tuple[np.ndarray, list[str]]] | None = None
 
 
 def render_frame(scene: Scene, result: FrameResult, stamp_ns: int | None) -> np.ndarray:
@@ -135,6 +138,8 @@ def render_frame(scene: Scene, result: FrameResult, stamp_ns: int | None) -> np.
     _frusta(img, view, scene.rig, scene.names)
     colours = [person_colour(pid) for pid in result.person_ids]
     draw_skeletons(img, view, result.joints, colours)
+    truth, labels = scene.truth(result.frame) if scene.truth else (np.zeros((0, NUM_JOINTS, 3)), [])
+    draw_ground_truth(img, view, truth, labels)
     _labels(img, view, result, 0.55)
     stamp = f'{stamp_ns / 1e9:.3f} s' if stamp_ns is not None else '-'
     _caption(img, f'frame {result.frame}  stamp {stamp}  {len(result.person_ids)} people')
@@ -144,6 +149,7 @@ def render_frame(scene: Scene, result: FrameResult, stamp_ns: int | None) -> np.
     photo = scene.image(result.frame) if scene.image else None
     panel = np.zeros((cam.height, cam.width, 3), np.uint8) if photo is None else photo.copy()
     draw_skeletons(panel, cam, result.joints, colours)
+    draw_ground_truth(panel, cam, truth, labels)
     _labels(panel, cam, result, 0.9)
     _caption(panel, f'{scene.names[scene.camera]}' + ('' if photo is not None else ' (no image of this frame)'))
     width = 2 * round(cam.width * view.height / cam.height / 2)  # even: video codecs drop an odd column
