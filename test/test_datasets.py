@@ -71,6 +71,14 @@ def test_shelf_3d_test_frames(shelf_mat):
                                atol=1e-8)
 
 
+def test_annotated_gives_the_actors_of_a_frame_and_their_poses(shelf_mat):
+    gt = load_actors_gt(shelf_mat, [300, 572])
+    actors, poses = gt.annotated(1)
+    assert actors.tolist() == [0, 2, 3]  # frame 572 annotates actors 1, 3 and 4
+    np.testing.assert_array_equal(poses, gt.poses[1, [0, 2, 3]])
+    assert np.isfinite(poses).all() and not np.isfinite(gt.poses[1, 1]).any()
+
+
 def test_shelf_all_frames(shelf_mat):
     gt = load_actors_gt(shelf_mat)
     assert gt.poses.shape == (3200, 4, 14, 3)

@@ -29,7 +29,7 @@ def test_the_ground_truth_is_drawn_in_its_colour_at_its_joints_and_not_over_the_
     colour = tuple(int(255 * c) for c in reversed(person_colour(3)))  # (b, g, r)
 
     plain = overlay(image, camera, [], estimate[None], [person_colour(3)])
-    drawn = overlay(image, camera, [], estimate[None], [person_colour(3)], truth[None], ['GT 2'])
+    drawn = overlay(image, camera, [], estimate[None], [person_colour(3)], truth[None], [1])
 
     assert not (image != 0).any()  # a copy is drawn on
     for uv in camera.project(truth):

@@ -68,8 +68,8 @@ def test_the_ground_truth_is_drawn_in_both_views_where_a_frame_has_it():
     view = virtual_camera([result], rig, np.array([0, 0, 1.0]), 640, 480)
     scene = Scene(view, rig, [c.name for c in rig], np.array([0, 0, 1.0]), camera=1)
     plain = render_frame(scene, result, None)
-    drawn = render_frame(replace(scene, truth=lambda frame: (truth[None], [f'GT {frame}'])), result, None)
-    nothing = render_frame(replace(scene, truth=lambda frame: (np.zeros((0, 14, 3)), [])), result, None)
+    drawn = render_frame(replace(scene, truth=lambda frame: (np.array([frame]), truth[None])), result, None)
+    nothing = render_frame(replace(scene, truth=lambda frame: (np.zeros(0, int), np.zeros((0, 14, 3)))), result, None)
     assert np.array_equal(nothing, plain)
     panel = cv2.resize(np.zeros((rig[1].height, rig[1].width, 3), np.uint8), (drawn.shape[1] - 640, 480))
     scale = panel.shape[1] / rig[1].width

@@ -143,19 +143,13 @@ def _same_count(paths: Sequence[Path], cameras: Sequence[Camera]) -> None:
         raise ValueError(f'--images: {len(paths)} images for {len(cameras)} cameras in the rig')
 
 
-def _annotated(frame: int, root: str | None) -> GroundTruth:
-    """Shelf's actorsGT at this one frame."""
-    return load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [frame])
-
-
-def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
+def _score(result: FrameResult, gt: GroundTruth, out: TextIO) -> None:
     """Per-actor MPJPE and PCP of this frame against Shelf's actorsGT, for every actor annotated in
     it (the standard Shelf protocol scores actors 1-3 over frames 300-600, but one frame can lack
     one of them and show actor 4: frame 572 annotates actors 1, 3 and 4), and each actor's error
     per joint: where an estimate and the annotation part, the overlays show which one the image
-    agrees with."""
-    gt = _annotated(result.frame, root)
-    actors = np.flatnonzero(gt.present[0]).tolist()
+    agrees with. gt: actorsGT at result's frame alone."""
+    actors = gt.annotated(0)[0].tolist()
     if not actors:
         print(f'ground truth: no actor is annotated in Shelf frame {result.frame}', file=out)
         return
@@ -172,10 +166,10 @@ def _score(result: FrameResult, root: str | None, out: TextIO) -> None:
                   + ', '.join(f'{name} {e:.0f}' for name, e in zip(JOINT_NAMES, joint_mm[a])), file=out)
 
 
-def _mpjpe(result: FrameResult, root: str | None) -> str:
-    """Each annotated actor's MPJPE in this frame, one short line ('actor 1 65.6 mm, ...')."""
-    gt = _annotated(result.frame, root)
-    actors = np.flatnonzero(gt.present[0]).tolist()
+def _mpjpe(result: FrameResult, gt: GroundTruth) -> str:
+    """Each annotated actor's MPJPE in this frame (gt: actorsGT at it alone), one short line
+    ('actor 1 65.6 mm, ...')."""
+    actors = gt.annotated(0)[0].tolist()
     if not actors:
         return 'no actor annotated'
     ev = evaluate({result.frame: result.joints}, gt, actors)
@@ -210,6 +204,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     print(f'{PROG}: {len(cameras)} cameras, heatmaps {source}, MultiPose input '
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
     stage = Stage3D(cameras, stage_config(args.sets, args.head_model), up)
+    gt = (load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', [args.frame])
+          if args.ground_truth == 'shelf' else None)
     nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
     # With MultiPose on every set, the next set's runs start while this one finishes (its people
     # and 3D stage): crops from skeletons would need this set's 3D first.
@@ -229,7 +225,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         t = detector.timing
         times.append((t.multipose, t.efficientpose, t.heatmaps, end - detected, end - pending.started))
         found = ' '.join(f'cam{c}:{NO_IMAGE if p is None else len(p)}' for c, p in enumerate(people))
-        scored = f'; MPJPE {_mpjpe(result, args.data_root)}' if args.ground_truth == 'shelf' else ''
+        scored = f'; MPJPE {_mpjpe(result, gt)}' if gt is not None else ''
         regions = f' ({t.multipose_regions} regions)' if t.multipose_regions else ''
         print(f'set {n}: MultiPose on {t.multipose_runs} images{regions} {1e3 * t.multipose:6.1f} ms, EfficientPose '
               f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * t.heatmaps:5.1f} ms, '
@@ -244,20 +240,16 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / 'skeletons.jsonl').write_text(frame_line(result) + '\n', encoding='utf-8')
     colours = [person_colour(pid) for pid in result.person_ids]
-    truth, labels = None, []
-    if args.ground_truth == 'shelf':
-        gt = _annotated(args.frame, args.data_root)
-        annotated = np.flatnonzero(gt.present[0])
-        truth, labels = gt.poses[0, annotated], [f'GT {a + 1}' for a in annotated]
+    actors, truth = gt.annotated(0) if gt is not None else ((), None)
     drawn = [c for c, bgr in enumerate(images) if bgr is not None]
     for c in drawn:
         cam, bgr, path = cameras[c], images[c], args.output / f'cam{c}.png'
-        if not cv2.imwrite(str(path), overlay(bgr, cam, people[c], result.joints, colours, truth, labels)):
+        if not cv2.imwrite(str(path), overlay(bgr, cam, people[c], result.joints, colours, truth, actors)):
             raise OSError(f'{path}: could not write the overlay')
     print(f'wrote {args.output / "skeletons.jsonl"} and {len(drawn)} overlays '
           f'{", ".join(f"cam{c}.png" for c in drawn)}', file=out)
-    if args.ground_truth == 'shelf':
-        _score(result, args.data_root, out)
+    if gt is not None:
+        _score(result, gt, out)
     return 0
 
 

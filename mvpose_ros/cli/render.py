@@ -82,19 +82,15 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _annotations(frames: Sequence[int], root: str | None) -> Callable[[int], tuple[np.ndarray, list[str]]]:
-    """frame -> Shelf's annotated poses (A, 14, 3) of the actors annotated in that frame of `frames`
-    and their labels ('GT <actor>')."""
+def _annotations(frames: Sequence[int], root: str | None) -> Callable[[int], tuple[np.ndarray, np.ndarray]]:
+    """frame -> the actors Shelf annotates in that frame of `frames` (A,) and their poses (A, 14, 3)."""
     try:
         gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', sorted(set(frames)))
     except IndexError as exc:
         raise ValueError(f"--ground-truth shelf: the predictions' frames are not all Shelf frames ({exc})") from None
     index = {int(f): i for i, f in enumerate(gt.frames)}
 
-    def truth(frame: int) -> tuple[np.ndarray, list[str]]:
-        present = np.flatnonzero(gt.present[index[frame]])
-        return gt.poses[index[frame], present], [f'GT {a + 1}' for a in present]
-    return truth
+    return lambda frame: gt.annotated(index[frame])
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -333,7 +333,7 @@ def score_sets(predictions: Path | str, frame: int, root: str | None, out: TextI
     frame), named on its line; the summary then also gives the sets with every camera apart, the
     ones comparable with all the cameras' images."""
     gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', [frame])
-    actors = np.flatnonzero(gt.present[0]).tolist()
+    actors = gt.annotated(0)[0].tolist()
     records = [json.loads(line) for line in Path(predictions).read_text(encoding='utf-8').splitlines() if line]
     absent = absent or {}
     errors: dict[int, list[float]] = {a: [] for a in actors}

@@ -104,6 +104,11 @@ class GroundTruth:
         """(F, A) bool: the actor is annotated in that frame."""
         return np.isfinite(self.poses).all(axis=(-2, -1))
 
+    def annotated(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """The actors (A,) annotated in the i-th frame, as actorsGT indices, and their poses (A, 14, 3)."""
+        actors = np.flatnonzero(self.present[i])
+        return actors, self.poses[i, actors]
+
 
 def _cells(mat_path: str | Path, key: str, frames: Sequence[int] | None) -> tuple[np.ndarray, list]:
     """Frame indices (F,) and per-actor lists of the selected cells of `key`."""

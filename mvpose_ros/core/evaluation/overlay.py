@@ -57,30 +57,31 @@ def draw_skeletons(bgr: np.ndarray, camera: Camera, joints: np.ndarray,
             cv2.circle(bgr, tuple(point.tolist()), (width + 2) << _SHIFT, colour, -1, cv2.LINE_AA, _SHIFT)
 
 
-def draw_ground_truth(bgr: np.ndarray, camera: Camera, truth: np.ndarray, labels: Sequence[str]) -> None:
+def draw_ground_truth(bgr: np.ndarray, camera: Camera, truth: np.ndarray, actors: Sequence[int]) -> None:
     """Each annotated pose (A, 14, 3) metres reprojected through camera, bones in GROUND_TRUTH_BGR
-    at half the skeletons' width, joints as open circles and its label (e.g. 'GT 4') at the top
-    of its head, in place."""
+    at half the skeletons' width, joints as open circles and `GT <actor>` (actors (A,): the
+    dataset's 0-based actor indices, printed from 1 as everywhere) at the top of its head, in place."""
     width = max(1, round(bgr.shape[1] / 600))
     scale = bgr.shape[1] / 1500
-    for xyz, label in zip(np.asarray(truth, dtype=np.float64), labels):
+    for xyz, actor in zip(np.asarray(truth, dtype=np.float64), actors):
         uv = camera.project(xyz)
         cv2.polylines(bgr, list(_segments(uv)), False, GROUND_TRUTH_BGR, width, cv2.LINE_AA, _SHIFT)
         for point in np.round(uv[np.isfinite(uv).all(axis=1)] * (1 << _SHIFT)).astype(np.int32):
             cv2.circle(bgr, tuple(point.tolist()), (width + 3) << _SHIFT, GROUND_TRUTH_BGR, width, cv2.LINE_AA, _SHIFT)
         if np.isfinite(uv[TOP_HEAD]).all():
             corner = (int(uv[TOP_HEAD, 0]) + 4 * width, int(uv[TOP_HEAD, 1]) - 4 * width)
-            cv2.putText(bgr, label, corner, cv2.FONT_HERSHEY_SIMPLEX, scale, GROUND_TRUTH_BGR, width, cv2.LINE_AA)
+            cv2.putText(bgr, f'GT {int(actor) + 1}', corner, cv2.FONT_HERSHEY_SIMPLEX, scale, GROUND_TRUTH_BGR,
+                        width, cv2.LINE_AA)
 
 
 def overlay(bgr: np.ndarray, camera: Camera, people: Sequence[Person2D], joints: np.ndarray,
             colours: Sequence[tuple[float, float, float]], truth: np.ndarray | None = None,
-            truth_labels: Sequence[str] = ()) -> np.ndarray:
+            truth_actors: Sequence[int] = ()) -> np.ndarray:
     """A copy of bgr with the 2D detections (thin, white), the reprojected 3D skeletons and, when
-    given, the annotated poses truth (A, 14, 3) labelled truth_labels (draw_ground_truth)."""
+    given, the annotated poses truth (A, 14, 3) of truth_actors (draw_ground_truth)."""
     out = np.array(bgr, copy=True)
     draw_detections(out, people)
     draw_skeletons(out, camera, joints, colours)
     if truth is not None:
-        draw_ground_truth(out, camera, truth, truth_labels)
+        draw_ground_truth(out, camera, truth, truth_actors)
     return out

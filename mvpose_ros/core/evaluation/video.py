@@ -116,7 +116,7 @@ def _caption(img: np.ndarray, text: str) -> None:
 class Scene:
     """What every frame is drawn with: the virtual camera, the rig (cameras and names), up,
     optionally a rig camera to project into with image(frame) -> BGR or None where none exists, and
-    optionally truth(frame) -> the annotated poses (A, 14, 3) and their labels, drawn as
+    optionally truth(frame) -> the actors annotated in it (A,) and their poses (A, 14, 3), drawn as
     overlay.draw_ground_truth draws them (A may be 0)."""
 
     view: Camera
@@ -125,7 +125,7 @@ class Scene:
     up: np.ndarray
     camera: int | None = None
     image: Callable[[int], np.ndarray | None] | None = None
-    truth: Callable[[int], tuple[np.ndarray, list[str]]] | None = None
+    truth: Callable[[int], tuple[np.ndarray, np.ndarray]] | None = None
 
 
 def render_frame(scene: Scene, result: FrameResult, stamp_ns: int | None) -> np.ndarray:
@@ -138,8 +138,8 @@ def render_frame(scene: Scene, result: FrameResult, stamp_ns: int | None) -> np.
     _frusta(img, view, scene.rig, scene.names)
     colours = [person_colour(pid) for pid in result.person_ids]
     draw_skeletons(img, view, result.joints, colours)
-    truth, labels = scene.truth(result.frame) if scene.truth else (np.zeros((0, NUM_JOINTS, 3)), [])
-    draw_ground_truth(img, view, truth, labels)
+    actors, truth = scene.truth(result.frame) if scene.truth else ((), np.zeros((0, NUM_JOINTS, 3)))
+    draw_ground_truth(img, view, truth, actors)
     _labels(img, view, result, 0.55)
     stamp = f'{stamp_ns / 1e9:.3f} s' if stamp_ns is not None else '-'
     _caption(img, f'frame {result.frame}  stamp {stamp}  {len(result.person_ids)} people')
@@ -149,7 +149,7 @@ def render_frame(scene: Scene, result: FrameResult, stamp_ns: int | None) -> np.
     photo = scene.image(result.frame) if scene.image else None
     panel = np.zeros((cam.height, cam.width, 3), np.uint8) if photo is None else photo.copy()
     draw_skeletons(panel, cam, result.joints, colours)
-    draw_ground_truth(panel, cam, truth, labels)
+    draw_ground_truth(panel, cam, truth, actors)
     _labels(panel, cam, result, 0.9)
     _caption(panel, f'{scene.names[scene.camera]}' + ('' if photo is not None else ' (no image of this frame)'))
     width = 2 * round(cam.width * view.height / cam.height / 2)  # even: video codecs drop an odd column
