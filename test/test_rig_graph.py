@@ -172,6 +172,22 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
     assert rig_played_connections(rig, lockstep=True) == {**rig_played_connections(rig), LOCKSTEP_ACK: ('pub', 'sub')}
     # --rig alone: the template's defaults (association max_skew 0 = half a 25 Hz period)
     assert rig_sync([load_params(package_path(RIG_TEMPLATE))]) == (0.02, 0.5)
+    # what --config leaves out comes from the template's runner section, where alone it is defined
+    template = load_params(package_path(RIG_TEMPLATE))['mvpose_graph']
+    assert (settings.predictions, settings.timeout, run.ack_timeout) == (
+        template['predictions'], template['timeout'], template['ack_timeout'])
+
+
+def test_rig_plan_names_a_runner_setting_the_template_lacks(rig_file, tmp_path, monkeypatch):
+    import mvpose_ros.graph.session as session
+    lines = package_path(RIG_TEMPLATE).read_text().splitlines(keepends=True)
+    broken = tmp_path / 'template.yaml'
+    broken.write_text(''.join(line for line in lines if not line.lstrip().startswith('ack_timeout:')))
+    monkeypatch.setattr(session, 'RIG_TEMPLATE', str(broken))
+    args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=None, data_root=None, lockstep=True,
+                           rate=None, qos=None, predictions=None, loops=1, overrides=[])
+    with pytest.raises(ValueError, match=r'template\.yaml: mvpose_graph\.ack_timeout: missing'):
+        rig_run_plan(args)
 
 
 def test_lockstep_nodes_and_their_overrides_file(tmp_path):

@@ -206,8 +206,8 @@ def unknown_nodes(params: Mapping[str, object], nodes: Sequence[NodeSpec]) -> li
 
 # What `mvpose-graph --rig` runs when --config does not say otherwise (package file, see its comments).
 RIG_TEMPLATE = 'config/rig_template.yaml'
-RIG_RUNNER_DEFAULTS: dict[str, bool | int | float | str] = {
-    'predictions': 'out/rig_graph.jsonl', 'rate': 1.0, 'timeout': 60.0, 'qos': 'sensor', 'ack_timeout': 5.0}
+# The runner's own settings of a --rig run; their defaults are the template's mvpose_graph section.
+RIG_RUNNER_KEYS = ('predictions', 'rate', 'timeout', 'qos', 'ack_timeout')
 LOCKSTEP_ACK = BUNDLES  # a set is done once its bundle is out (the 3D stage holds skeletons back `lag` sets)
 # Lockstep: a set the sync releases late (a camera missing from it, decided by the next set's
 # image or the sync timeout) can leave together with the next; the detector keeps both.

@@ -27,7 +27,7 @@ from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
-from mvpose_ros.graph.config import (RIG_RUNNER_DEFAULTS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
+from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
                                      detector_backend, graph_nodes, graph_settings, load_params, output_topics,
                                      rig_connections, rig_graph_nodes, rig_played_connections, rig_sync, runner_section,
                                      unknown_nodes, write_overrides)
@@ -160,7 +160,10 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     files = ([package_path(RIG_TEMPLATE)] + ([args.config.resolve()] if args.config else [])
              + _override_files(args.overrides))
     params_list = [load_params(f) for f in files]
-    section = RIG_RUNNER_DEFAULTS | {k: v for k, v in runner_section(params_list).items() if k in RIG_RUNNER_DEFAULTS}
+    section = {k: v for k, v in runner_section(params_list).items() if k in RIG_RUNNER_KEYS}
+    missing = [k for k in RIG_RUNNER_KEYS if k not in section]
+    if missing:
+        raise ValueError(f'{files[0]}: {RUNNER_SECTION}.{missing[0]}: missing')
     max_skew, sync_timeout = rig_sync(params_list)
     bag = Path(args.bag).resolve()
     summary = bag_summary(bag)
