@@ -128,6 +128,13 @@ def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
     return records
 
 
+def _grids(records: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each record's map shapes (P, 16, 2) h, w and its number of heatmap cells (P,), of records
+    (P,) of B's fields."""
+    grid = records['grid'].reshape(len(records), J, 2).astype(np.int64)
+    return grid, (grid[..., 0] * grid[..., 1]).sum(axis=1)
+
+
 def _records_from_msg(msg: PointCloud2, keys: Sequence[tuple[str, str]]) -> np.ndarray:
     """Decode B's layout (after keys) with the heatmap count the message declares, then check
     every record's grids against it."""
@@ -140,12 +147,11 @@ def _records_from_msg(msg: PointCloud2, keys: Sequence[tuple[str, str]]) -> np.n
         if n_cells != 0:
             raise ValueError(f'people heatmap count: expected 0 with no records, got {n_cells}')
         return records
-    grid = records['grid'].reshape(len(records), J, 2).astype(np.int64)
+    grid, sizes = _grids(records)
     empty = (grid < 1).any(axis=2)
     if empty.any():
         i, j = np.argwhere(empty)[0]
         raise ValueError(f'people record {i} joint {j}: grid {tuple(grid[i, j].tolist())}, needs h, w >= 1')
-    sizes = (grid[..., 0] * grid[..., 1]).sum(axis=1)
     over = sizes > n_cells
     if over.any():
         i = int(np.argmax(over))
@@ -176,8 +182,7 @@ def _people_from_records(records: np.ndarray) -> list[Person2D]:
     keypoints = _keypoints_of(records)
     if n == 0:
         return []
-    grid = records['grid'].reshape(n, J, 2).astype(np.int64)
-    sizes = (grid[..., 0] * grid[..., 1]).sum(axis=1)
+    grid, sizes = _grids(records)
     cells = np.divide(records['heatmap'], np.float32(255), dtype=np.float32)
     origin = records['origin'].astype(np.float64).reshape(n, J, 2)
     return [Person2D(keypoints=keypoints[p],
@@ -267,8 +272,7 @@ def wire_bundles_to_msg(bundles: Sequence[tuple[int, dict[int, WirePerson]]],
         in_rows.append(person.row)
     sizes = np.zeros(n, dtype=np.int64)
     for records, out_rows, in_rows in sources.values():
-        grid = records['grid'][in_rows].reshape(len(in_rows), J, 2).astype(np.int64)
-        sizes[out_rows] = (grid[..., 0] * grid[..., 1]).sum(axis=1)
+        sizes[out_rows] = _grids(records[in_rows])[1]
     out = np.zeros(n, dtype=people_dtype(int(sizes.max(initial=0)), BUNDLE_KEYS))
     width = out['heatmap'].shape[1]
     for records, out_rows, in_rows in sources.values():
