@@ -16,6 +16,7 @@ from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, ray_r
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
 from mvpose_ros.core.association.identity import IdentityKeeper
+from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.association.matching import TIE_M, MatchingConfig, ViewRays, all_view_distances, cluster_views
 from mvpose_ros.core.types import Person2D
 
@@ -316,16 +317,32 @@ def _members(tracks: list[int]) -> list[set[tuple[int, int]]]:
     return [{(0, t), (1, t)} for t in tracks]
 
 
-def test_identity_follows_shared_tracks_even_after_a_jump(poses):
+def test_identity_follows_shared_tracks_as_far_as_a_person_moves(poses):
     keeper = IdentityKeeper(max_jump=0.5, max_age=25)
     centres = _gt_centres(poses, FRAMES[0])
     ids = keeper.assign(0, _members([0, 1, 2]), centres)
     assert ids == [0, 1, 2]
-    # listed in another order, the same tracks: same ids, even with a centre 2 m away
-    moved = centres[[2, 0, 1]] + [[2.0, 0, 0], [0, 0, 0], [0, 0, 0]]
-    assert keeper.assign(1, _members([2, 0, 1]), moved) == [2, 0, 1]
+    # listed in another order, the same tracks: same ids, one of them 0.7 m on after two frames
+    moved = centres[[2, 0, 1]] + [[0.7, 0, 0], [0, 0, 0], [0, 0, 0]]
+    assert keeper.assign(2, _members([2, 0, 1]), moved) == [2, 0, 1]
     # one of two cameras switched track: the shared one still votes
-    assert keeper.assign(2, [{(0, 0), (1, 9)}], centres[[0]]) == [0]
+    assert keeper.assign(3, [{(0, 0), (1, 9)}], centres[[0]]) == [0]
+    # its tracks 2 m away one frame later: no one walks that far, a new id
+    assert keeper.assign(4, _members([1]), centres[[1]] + [2.0, 0, 0]) == [3]
+
+
+def test_a_stray_cluster_holding_a_persons_track_far_away_does_not_take_its_id():
+    """Shelf with every second frame dropped, frame 596: camera 1's view of a person goes into a
+    two-view cluster 1.8 m away with another person's view, while the person's other cameras
+    all start new tracks. Its track's history gave the stray cluster the id and the person a new
+    one."""
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    a, b = np.array([1.4, -1.1, 0.9]), np.array([0.1, 0.1, 0.9])
+    for frame in range(0, 40, 2):
+        assert keeper.assign(frame, [{(1, 123), (2, 64), (3, 84)}, {(0, 76), (2, 57)}], np.stack([a, b])) == [0, 1]
+    stray = np.array([-0.4, -0.6, 0.9])
+    ids = keeper.assign(40, [{(2, 80), (3, 85)}, {(0, 76), (1, 123)}, {(2, 57)}], np.stack([a, stray, b]))
+    assert ids[0] == 0 and ids[1] not in (0, 1)
 
 
 def test_identity_recovered_by_position_when_all_tracks_changed(poses):
@@ -448,3 +465,61 @@ def test_identity_state_restored_keeps_ids_by_position_and_never_reuses_one(pose
 def test_identity_state_malformed_is_a_value_error(state, problem):
     with pytest.raises(ValueError, match=problem):
         IdentityKeeper().restore(state, 0)
+
+
+def test_a_split_does_not_hand_the_persons_young_tracks_to_the_newcomer():
+    """Shelf with 30% of its frames dropped, frames 518-522: tracks restart often, so two of actor
+    1's cameras had joined him one frame before a duplicate split him for a frame. Forgetting at
+    the split that those tracks had been his left them voting as much for the newcomer, and the
+    next frame with only them went to the newcomer's id, nearer as it was seen by the same cameras."""
+    keeper = IdentityKeeper(max_jump=0.5, max_age=25)
+    here, partial = np.array([0.1, 0.0, 0.9]), np.array([0.2, 0.05, 0.95])
+    for frame in range(20):
+        assert keeper.assign(frame, [{(0, 1), (3, 1)}], here[None]) == [0]
+    whole = {(0, 1), (1, 7), (3, 1), (4, 7)}
+    assert keeper.assign(20, [whole], here[None]) == [0]
+    assert keeper.assign(21, [{(0, 1), (3, 1)}, {(1, 7), (4, 7)}], np.stack([here, partial])) == [0, 1]
+    assert keeper.assign(22, [whole], here[None]) == [0]
+    assert keeper.assign(23, [{(1, 7), (4, 7)}], partial[None]) == [0]
+
+
+def test_a_tracks_history_with_an_id_ends_max_age_frames_after_it_left():
+    keeper = IdentityKeeper(max_jump=0.5, max_age=5)
+    here = np.array([[0.0, 0.0, 0.9]])
+    assert keeper.assign(0, [{(0, 1), (1, 1)}], here) == [0]
+    for frame in range(1, 8):  # camera 1's track goes on elsewhere, voting for nobody
+        assert keeper.assign(frame, [{(0, 1)}], here) == [0]
+    # back beside person 0 after 8 frames away: forgotten, so it votes for 0 no more, and the
+    # nearer person keeps 0 (were it remembered, its vote would win 0 for it)
+    assert keeper.assign(8, [{(0, 9)}, {(1, 1), (2, 5)}], np.vstack([here, here + [0.3, 0.0, 0.0]])) == [0, 1]
+
+
+@pytest.fixture(scope='module')
+def shelf_people(shelf_openpose):
+    """The 2D people of every Shelf test frame from the shared OpenPose output."""
+    from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
+    from mvpose_ros.core.evaluation.offline import detect_sequence
+    cameras, raw = shelf_openpose
+    return detect_sequence(cameras, raw, list(range(300, 601)), OpenPoseDetectorConfig())
+
+
+@pytest.mark.parametrize('drop', [FrameDrop(), FrameDrop(fraction=0.3, seed=0), FrameDrop(fraction=0.3, seed=1),
+                                  FrameDrop(fraction=0.3, seed=4), FrameDrop(fraction=0.5, seed=1)])
+def test_each_actor_keeps_its_id_with_frames_dropped_upstream(shelf_people, drop):
+    """Association alone over Shelf's 301 frames, whole and thinned as a loaded camera system
+    drops sets: in every frame with one person within 0.5 m of an annotated actor, that person
+    has the actor's one id (where a duplicate detection puts two people there, which of them is
+    nearer is chance). Before a split kept its tracks' history and tracks were limited to a
+    person's pace, these thinned clips had 2-4 changes each. Every second or third frame dropped
+    still gives one or two (README, Uneven frames)."""
+    gt = load_actors_gt(SHELF / 'actorsGT.mat')
+    associator = Associator(shelf_people.cameras, AssociationConfig())
+    ids: dict[int, set[int]] = {0: set(), 1: set(), 2: set()}
+    for k in drop.kept(len(shelf_people.frames)):
+        frame = shelf_people.frames[k]
+        people = associator.update(frame, shelf_people.people[k])
+        for actor, pose in enumerate(gt.poses[frame, :3]):
+            if np.isfinite(pose).all():
+                near = [p.person_id for p in people if np.linalg.norm(p.centre - pose.mean(axis=0)) < 0.5]
+                ids[actor] |= set(near) if len(near) == 1 else set()
+    assert all(len(i) == 1 for i in ids.values())

@@ -22,7 +22,8 @@ from mvpose_ros.core.association.view_consistency import consistent_views
 
 @dataclass(frozen=True)
 class AssociationConfig:
-    """track_iou: the paper's 0.7; max_jump / max_age: how an id is recovered after occlusion;
+    """track_iou: the paper's 0.7; max_jump / max_age: how an id is recovered after occlusion, and
+    max_jump how far a person's tracks carry its id a frame (identity);
     max_view_residual: a matched view the others contradict by more than this share of its size is
     left out (view_consistency; 0: every matched view kept)."""
 

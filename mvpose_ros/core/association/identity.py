@@ -3,9 +3,16 @@
 A person keeps its id while the per-camera tracks that make it up continue: each shared
 (camera, track) pair votes for the old id with the number of frames it has been part of that id
 (up to `max_age`), so a person split for a few frames into two clusters (a duplicate detection in
-one camera) goes back to the id its tracks have long made up rather than to the newcomer's. When
-the tracks all changed (a new box in every camera after an occlusion), the id is recovered from
-the 3D position if the person is within `max_jump` metres of where a recently seen person was.
+one camera) goes back to the id its tracks have long made up rather than to the newcomer's. A
+track keeps its history with an id through frames in which it is elsewhere (the other part of a
+split, or left out of the frame's people) and loses it after `max_age` frames away: were it
+forgotten, a one-frame split would leave the id's young tracks voting as much for the newcomer as
+for the id (with frames dropped upstream tracks restart often, and Shelf's actor 1 then changed
+id four times in frames 520-523). Tracks carry an id only as far as a person can move in the
+frames since it was seen (`max_jump` a frame): a stray two-view cluster holding one of a person's
+tracks must not take that person's id from across the room. When the tracks all changed (a new
+box in every camera after an occlusion), the id is recovered from the 3D position if the person
+is within `max_jump` metres of where a recently seen person was.
 
 The keeper's state that outlives a restart is small: the next id and where each recent person
 was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
@@ -24,8 +31,17 @@ from scipy.optimize import linear_sum_assignment
 @dataclass
 class _Known:
     members: dict[tuple[int, int], int]  # (camera, track) -> frames it has been part of this id
+    seen: dict[tuple[int, int], int]  # (camera, track) -> the last frame it was part of this id
     centre: np.ndarray
     last_frame: int
+
+    def joined(self, frame: int, tracks: set[tuple[int, int]], centre: np.ndarray, max_age: int) -> _Known:
+        """This id seen again at `frame`, made of `tracks`: theirs count one more frame (up to
+        max_age); the others keep theirs until max_age frames without being part of it."""
+        kept = {t: n for t, n in self.members.items() if t not in tracks and frame - self.seen[t] <= max_age}
+        members = {**kept, **{t: min(self.members.get(t, 0) + 1, max(max_age, 1)) for t in tracks}}
+        seen = {**{t: self.seen[t] for t in kept}, **dict.fromkeys(tracks, frame)}
+        return _Known(members, seen, centre, frame)
 
 
 @dataclass
@@ -59,7 +75,8 @@ class IdentityKeeper:
                         shared[row, col] += frames
             jump = np.linalg.norm(centres[:, None] - np.array([self._known[k].centre for k in known_ids])[None],
                                   axis=-1)
-            allowed = (shared > 0) | (jump <= self.max_jump)
+            elapsed = np.maximum(frame - np.array([self._known[k].last_frame for k in known_ids]), 1)
+            allowed = ((shared > 0) & (jump <= self.max_jump * elapsed[None])) | (jump <= self.max_jump)
             # Shared track history dominates; distance breaks ties and decides when no track survives.
             # A new id costs more than any allowed match but far less than a forbidden one, so a
             # person nobody matches takes one instead of pushing another person off its id.
@@ -69,13 +86,12 @@ class IdentityKeeper:
             for r, c in zip(rows.tolist(), cols.tolist()):
                 if c < len(known_ids) and allowed[r, c]:
                     ids[r] = known_ids[c]
-        most = max(self.max_age, 1)
-        for i, m in enumerate(members):
+        for i, tracks in enumerate(members):
             if ids[i] < 0:
                 ids[i] = self._next_id
                 self._next_id += 1
-            before = self._known[ids[i]].members if ids[i] in self._known else {}
-            self._known[ids[i]] = _Known({t: min(before.get(t, 0) + 1, most) for t in m}, centres[i], frame)
+            known = self._known.get(ids[i]) or _Known({}, {}, centres[i], frame)
+            self._known[ids[i]] = known.joined(frame, tracks, centres[i], self.max_age)
         return ids
 
     def state(self) -> dict[str, Any]:
@@ -100,4 +116,4 @@ class IdentityKeeper:
                 raise ValueError(f'identity state: person {pid}: centre must be 3 finite numbers')
         self._next_id = max(self._next_id, next_id)
         for pid, centre in people:
-            self._known[pid] = _Known({}, centre, frame)
+            self._known[pid] = _Known({}, {}, centre, frame)
