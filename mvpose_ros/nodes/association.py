@@ -27,8 +27,8 @@ from each camera's CameraInfo: until every camera's is known, inputs are dropped
 
 Diagnostics (nodes.health, on /diagnostics): per camera its people2d rate, drops by reason, sync
 offset and silence; the node's ms per set, pending messages, set skew and latency. Live
-parameters: sync_timeout, max_skew, track_iou, match_distance, max_view_residual and the diagnostics
-thresholds.
+parameters: sync_timeout, max_skew, track_iou, match_distance, max_view_residual, merge_duplicates and
+the diagnostics thresholds.
 """
 from __future__ import annotations
 
@@ -114,7 +114,8 @@ class AssociationNode(Node):
         self._arrivals: dict[tuple[int, int], float] = {}  # (camera, stamp) of pending messages -> arrival
         self._monitor = NodeMonitor()
         self._health = NodeHealth(self, self._statuses)
-        live_parameters(self, ['sync_timeout', 'max_skew', 'track_iou', 'match_distance', 'max_view_residual'],
+        live_parameters(self, ['sync_timeout', 'max_skew',
+                               *[s.name for s in parameter_specs(ASSOCIATION_PARAMETERS) if s.live]],
                         self._check, self._retune)
         self._state = Path(p['state_dir'], self.get_fully_qualified_name().strip('/').replace('/', '_') + '.json') \
             if p['state_dir'] else None
