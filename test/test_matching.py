@@ -510,8 +510,8 @@ def test_each_actor_keeps_its_id_with_frames_dropped_upstream(shelf_people, drop
     drops sets: in every frame with one person within 0.5 m of an annotated actor, that person
     has the actor's one id (where a duplicate detection puts two people there, which of them is
     nearer is chance). Before a split kept its tracks' history and tracks were limited to a
-    person's pace, these thinned clips had 2-4 changes each. Every second or third frame dropped
-    still gives one or two (README, Uneven frames)."""
+    person's pace, these thinned clips had 2-4 changes each. Every second or third frame dropped, or
+    half of them with seed 0, still gives one or two (README, Method choices, Identities)."""
     gt = load_actors_gt(SHELF / 'actorsGT.mat')
     associator = Associator(shelf_people.cameras, AssociationConfig())
     ids: dict[int, set[int]] = {0: set(), 1: set(), 2: set()}
