@@ -356,10 +356,10 @@ def test_identity_recovered_by_position_when_all_tracks_changed(poses):
     assert recovered == [ids[k] for k in order]
 
 
-def test_a_person_split_for_a_few_frames_goes_back_to_its_long_standing_id():
+def test_a_person_split_for_a_few_frames_keeps_its_long_standing_id():
     """Shelf frames 431-435: a duplicate detection in one camera splits a person into two
-    clusters; when they merge again, with as many tracks from each, the id the tracks have long
-    made up wins over the newcomer's (its tracks vote with their history, not one each)."""
+    clusters. The part left without an id, made of tracks that vote for the id beside it, is the
+    person seen twice and shares the id; merged again, the person keeps it."""
     keeper = IdentityKeeper(max_jump=0.5, max_age=25)
     here = np.array([[0.0, 0.0, 0.9]])
     for frame in range(20):
@@ -367,7 +367,7 @@ def test_a_person_split_for_a_few_frames_goes_back_to_its_long_standing_id():
     split = [{(0, 5), (1, 0)}, {(1, 91), (2, 1), (3, 29)}]  # camera 2's track went to the newcomer
     newcomer = here + [0.05, 0.05, 0.0]
     for frame in range(20, 24):
-        assert keeper.assign(frame, split, np.vstack([here, newcomer])) == [0, 1]
+        assert keeper.assign(frame, split, np.vstack([here, newcomer])) == [0, 0]
     # merged again, two tracks shared with each id and nearer the newcomer's centre
     merged = {(0, 5), (1, 0), (2, 1), (3, 29)}
     assert keeper.assign(24, [merged], newcomer) == [0]
@@ -428,13 +428,13 @@ def test_a_person_nobody_matches_takes_a_new_id_rather_than_another_persons():
     a, c = np.array([0.0, 0.0, 0.9]), np.array([3.0, 0.0, 0.9])
     for frame in range(30):
         assert keeper.assign(frame, [{(0, 1), (1, 1), (2, 1)}, {(3, 9), (5, 9), (6, 9)}], np.stack([a, c])) == [0, 1]
-    # a splits: camera 0's view of a goes with a stray view into a new person 0.3 m off
+    # a splits: camera 0's view of a goes with a stray view into a cluster 0.3 m off, a seen twice
     assert keeper.assign(30, [{(1, 1), (2, 1), (4, 4)}, {(0, 1), (7, 7)}, {(3, 9), (5, 9), (6, 9)}],
-                         np.stack([a, a + [0.3, 0, 0], c])) == [0, 2, 1]
+                         np.stack([a, a + [0.3, 0, 0], c])) == [0, 0, 1]
     # a whole again; a stray cluster with a's weak track (4, 4) and c's (3, 9), far from everyone
     ids = keeper.assign(31, [{(0, 1), (1, 1), (2, 1)}, {(4, 4), (3, 9)}, {(5, 9), (6, 9)}],
                         np.stack([a, [1.5, 2.0, 0.9], c]))
-    assert ids[0] == 0 and ids[2] == 1 and ids[1] not in (0, 1, 2)
+    assert ids == [0, 2, 1]
 
 
 def test_identity_state_restored_keeps_ids_by_position_and_never_reuses_one(poses):
@@ -467,31 +467,35 @@ def test_identity_state_malformed_is_a_value_error(state, problem):
         IdentityKeeper().restore(state, 0)
 
 
-def test_a_split_does_not_hand_the_persons_young_tracks_to_the_newcomer():
-    """Shelf with 30% of its frames dropped, frames 518-522: tracks restart often, so two of actor
-    1's cameras had joined him one frame before a duplicate split him for a frame. Forgetting at
-    the split that those tracks had been his left them voting as much for the newcomer, and the
-    next frame with only them went to the newcomer's id, nearer as it was seen by the same cameras."""
+def test_a_person_seen_twice_shares_its_id_only_beside_it_and_by_its_tracks():
+    """Shelf with 30% of its frames dropped, frames 518-522: a duplicate split actor 1 into two
+    clusters, and the part left without an id took a new one, which his next frames then went
+    to. A part whose tracks vote for an id taken in the frame, within max_jump of it, shares it;
+    one farther away, or whose tracks vote for no one, is someone else."""
     keeper = IdentityKeeper(max_jump=0.5, max_age=25)
-    here, partial = np.array([0.1, 0.0, 0.9]), np.array([0.2, 0.05, 0.95])
+    here = np.array([0.1, 0.0, 0.9])
     for frame in range(20):
-        assert keeper.assign(frame, [{(0, 1), (3, 1)}], here[None]) == [0]
-    whole = {(0, 1), (1, 7), (3, 1), (4, 7)}
-    assert keeper.assign(20, [whole], here[None]) == [0]
-    assert keeper.assign(21, [{(0, 1), (3, 1)}, {(1, 7), (4, 7)}], np.stack([here, partial])) == [0, 1]
-    assert keeper.assign(22, [whole], here[None]) == [0]
-    assert keeper.assign(23, [{(1, 7), (4, 7)}], partial[None]) == [0]
+        assert keeper.assign(frame, [{(0, 1), (1, 7), (3, 1), (4, 7)}], here[None]) == [0]
+    split = [{(0, 1), (3, 1)}, {(1, 7), (4, 7)}]
+    assert keeper.assign(20, split, np.stack([here, here + [0.1, 0.05, 0.1]])) == [0, 0]
+    assert keeper.assign(21, [{(1, 7), (4, 7)}], (here + [0.1, 0.05, 0.1])[None]) == [0]
+    assert keeper.assign(22, split, np.stack([here, here + [0.6, 0.0, 0.0]])) == [0, 1]
+    assert keeper.assign(23, [{(0, 1), (3, 1)}, {(1, 8), (4, 8)}], np.stack([here, here - [0.2, 0.0, 0.0]])) == [0, 2]
 
 
-def test_a_tracks_history_with_an_id_ends_max_age_frames_after_it_left():
-    keeper = IdentityKeeper(max_jump=0.5, max_age=5)
-    here = np.array([[0.0, 0.0, 0.9]])
-    assert keeper.assign(0, [{(0, 1), (1, 1)}], here) == [0]
-    for frame in range(1, 8):  # camera 1's track goes on elsewhere, voting for nobody
-        assert keeper.assign(frame, [{(0, 1)}], here) == [0]
-    # back beside person 0 after 8 frames away: forgotten, so it votes for 0 no more, and the
-    # nearer person keeps 0 (were it remembered, its vote would win 0 for it)
-    assert keeper.assign(8, [{(0, 9)}, {(1, 1), (2, 5)}], np.vstack([here, here + [0.3, 0.0, 0.0]])) == [0, 1]
+def test_the_associator_merges_a_person_seen_twice(shelf_people):
+    """Shelf frame 520: cameras 1 and 4 found actor 1 twice, and he came out as two people of
+    four and three views, 0.3 and 0.18 m from his annotated centre. Seen twice, he is one, with
+    a view from every camera."""
+    gt = load_actors_gt(SHELF / 'actorsGT.mat')
+    associator = Associator(shelf_people.cameras, AssociationConfig())
+    for k in range(200, 221):  # frames 500-520: his tracks' history
+        people = associator.update(shelf_people.frames[k], shelf_people.people[k])
+    centre = gt.poses[520, 0].mean(axis=0)
+    near = [p for p in people if np.linalg.norm(p.centre - centre) < 0.5]
+    assert len(near) == 1 and sorted(near[0].views) == [0, 1, 2, 3, 4]
+    assert np.linalg.norm(near[0].centre - centre) < 0.1
+    assert len({p.person_id for p in people}) == len(people)
 
 
 @pytest.fixture(scope='module')
@@ -503,15 +507,15 @@ def shelf_people(shelf_openpose):
     return detect_sequence(cameras, raw, list(range(300, 601)), OpenPoseDetectorConfig())
 
 
-@pytest.mark.parametrize('drop', [FrameDrop(), FrameDrop(fraction=0.3, seed=0), FrameDrop(fraction=0.3, seed=1),
-                                  FrameDrop(fraction=0.3, seed=4), FrameDrop(fraction=0.5, seed=1)])
+@pytest.mark.parametrize('drop', [FrameDrop(), FrameDrop(every=2), FrameDrop(every=3), FrameDrop(fraction=0.3, seed=0),
+                                  FrameDrop(fraction=0.3, seed=1), FrameDrop(fraction=0.3, seed=4),
+                                  FrameDrop(fraction=0.5, seed=0), FrameDrop(fraction=0.5, seed=1)])
 def test_each_actor_keeps_its_id_with_frames_dropped_upstream(shelf_people, drop):
     """Association alone over Shelf's 301 frames, whole and thinned as a loaded camera system
     drops sets: in every frame with one person within 0.5 m of an annotated actor, that person
     has the actor's one id (where a duplicate detection puts two people there, which of them is
-    nearer is chance). Before a split kept its tracks' history and tracks were limited to a
-    person's pace, these thinned clips had 2-4 changes each. Every second or third frame dropped, or
-    half of them with seed 0, still gives one or two (README, Method choices, Identities)."""
+    nearer is chance). Before a person seen twice shared its id and tracks were limited to a
+    person's pace, these thinned clips had 1-4 changes each (README, Method choices, Identities)."""
     gt = load_actors_gt(SHELF / 'actorsGT.mat')
     associator = Associator(shelf_people.cameras, AssociationConfig())
     ids: dict[int, set[int]] = {0: set(), 1: set(), 2: set()}

@@ -14,7 +14,7 @@ import numpy as np
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
 from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, cluster_views
+from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, all_view_distances, cluster_views
 from mvpose_ros.core.types import Keypoints2D
 from mvpose_ros.core.association.tracking import IouTracker
 from mvpose_ros.core.association.view_consistency import consistent_views
@@ -140,13 +140,38 @@ class Associator:
                                 self.config.matching.min_score, self.config.max_view_residual)
         skeleton = [p for ps in present for p in ps]  # by row of rays
         owner = rays.owner.tolist()
-        views = [{owner[r]: skeleton[r] for r in rs} for rs in rows]
         centres = rough_centres(rays, rows, self.config.matching.min_score)
         keep = np.flatnonzero(np.isfinite(centres).all(axis=1)).tolist()
-        views, centres = [views[i] for i in keep], centres[keep].reshape(-1, 3)
-        members = [{(c, p.track_id) for c, p in v.items()} for v in views]
+        rows, centres = [rows[i] for i in keep], centres[keep].reshape(-1, 3)
+        members = [{(owner[r], skeleton[r].track_id) for r in rs} for rs in rows]
         ids = self._ids.assign(frame, members, centres)
-        return [PersonObservation(i, v, c) for i, v, c in zip(ids, views, centres)]
+        if len(set(ids)) < len(ids):
+            rows, centres, ids = self._merge_seen_twice(present, rays, rows, centres, ids)
+        return [PersonObservation(i, {owner[r]: skeleton[r] for r in rs}, c) for i, rs, c in zip(ids, rows, centres)]
+
+    def _merge_seen_twice(self, present: Sequence[Sequence[P]], rays: ViewRays, rows: list[list[int]],
+                          centres: np.ndarray, ids: list[int]) -> tuple[list[list[int]], np.ndarray, list[int]]:
+        """The people sharing an id (one person seen twice: identity) as one: every camera's view,
+        and of a camera with two the one whose rays pass closer to the other cameras' on average."""
+        dist = all_view_distances(self.cameras, present, self.config.matching, rays)
+        owner = rays.owner
+        merged: dict[int, list[int]] = {}
+        for pid, rs in zip(ids, rows):
+            merged.setdefault(pid, []).extend(rs)
+        out = []
+        for views in merged.values():
+            kept = []
+            for camera in dict.fromkeys(owner[views].tolist()):
+                mine = [v for v in views if owner[v] == camera]
+                others = [v for v in views if owner[v] != camera]
+                near = dist[np.ix_(mine, others)]
+                finite = np.isfinite(near)
+                counts = finite.sum(axis=1)
+                mean = np.where(counts > 0, np.where(finite, near, 0.0).sum(axis=1) / np.maximum(counts, 1), np.inf)
+                kept.append(mine[int(np.argmin(mean))])
+            out.append(kept)
+        new_centres = rough_centres(rays, out, self.config.matching.min_score)
+        return out, new_centres, list(merged)
 
     @property
     def identities(self) -> IdentityKeeper:

@@ -3,16 +3,21 @@
 A person keeps its id while the per-camera tracks that make it up continue: each shared
 (camera, track) pair votes for the old id with the number of frames it has been part of that id
 (up to `max_age`), so a person split for a few frames into two clusters (a duplicate detection in
-one camera) goes back to the id its tracks have long made up rather than to the newcomer's. A
-track keeps its history with an id through frames in which it is elsewhere (the other part of a
-split, or left out of the frame's people) and loses it after `max_age` frames away: were it
-forgotten, a one-frame split would leave the id's young tracks voting as much for the newcomer as
-for the id (with frames dropped upstream tracks restart often, and Shelf's actor 1 then changed
-id four times in frames 520-523). Tracks carry an id only as far as a person can move in the
-frames since it was seen (`max_jump` a frame): a stray two-view cluster holding one of a person's
-tracks must not take that person's id from across the room. When the tracks all changed (a new
-box in every camera after an occlusion), the id is recovered from the 3D position if the person
-is within `max_jump` metres of where a recently seen person was.
+one camera) goes back to the id its tracks have long made up rather than to the newcomer's.
+Tracks carry an id only as far as a person can move in the frames since it was seen (`max_jump`
+a frame): a stray two-view cluster holding one of a person's tracks must not take that person's
+id from across the room. When the tracks all changed (a new box in every camera after an
+occlusion), the id is recovered from the 3D position if the person is within `max_jump` metres
+of where a recently seen person was.
+
+A person the detector found twice in a camera splits into two clusters, each with one of that
+camera's two views. The part that gets no id of its own, but whose tracks vote for the id the
+other part took and which lies within `max_jump` of it, is that person seen twice: it gets the
+same id (its tracks count for it), and the associator merges the two. Without this the second
+part took a new id, which, where tracks restart often (frames dropped upstream), could then take
+over the person's (Shelf thinned 15 ways: 26 id changes, none with it and the pace limit).
+Telling a duplicate from someone close by is what the tracks are for: ray distances alone cannot
+(two people near each other, one seen by two cameras only, match on average as well).
 
 The keeper's state that outlives a restart is small: the next id and where each recent person
 was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
@@ -31,17 +36,8 @@ from scipy.optimize import linear_sum_assignment
 @dataclass
 class _Known:
     members: dict[tuple[int, int], int]  # (camera, track) -> frames it has been part of this id
-    seen: dict[tuple[int, int], int]  # (camera, track) -> the last frame it was part of this id
     centre: np.ndarray
     last_frame: int
-
-    def joined(self, frame: int, tracks: set[tuple[int, int]], centre: np.ndarray, max_age: int) -> _Known:
-        """This id seen again at `frame`, made of `tracks`: theirs count one more frame (up to
-        max_age); the others keep theirs until max_age frames without being part of it."""
-        kept = {t: n for t, n in self.members.items() if t not in tracks and frame - self.seen[t] <= max_age}
-        members = {**kept, **{t: min(self.members.get(t, 0) + 1, max(max_age, 1)) for t in tracks}}
-        seen = {**{t: self.seen[t] for t in kept}, **dict.fromkeys(tracks, frame)}
-        return _Known(members, seen, centre, frame)
 
 
 @dataclass
@@ -57,11 +53,13 @@ class IdentityKeeper:
         """Ids for this frame's people.
 
         members: per person the (camera, track id) pairs it was built from; centres: (P, 3)
-        rough 3D centres in metres. Returns one id per person, unique within the frame.
+        rough 3D centres in metres. Returns one id per person; people sharing an id are one
+        person seen twice (module doc).
         """
         self._known = {k: v for k, v in self._known.items() if frame - v.last_frame <= self.max_age}
         known_ids = list(self._known)
         ids = [-1] * len(members)
+        twice: set[int] = set()  # the people that are another one seen twice
         if members and known_ids:
             # per (camera, track) the known ids it was part of: a look-up per track, not per pair of people
             votes: dict[tuple[int, int], list[tuple[int, int]]] = {}
@@ -86,13 +84,39 @@ class IdentityKeeper:
             for r, c in zip(rows.tolist(), cols.tolist()):
                 if c < len(known_ids) and allowed[r, c]:
                     ids[r] = known_ids[c]
+            twice = self._join_duplicates(ids, shared, known_ids, centres)
+        tracks_of: dict[int, set[tuple[int, int]]] = {}
+        centre_of: dict[int, np.ndarray] = {}
         for i, tracks in enumerate(members):
             if ids[i] < 0:
                 ids[i] = self._next_id
                 self._next_id += 1
-            known = self._known.get(ids[i]) or _Known({}, {}, centres[i], frame)
-            self._known[ids[i]] = known.joined(frame, tracks, centres[i], self.max_age)
+            tracks_of.setdefault(ids[i], set()).update(tracks)
+            if i not in twice:
+                centre_of[ids[i]] = centres[i]
+        most = max(self.max_age, 1)
+        for pid, tracks in tracks_of.items():
+            before = self._known[pid].members if pid in self._known else {}
+            self._known[pid] = _Known({t: min(before.get(t, 0) + 1, most) for t in tracks}, centre_of[pid], frame)
         return ids
+
+    def _join_duplicates(self, ids: list[int], shared: np.ndarray, known_ids: list[int],
+                         centres: np.ndarray) -> set[int]:
+        """Give each person left without an id (-1 in ids) the id its tracks vote for most among
+        those another person of the frame took within max_jump of it (module doc); returns the
+        people given one so."""
+        host = {pid: row for row, pid in enumerate(ids) if pid >= 0}
+        twice = set()
+        for row in [r for r, pid in enumerate(ids) if pid < 0]:
+            for col in np.argsort(-shared[row], kind='stable'):
+                other = host.get(known_ids[col])
+                if shared[row, col] <= 0:
+                    break
+                if other is not None and np.linalg.norm(centres[row] - centres[other]) <= self.max_jump:
+                    ids[row] = known_ids[col]
+                    twice.add(row)
+                    break
+        return twice
 
     def state(self) -> dict[str, Any]:
         """JSON-able: {'next_id': int, 'people': [{'id': int, 'centre': [x, y, z]}, ...]} (metres)."""
@@ -116,4 +140,4 @@ class IdentityKeeper:
                 raise ValueError(f'identity state: person {pid}: centre must be 3 finite numbers')
         self._next_id = max(self._next_id, next_id)
         for pid, centre in people:
-            self._known[pid] = _Known({}, {}, centre, frame)
+            self._known[pid] = _Known({}, centre, frame)
