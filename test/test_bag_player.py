@@ -24,7 +24,7 @@ from std_msgs.msg import Header
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.nodes.runtime import DATA_QOS
-from ros_harness import matched, open_start_gate, ros_domain, ros_env
+from ros_harness import matched, open_start_gate, ros_domain, ros_env, stop
 
 START = 'bag_player/start'
 REPO = Path(__file__).resolve().parents[1]
@@ -117,7 +117,7 @@ def _run_to_end(executor, proc: subprocess.Popen, done, timeout: float = 15.0) -
     """Spin until the player exits and done() (every message expected has been taken)."""
     _spin_until(executor, lambda: proc.poll() is not None, timeout)
     if proc.poll() is None:
-        proc.kill()
+        stop(proc)
         pytest.fail('bag_player did not finish')
     _spin_until(executor, done, 5.0)
     return proc.returncode
@@ -273,8 +273,7 @@ def test_waits_for_readers_and_the_start_signal_and_publishes_relative_topics(pr
     open_start_gate(node, f'/rig1/{START}')
     assert _spin_until(executor, lambda: len(received) >= 1), log.read_text()
     assert received[0][1] == stamp_ns(stamp_of_frame(300))
-    proc.kill()
-    proc.wait()
+    stop(proc)
 
 
 def _rig_bag(path: Path, sets: int = 6, offsets_ms=(0.0, 7.0, -6.0)) -> tuple[Path, list[list[int]]]:
