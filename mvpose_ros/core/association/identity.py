@@ -109,9 +109,9 @@ class IdentityKeeper:
         twice = set()
         for row in [r for r, pid in enumerate(ids) if pid < 0]:
             for col in np.argsort(-shared[row], kind='stable'):
-                other = host.get(known_ids[col])
                 if shared[row, col] <= 0:
                     break
+                other = host.get(known_ids[col])
                 if other is not None and np.linalg.norm(centres[row] - centres[other]) <= self.max_jump:
                     ids[row] = known_ids[col]
                     twice.add(row)
