@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 
 import pytest
 
@@ -83,3 +84,15 @@ def test_the_secondary_radius_reaches_the_detector(shelf_run, tmp_path):
     run(build_parser().parse_args(['shelf', '--no-ablation', '--secondary-radius', '0', '--predictions', str(path)]),
         io.StringIO())
     assert path.read_text() != shelf_run[1].read_text()
+
+
+def test_error_sources_name_what_the_detections_back(shelf_run, capsys):
+    _, path = shelf_run
+    assert main(['shelf', '--score', str(path), '--error-sources']) == 0
+    text = capsys.readouterr().out
+    report = text[text.index('Wrong endpoints'):]
+    rows = re.findall(r'Actor \d: (\d+), backing the estimate (\d+), the annotation (\d+), neither (\d+)', report)
+    assert len(rows) == 3
+    for total, *verdicts in ([int(n) for n in row] for row in rows):
+        assert total == sum(verdicts)
+    assert len(re.findall(r'Actor \d \(\d+ frames\): length', report)) == 3

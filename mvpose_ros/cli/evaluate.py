@@ -6,6 +6,7 @@
     mvpose-eval shelf --drop-fraction 0.3 --drop-seed 1 [--evenly-spaced]
     mvpose-eval shelf --score FILE      # score a predictions file (e.g. from the ROS graph)
     mvpose-eval shelf --confidence-report out/confidence [--score FILE]   # confidence against error
+    mvpose-eval shelf --error-sources [--score FILE]   # do the 2D detections back the wrong joints?
     mvpose-eval campus [--campus-dir CampusSeq1]
 """
 from __future__ import annotations
@@ -21,12 +22,13 @@ import numpy as np
 
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
 from mvpose_ros.core.evaluation.campus import campus_sequence
+from mvpose_ros.core.evaluation.error_sources import format_error_sources, head_offsets, wrong_endpoints
 from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
                                                  dataset_dir, load_actors_gt)
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.evaluation.identities import identity_report
 from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
-from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
+from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table, match_actors
 from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
 from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
 from mvpose_ros.core.geometry.body import HEAD_MODELS
@@ -96,6 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--confidence-report', type=Path, metavar='DIR',
                    help='shelf: bin every joint and limb by its confidence, print error, PCP and the threshold '
                         'trade-off, and write the plots confidence_joints.png and confidence_limbs.png into DIR')
+    p.add_argument('--error-sources', action='store_true',
+                   help='for each wrong limb end, whether the 2D detections back the estimate or the annotation; '
+                        'where the annotated heads sit against ours (shelf)')
     p.add_argument('--campus-dir', type=Path, help='a full CampusSeq1 folder (campus only)')
     return p
 
@@ -122,6 +127,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         print('\n'.join(identity_report(results, gt, actors).lines()), file=out)
         if args.confidence_report:
             _confidence_report(results, gt, actors, args.confidence_report, out)
+        if args.error_sources:
+            detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
+            _error_sources(results, gt, actors, shelf_openpose(args.data_root, detector), out)
         return 0
     t0 = time.perf_counter()
     if args.dataset == 'shelf':
@@ -166,6 +174,10 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if args.dataset != 'shelf':
             raise ValueError('--confidence-report is for shelf')
         _confidence_report(results, gt, actors, args.confidence_report, out)
+    if args.error_sources:
+        if args.dataset != 'shelf':
+            raise ValueError('--error-sources is for shelf')
+        _error_sources(results, gt, actors, seq, out)
     if not args.no_ablation:
         _print_ablation(prepared, config, gt, actors, args.dataset == 'shelf', out, real_time)
     print(f'total {time.perf_counter() - t0:.1f} s', file=out)
@@ -187,6 +199,12 @@ def _confidence_report(results, gt: GroundTruth, actors: Sequence[int], folder: 
     print('\n' + format_confidence_report(samples), file=out)
     for path in plot_confidence_report(samples, folder):
         print(f'wrote {path}', file=out)
+
+
+def _error_sources(results, gt: GroundTruth, actors: Sequence[int], seq: Sequence2D, out) -> None:
+    matches = match_actors(as_predictions(results), gt, actors)
+    endpoints = wrong_endpoints(matches, actors, seq, gt.frames)
+    print('\n' + format_error_sources(endpoints, head_offsets(matches, actors), actors), file=out)
 
 
 def _restricted(gt: GroundTruth, frames: Sequence[int]) -> GroundTruth:

@@ -142,13 +142,19 @@ def match_actors(predictions: Mapping[int, np.ndarray], gt: GroundTruth, actors:
     return Matches(truth, present, best, matched, chosen, np.where(matched[..., None], err, np.nan))
 
 
+def endpoint_errors(truth: np.ndarray, chosen: np.ndarray, alpha: float = ALPHA) -> tuple[np.ndarray, np.ndarray]:
+    """Each limb's (LIMBS) endpoint errors (..., 10, 2) in metres (NaN where a chosen joint is NaN)
+    and its tolerance (..., 10): alpha times the true limb length; truth and chosen (..., 14, 3)."""
+    ends_true = _with_hip_centre(truth)[..., LIMBS, :]                 # (..., 10, 2, 3)
+    ends_pred = _with_hip_centre(chosen)[..., LIMBS, :]
+    end_err = np.linalg.norm(ends_pred - ends_true, axis=-1)
+    return end_err, alpha * np.linalg.norm(ends_true[..., 0, :] - ends_true[..., 1, :], axis=-1)
+
+
 def limb_correct(truth: np.ndarray, chosen: np.ndarray, alpha: float = ALPHA) -> np.ndarray:
     """(2, ..., 10) whether each limb (LIMBS) of the poses chosen (..., 14, 3) is correct against
     truth (..., 14, 3), strict then lenient (FORMS); NaN joints make their limbs wrong."""
-    ends_true = _with_hip_centre(truth)[..., LIMBS, :]                 # (..., 10, 2, 3)
-    ends_pred = _with_hip_centre(chosen)[..., LIMBS, :]
-    end_err = np.linalg.norm(ends_pred - ends_true, axis=-1)           # (..., 10, 2), NaN = wrong
-    tolerance = alpha * np.linalg.norm(ends_true[..., 0, :] - ends_true[..., 1, :], axis=-1)
+    end_err, tolerance = endpoint_errors(truth, chosen, alpha)
     return np.stack([(end_err <= tolerance[..., None]).all(axis=-1), end_err.mean(axis=-1) <= tolerance])
 
 
