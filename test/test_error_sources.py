@@ -81,3 +81,15 @@ def test_head_offsets_are_in_the_body_frame():
         assert head.bottom == pytest.approx([0.0, 0.0, -0.115], abs=1e-9)
         assert head.length_estimate == pytest.approx(0.23)
         assert head.length_true == pytest.approx(np.linalg.norm(truth_top - POSE[12]))
+
+
+def test_a_frame_or_camera_without_detections_backs_nothing():
+    estimate = _moved(R_WRIST, [0.0, 0.0, 0.3])
+    cameras = _cameras()
+    gt = GroundTruth(frames=np.array([7]), poses=POSE[None, None])
+    matches = match_actors({7: estimate[None]}, gt, [0])
+    for seq in (Sequence2D(cameras, [8], [_detected(cameras, estimate)]),  # another frame
+                Sequence2D(cameras, [7], [[None, [], None]])):  # no data, nobody, no data
+        endpoints = wrong_endpoints(matches, [0], seq, gt.frames)
+        assert [(e.joint, e.verdict, e.backing_estimate, e.backing_annotation) for e in endpoints] == \
+            [(R_WRIST, 'neither', 0, 0)]

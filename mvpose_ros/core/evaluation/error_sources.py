@@ -5,8 +5,8 @@ heads sit against the estimated ones.
 A camera *backs* a 3D point for a joint when a person detected in its image has a keypoint of that
 joint within `radius` (a fraction of the annotated person's projected box diagonal, so any image
 size reads alike) of the point's projection. An endpoint that more cameras back where it was
-estimated than where it is annotated is wrong with the detections, not against them: no 3D stage fed
-these detections would put it at the annotation without overruling them. Head ends and the hip
+estimated than where it is annotated is wrong with the detections, not against them: a 3D stage fed
+these detections would put it at the annotation only by overruling them. Head ends and the hip
 centre are derived, with no keypoint of their own, and left out: the head table covers the heads.
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ from mvpose_ros.core.evaluation.pcp import ALPHA, LIMBS, Matches, endpoint_error
 from mvpose_ros.core.geometry.body import BOTTOM_HEAD, JOINT_NAMES, TOP_HEAD, UP
 from mvpose_ros.core.types import Sequence2D
 
-SUPPORT_RADIUS = 0.05  # of the annotated person's projected box diagonal (about 20 px on Shelf)
+SUPPORT_RADIUS = 0.05  # of the annotated person's projected box diagonal (21-35 px on Shelf)
 VERDICTS = ('estimate', 'annotation', 'neither')
 _DETECTED = len(JOINT_NAMES) - 2  # joints 0-11 have keypoints of their own; the head's two do not
 
@@ -56,11 +56,10 @@ def wrong_endpoints(matches: Matches, actors: Sequence[int], seq: Sequence2D, fr
     matches: of the frames `frames` (dataset numbers) and the actorsGT `actors`, in that order;
     seq: the clip's 2D people (frames not in it back nothing)."""
     end_err, tolerance = endpoint_errors(matches.truth, matches.chosen, alpha)  # (F, A, 10, 2), (F, A, 10)
-    beyond = (end_err > tolerance[..., None]) & matches.matched[..., None, None]
-    strictly_wrong = beyond.any(axis=-1)
+    beyond = (end_err > tolerance[..., None]) & matches.matched[..., None, None]  # such an end makes a limb wrong
     index = {int(f): k for k, f in enumerate(seq.frames)}
     out = []
-    for i, a in zip(*np.nonzero(strictly_wrong.any(axis=-1))):
+    for i, a in zip(*np.nonzero(beyond.any(axis=(-2, -1)))):
         joints = sorted({int(LIMBS[limb, end]) for limb, end in zip(*np.nonzero(beyond[i, a]))
                          if LIMBS[limb, end] < _DETECTED})
         people = seq.people[index[int(frames[i])]] if int(frames[i]) in index else []
