@@ -134,7 +134,8 @@ class Associator:
             if raw is not None:
                 tracker.update(skeletons)
         rays = ViewRays.of(self.cameras, present)
-        clusters = cluster_views(self.cameras, present, self.config.matching, rays)
+        dist = all_view_distances(self.cameras, present, self.config.matching, rays)
+        clusters = cluster_views(self.cameras, present, self.config.matching, rays, dist)
         first = [0, *itertools.accumulate(len(p) for p in present)]
         rows = consistent_views(self.cameras, rays, [[first[c] + i for c, i in cl.items()] for cl in clusters],
                                 self.config.matching.min_score, self.config.max_view_residual)
@@ -146,14 +147,14 @@ class Associator:
         members = [{(owner[r], skeleton[r].track_id) for r in rs} for rs in rows]
         ids = self._ids.assign(frame, members, centres)
         if len(set(ids)) < len(ids):
-            rows, centres, ids = self._merge_seen_twice(present, rays, rows, centres, ids)
+            rows, centres, ids = self._merge_seen_twice(dist, rays, rows, ids)
         return [PersonObservation(i, {owner[r]: skeleton[r] for r in rs}, c) for i, rs, c in zip(ids, rows, centres)]
 
-    def _merge_seen_twice(self, present: Sequence[Sequence[P]], rays: ViewRays, rows: list[list[int]],
-                          centres: np.ndarray, ids: list[int]) -> tuple[list[list[int]], np.ndarray, list[int]]:
+    def _merge_seen_twice(self, dist: np.ndarray, rays: ViewRays, rows: list[list[int]],
+                          ids: list[int]) -> tuple[list[list[int]], np.ndarray, list[int]]:
         """The people sharing an id (one person seen twice: identity) as one: every camera's view,
-        and of a camera with two the one whose rays pass closer to the other cameras' on average."""
-        dist = all_view_distances(self.cameras, present, self.config.matching, rays)
+        and of a camera with two the one whose rays pass closer to the other cameras' on average
+        (dist: the frame's all_view_distances)."""
         owner = rays.owner
         merged: dict[int, list[int]] = {}
         for pid, rs in zip(ids, rows):

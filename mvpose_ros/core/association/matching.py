@@ -233,13 +233,14 @@ def all_view_distances(cameras: Sequence[Camera], people: Sequence[Sequence[Keyp
 
 
 def cluster_views(cameras: Sequence[Camera], people: Sequence[Sequence[Keypoints2D]],
-                  config: MatchingConfig, rays: ViewRays | None = None) -> list[dict[int, int]]:
+                  config: MatchingConfig, rays: ViewRays | None = None,
+                  dist: np.ndarray | None = None) -> list[dict[int, int]]:
     """Group skeletons across cameras into people seen by at least two cameras.
 
-    people[c] are camera c's skeletons (rays: their ViewRays, when already made). Returns one
-    {camera index: skeleton index} per person.
+    people[c] are camera c's skeletons (rays: their ViewRays, dist: their all_view_distances, when
+    already made). Returns one {camera index: skeleton index} per person.
     """
-    dist = all_view_distances(cameras, people, config, rays)
+    dist = all_view_distances(cameras, people, config, rays) if dist is None else dist
     view = [(c, i) for c, ps in enumerate(people) for i in range(len(ps))]
     owner = np.array([c for c, _ in view], dtype=np.int64)
     members, sizes = _greedy_clusters(dist, owner, float(config.max_distance))
