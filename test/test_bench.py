@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -185,6 +186,55 @@ def test_plan_measures_each_setting_once():
     assert [r.people for r in sweeps['people']] == [None, 10.0]
     assert all(r.frames == bench_runs.QUICK_FRAMES for s in sweeps.values() for r in s)
     assert len({r.key() for r in runs}) < len(runs)  # cameras=5, people~3, window=8, M=64: one run
+
+
+def test_plan_adds_the_paced_default_row_only_when_asked():
+    runs = bench_runs.plan(GRAPH, 100, 'none', {}, pace=25.0)
+    assert runs[0] == replace(GRAPH, frames=100) and runs[2].name.startswith('offline') and len(runs) == 3
+    assert runs[1] == replace(GRAPH, frames=100, pace=25.0, name='graph (default) at 25 Hz')
+    assert runs[1].key() != runs[0].key()  # measured on its own
+    assert all(not r.pace for r in bench_runs.plan(GRAPH, 100, 'quick', {}))
+
+
+class _SteppedClock:
+    """time for bench.runs: sleep() is not slept but moves perf_counter() on by as much."""
+
+    def __init__(self) -> None:
+        self.waits: list[float] = []
+        self._ahead = 0.0
+
+    def perf_counter(self) -> float:
+        return time.perf_counter() + self._ahead
+
+    def sleep(self, seconds: float) -> None:
+        self.waits.append(seconds)
+        self._ahead += seconds
+
+
+def test_a_paced_run_waits_for_each_frame_and_gives_the_same_results(monkeypatch):
+    clock = _SteppedClock()
+    monkeypatch.setattr(bench_runs, 'time', clock)
+    paced = bench_runs.run_config(replace(GRAPH, frames=4, pace=2.0))
+    monkeypatch.undo()
+    back = bench_runs.run_config(replace(GRAPH, frames=4))
+    # frame i is due i / pace after the first: each wait is the period less the frame before's work
+    assert len(clock.waits) == 4 and clock.waits[0] == 0.0 and all(0.2 < w <= 0.5 for w in clock.waits[1:])
+    assert paced['stage_wall_s'] < 0.3  # 1.5 s with the waits: they are not work
+    assert paced['pcp'] == back['pcp'] and paced['people_3d'] == back['people_3d'] > 0
+    for r in (paced, back):
+        assert 0 < r['frame_ms']['p50'] <= r['frame_ms']['p95']
+
+
+def test_the_paced_line_sets_the_paced_run_beside_the_same_run_back_to_back(capsys):
+    def fake(pace, p50, p95, cameras=5):
+        return {'config': asdict(replace(GRAPH, pace=pace, cameras=cameras)), 'frame_ms': {'p50': p50, 'p95': p95}}
+    bench_report.print_paced([fake(0.0, 4.0, 5.0), fake(25.0, 6.0, 8.0), fake(30.0, 9.0, 9.5, cameras=4),
+                              {**fake(0.0, 1.0, 1.0, cameras=3), 'error': 'exit 1'}, fake(30.0, 2.0, 2.0, cameras=3)],
+                             sys.stdout)
+    lines = [line for line in capsys.readouterr().out.splitlines() if line]
+    # a paced run whose twin did not run back to back (or failed) has nothing to be set beside
+    assert lines == ['fed at 25 Hz (sleeping between frames): from 2D people p50 / p95 6.00 / 8.00 ms per frame; '
+                     'back to back 4.00 / 5.00 ms (x1.50 at the median)']
 
 
 def test_one_camera_gives_no_people_and_no_crash():

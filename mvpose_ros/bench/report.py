@@ -7,9 +7,10 @@ import io
 import pstats
 import cProfile
 from pathlib import Path
+from dataclasses import replace
 from typing import Sequence, TextIO
 
-from mvpose_ros.bench.runs import OTHER, SWEEPS
+from mvpose_ros.bench.runs import OTHER, SWEEPS, RunConfig
 from mvpose_ros.core.evaluation.offline import GROUPING
 
 # the core's timer keys, in pipeline order; any other key the timer has is printed after these
@@ -136,6 +137,21 @@ def print_default(result: dict, out: TextIO) -> None:
               f'actor-average'
               f' | lenient {p["lenient_frame_weighted"]:.2f} / {p["lenient_actor_avg"]:.2f} | MPJPE '
               f'{p["mpjpe_mm"]:.1f} mm', file=out)
+
+
+def print_paced(results: Sequence[dict], out: TextIO) -> None:
+    """Each paced row's time per frame from 2D people on (p50 / p95) beside the same run back to
+    back: what a frame costs a node that waits for its next message, against a loop."""
+    done = [(RunConfig.from_dict(r['config']), r) for r in results if 'error' not in r]
+    loops = {config.key(): r for config, r in done if not config.pace}
+    for config, r in done:
+        loop = loops.get(replace(config, pace=0.0).key())
+        if not config.pace or loop is None:
+            continue
+        paced, back = r['frame_ms'], loop['frame_ms']
+        print(f'\nfed at {config.pace:g} Hz (sleeping between frames): from 2D people p50 / p95 {paced["p50"]:.2f} / '
+              f'{paced["p95"]:.2f} ms per frame; back to back {back["p50"]:.2f} / {back["p95"]:.2f} ms '
+              f'(x{paced["p50"] / back["p50"]:.2f} at the median)', file=out)
 
 
 def print_crowds(results: Sequence[dict], out: TextIO) -> None:

@@ -7,7 +7,9 @@ network), then core.stage.Stage3D (association, sampling, data term, factor tabl
 decoding over the sliding window). Rows: the graph's settings (config/shelf.yaml) and the
 defaults (the offline evaluator's window); sweeps change one setting of the graph row: the first k
 cameras; people multiplied by shifted copies of the scene (core.evaluation.crowd); window length (lag =
-window // 2); M, hypotheses per joint.
+window // 2); M, hypotheses per joint. A paced row feeds the graph row's 2D people at a camera rate
+and sleeps between frames, as a node waits for its next message: code that has not just run takes
+longer than back to back, and that is the time a frame costs in the graph.
 """
 from __future__ import annotations
 
@@ -67,6 +69,7 @@ class RunConfig:
     head_model: str = _STAGE['head_model']
     seed: int = _STAGE['seed']
     pcp: bool = True
+    pace: float = 0.0  # Hz the 2D people are fed at, sleeping between frames; 0: back to back
 
     @classmethod
     def from_dict(cls, d: dict) -> RunConfig:
@@ -157,15 +160,21 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
 
     results: list = []
     found = []
+    frame_s = []  # each frame's time from its 2D people to its push's end
     if profiler:
         profiler.enable()
     t_start = time.perf_counter()
-    for frame, per_camera in zip(seq.frames, people):
+    for i, (frame, per_camera) in enumerate(zip(seq.frames, people)):
+        if config.pace > 0:
+            time.sleep(max(t_start + i / config.pace - time.perf_counter(), 0.0))
+        t0 = time.perf_counter()
         bundles = stage.associate(frame, per_camera)
         found.append(len(bundles))
         results += stage.solver.push(frame, bundles)
+        frame_s.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
     results += stage.flush()
-    wall = time.perf_counter() - t_start
+    wall = sum(frame_s) + time.perf_counter() - t0  # the sleeps between paced frames left out
     if profiler:
         profiler.disable()
     peak_stage = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -178,6 +187,8 @@ def run_config(config: RunConfig, data_root: str | None = None, profiler: cProfi
         'cameras': len(seq.cameras),
         'stages_s': stages,
         'stage_wall_s': wall,
+        'frame_ms': {'p50': 1e3 * float(np.median(frame_s)), 'p95': 1e3 * float(np.percentile(frame_s, 95))}
+        if frame_s else None,
         'people_2d_per_camera': float(np.mean([[len(p or []) for p in f] for f in people])) if people else 0.0,
         'people_3d': float(np.mean(found)) if found else 0.0,
         'people_out': float(np.mean([len(r.person_ids) for r in results])) if results else 0.0,
@@ -212,12 +223,13 @@ def run_in_process(config: RunConfig, data_root: str | None) -> dict:
 
 
 def plan(base: RunConfig, frames: int, scaling: str, given: dict[str, tuple[int, ...] | None],
-         offline: bool = True) -> list[RunConfig]:
-    """The runs: the default and offline rows, then each sweep (scaling 'none', 'quick' or
-    'full'; given: a sweep's values replacing the built-in ones). A run equal to one already
-    planned is measured once."""
+         offline: bool = True, pace: float = 0.0) -> list[RunConfig]:
+    """The runs: the default row, with pace > 0 the same fed at `pace` Hz, the offline row, then
+    each sweep (scaling 'none', 'quick' or 'full'; given: a sweep's values replacing the built-in
+    ones). A run equal to one already planned is measured once."""
     base = replace(base, frames=frames)
-    runs = [base] + ([replace(OFFLINE, frames=frames)] if offline else [])
+    runs = [base] + ([replace(base, pace=pace, name=f'{base.name} at {pace:g} Hz')] if pace > 0 else [])
+    runs += [replace(OFFLINE, frames=frames)] if offline else []
     lists = {k: () for k in SWEEPS} if scaling == 'none' else dict(FULL)
     lists.update({k: v for k, v in given.items() if v is not None})
     sweep_base = replace(base, frames=min(frames, QUICK_FRAMES) if scaling == 'quick' else frames, pcp=True)

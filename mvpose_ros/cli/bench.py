@@ -2,14 +2,15 @@
 
     mvpose-bench [--data-root DIR] [--output out/bench] [--frames N] [--scaling none|quick|full]
                  [--cameras 1,2,3,4,5] [--people 3,10,20] [--windows 4,8,15] [--hypotheses 16,32,64]
-                 [--profile] [--repeat N] [--no-two-processes]
+                 [--profile] [--repeat N] [--no-two-processes] [--pace HZ]
 
 Prints the time per frame of each stage of the 3D stage (from the core's own timers; wall time
 they do not cover is 'other'), the frames per second of the whole 3D stage and of its part from
 2D people on, peak memory, and the PCP of the runs on the original scene; writes a JSON of every
 figure and PNG plots of the time per frame against people, cameras, M and window length into
 --output. Last, the default row runs again with its two halves (grouping, heatmaps and
-association | sampling onward) in two processes, as the node graph splits them. What a run is:
+association | sampling onward) in two processes, as the node graph splits them. With --pace, the
+default row also runs with its frames fed at a camera rate, as the graph's nodes get them. What a run is:
 bench.runs; what is printed: bench.report. Each configuration runs in a fresh process
 (`python -m mvpose_ros.cli.bench --one CONFIG`), so its peak RSS is its own.
 """
@@ -43,6 +44,16 @@ def _ints(text: str) -> tuple[int, ...]:
     return values
 
 
+def _rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected frames per second, got {text!r}') from None
+    if not 0 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f'must be in 0..1000 frames/s, got {text!r}')
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='mvpose-bench', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -66,6 +77,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--no-offline', action='store_true', help='skip the offline evaluator\'s row')
     p.add_argument('--no-two-processes', action='store_true',
                    help='skip the default row pipelined over two processes (bench.pipelined)')
+    p.add_argument('--pace', type=_rate, default=0.0, metavar='HZ',
+                   help='also run the default row with its 2D people fed at HZ frames/s (sleeping between frames, '
+                        'as a node waits for its next message; e.g. 25, the Shelf cameras\' rate) and print its time '
+                        'per frame against back to back (default 0: not run)')
     p.add_argument('--repeat', type=int, default=1,
                    help='run each configuration this many times (each a fresh process) and keep the fastest '
                         '(on a shared machine the minimum is the least disturbed figure; default 1)')
@@ -83,7 +98,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         raise ValueError(f'--frames must be in 1..{len(SHELF_TEST_FRAMES)}, got {args.frames}')
     base = graph_config_from(args.config) if args.config else default_graph_config()
     given = {'cameras': args.cameras, 'people': args.people, 'window': args.windows, 'M': args.hypotheses}
-    runs = plan(base, args.frames, args.scaling, given, offline=not args.no_offline)
+    runs = plan(base, args.frames, args.scaling, given, offline=not args.no_offline, pace=args.pace)
     t_all = time.perf_counter()
     measured: dict[tuple, tuple[str, dict]] = {}
     results = []
@@ -113,6 +128,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     report.print_tables(main_rows + sweep_rows, out)
     if 'error' not in results[0]:
         report.print_default(results[0], out)
+    report.print_paced(results, out)
     report.print_crowds(results, out)
     pipelined = None if args.no_two_processes else two_processes(replace(base, frames=args.frames),
                                                                  args.data_root, args.repeat)
