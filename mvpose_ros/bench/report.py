@@ -6,8 +6,8 @@ from __future__ import annotations
 import io
 import pstats
 import cProfile
-from pathlib import Path
 from dataclasses import replace
+from pathlib import Path
 from typing import Sequence, TextIO
 
 from mvpose_ros.bench.runs import OTHER, SWEEPS, RunConfig
