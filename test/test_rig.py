@@ -123,6 +123,24 @@ def test_shelf_and_campus_rig_files(dataset, cameras):
         load_rig_file(CONFIG / f'{dataset}.yaml')
 
 
+def test_a_data_root_is_looked_for_only_when_the_rig_file_names_it(tmp_path, shelf):
+    """load_rig_file's data_root may be a function finding it (the nodes' default, which fails on a
+    host without the shared data): a rig file with its own cameras never calls it."""
+    calls = []
+
+    def missing() -> Path:
+        calls.append('missing')
+        raise FileNotFoundError('mvpose data root not found')
+
+    explicit = _write(tmp_path, {'cameras': [_quaternion_entry(cam) for cam in shelf]})
+    assert load_rig_file(explicit, data_root=missing).names == [f'cam{c}' for c in range(5)] and not calls
+    with pytest.raises(FileNotFoundError, match='data root not found'):
+        load_rig_file(CONFIG / 'shelf.yaml', data_root=missing)
+    assert calls == ['missing']
+    found = load_rig_file(CONFIG / 'shelf.yaml', data_root=lambda: data_root())
+    assert [cam.name for cam in found.calibrated_cameras()] == [cam.name for cam in shelf]
+
+
 def test_calibration_json_with_explicit_size(tmp_path, shelf):
     rig = load_rig_file(SHELF_JSON, 1032, 776)
     assert rig.names == ['cam0', 'cam1', 'cam2', 'cam3', 'cam4']

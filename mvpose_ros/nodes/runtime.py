@@ -158,7 +158,7 @@ def load_rig_parameter(values: dict[str, Any]) -> Rig:
     try:
         if not path.is_absolute() and not path.is_file():
             path = package_path(path)
-        return load_rig_file(path, data_root=data_root(values['data_root'] or None))
+        return load_rig_file(path, data_root=partial(data_root, values['data_root'] or None))
     except (OSError, ValueError, KeyError) as exc:
         raise StartupError(f'parameter rig: {" ".join(str(exc).split())}') from None
 

@@ -37,7 +37,7 @@ import dataclasses
 import math
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import yaml
@@ -47,6 +47,7 @@ from mvpose_ros.core.geometry.camera import Camera, load_rig
 DISTORTION_MODEL = 'plumb_bob'  # k1, k2, p1, p2, k3 (OpenCV's order, as Camera.dist)
 UNIT_TOLERANCE = 1e-3  # |norm(q) - 1| above this: not a rotation (rather than a rounded one)
 DATA_ROOT_TOKEN = '{data_root}'
+DataRoot = str | Path | Callable[[], str | Path] | None  # a folder, or a function finding it
 NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 _TOP_KEYS = {'world_frame', 'up', 'cameras', 'calibration', 'width', 'height'}
@@ -168,12 +169,14 @@ class Rig:
 
 
 def load_rig_file(path: str | Path, width: int | None = None, height: int | None = None,
-                  data_root: str | Path | None = None) -> Rig:
+                  data_root: DataRoot = None) -> Rig:
     """A Rig from a YAML rig file (.yaml, .yml), or from a calibration (json, P<i>.txt or a folder,
     see camera.load_rig) with the image size width x height pixels given here (required then).
 
     A YAML rig of the calibration form takes its width/height from the file, these arguments
-    otherwise. data_root: replaces '{data_root}' at the start of the file's calibration path.
+    otherwise. data_root: replaces '{data_root}' at the start of the file's calibration path; a
+    function giving it is called only then, so a rig that names no data root needs none (association
+    on a host without the shared data).
     Calibration cameras are named cam<c> (rig index c), with topics cam<c>/image_raw and
     cam<c>/camera_info and frame id cam<c>; their Camera keeps the calibration's own name.
     """
@@ -210,12 +213,13 @@ def load_rig_file(path: str | Path, width: int | None = None, height: int | None
 
 
 def _calibration_form(path: Path, doc: dict, world_frame: str, up: np.ndarray, width: int | None,
-                      height: int | None, data_root: str | Path | None) -> Rig:
+                      height: int | None, data_root: DataRoot) -> Rig:
     calibration = _string(str(path), 'calibration', doc['calibration'])
     if calibration.startswith(DATA_ROOT_TOKEN):
         if data_root is None:
             raise ValueError(f'{path}: calibration: {calibration!r} needs a data root, and none was given')
-        calib_path = Path(data_root) / calibration[len(DATA_ROOT_TOKEN):].lstrip('/')
+        root = data_root() if callable(data_root) else data_root
+        calib_path = Path(root) / calibration[len(DATA_ROOT_TOKEN):].lstrip('/')
     else:
         calib_path = path.parent / Path(calibration).expanduser()
     size = []
