@@ -8,19 +8,33 @@ config/rig_template.yaml) and the rig file, and the package's Fast DDS profile (
 messages). Outputs: <camera>/people2d, people/bundles, skeletons and skeletons/markers (RViz),
 relative to `namespace` (default: the root). A node that dies is started again after
 RESPAWN_DELAY_S (launch has no cap on restarts); association keeps its person ids in `state_dir`.
+`tf:=true` also puts each camera's pose from the rig file on /tf_static (tf2_ros's
+static_transform_publisher, one per camera): leave it off where something else, a robot's URDF for
+example, already publishes those frames.
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
+from mvpose_ros.graph.static_tf import static_transform_nodes
 
 PACKAGE = 'mvpose_ros'
 NODES = ('heatmap_detector', 'association', 'bp_solver')
+
+
+def camera_frames(context, namespace):
+    """The rig file's camera poses as TF, read when the launch runs (the file is an argument)."""
+    rig = load_rig_file(LaunchConfiguration('rig').perform(context), data_root=data_root)
+    return [Node(**node, namespace=namespace, output='screen', respawn=True, respawn_delay=RESPAWN_DELAY_S)
+            for node in static_transform_nodes(rig)]
 
 
 def generate_launch_description():
@@ -43,7 +57,10 @@ def generate_launch_description():
                               description="the graph's namespace (relative topics of the rig move with it)"),
         DeclareLaunchArgument('state_dir', default_value=os.path.join(ros_home, 'mvpose_ros'),
                               description="folder where association keeps the person ids' state (restarts)"),
+        DeclareLaunchArgument('tf', default_value='false',
+                              description="publish each camera's pose from the rig file on /tf_static"),
         SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(config, 'fastdds.xml')),
         SetEnvironmentVariable('RMW_FASTRTPS_USE_QOS_FROM_XML', '1'),
         *nodes,
+        OpaqueFunction(function=camera_frames, args=[namespace], condition=IfCondition(LaunchConfiguration('tf'))),
     ])

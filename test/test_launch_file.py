@@ -4,6 +4,7 @@ and the bag and rate launch arguments."""
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 from mvpose_ros.graph.config import graph_nodes, graph_settings
@@ -98,7 +99,7 @@ def test_every_node_but_the_player_is_respawned_after_the_runners_delay():
         tree = ast.parse(path.read_text())
         for call in _calls(tree, 'Node'):
             keywords = {kw.arg: ast.unparse(kw.value) for kw in call.keywords}
-            player = keywords['executable'] == "'bag_player'"
+            player = keywords.get('executable') == "'bag_player'"
             assert ('respawn' not in keywords) if player else (keywords['respawn'] == 'True'), path
             assert player or keywords['respawn_delay'] == 'RESPAWN_DELAY_S', path
         imported = {(n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
@@ -138,10 +139,11 @@ def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
     from mvpose_ros.graph.config import RigRun, rig_graph_nodes
     tree = ast.parse(RIG_LAUNCH.read_text(), str(RIG_LAUNCH))
     consts = _constants(tree)
-    (comp,) = [c for c in ast.walk(tree) if isinstance(c, ast.ListComp)]
+    (comp,) = [c for c in ast.walk(tree)
+               if isinstance(c, ast.ListComp) and ast.unparse(c.generators[0].iter) == 'NODES']
     (gen,) = comp.generators
     names = _evaluate(gen.iter, consts)
-    (call,) = _calls(tree, 'Node')
+    call = comp.elt
     keywords = {kw.arg: kw.value for kw in call.keywords}
     launched = [(_evaluate(keywords['executable'], {**consts, gen.target.id: n}),
                  _evaluate(keywords['name'], {**consts, gen.target.id: n})) for n in names]
@@ -158,7 +160,7 @@ def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
                       'association': {'rig': 'rig', 'state_dir': 'state_dir'}, 'bp_solver': {'rig': 'rig'}}
     args = {ast.literal_eval(c.args[0]): {k.arg: ast.unparse(k.value) for k in c.keywords}
             for c in _calls(tree, 'DeclareLaunchArgument')}
-    assert set(args) == {'rig', 'params', 'namespace', 'state_dir'} and 'default_value' not in args['rig']
+    assert set(args) == {'rig', 'params', 'namespace', 'state_dir', 'tf'} and 'default_value' not in args['rig']
     assert args['params']['default_value'] == "os.path.join(config, 'rig_template.yaml')"
     env, qos = _calls(tree, 'SetEnvironmentVariable')
     assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "
@@ -174,3 +176,69 @@ def test_rig_template_sections_match_the_rig_graph_and_leave_command_line_values
     assert params['/**/heatmap_detector']['camera'] == 'all' and params['/**/heatmap_detector']['backend'] == 'onnx'
     # a '/**/<node>' section wins over -p: it must not set what rig:= / the runner set
     assert all('rig' not in section for section in params.values())
+
+
+class _Action:
+    """A launch or launch_ros class as recorded by the stubs below: its arguments, unrun."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        self.args, self.kwargs = args, kwargs
+
+
+class _LaunchConfiguration(_Action):
+    def perform(self, context: dict[str, str]) -> str:
+        return context[self.args[0]]
+
+
+def _stub_launch_modules(monkeypatch) -> dict[str, type]:
+    """launch, launch_ros and the ament index as recording stubs (none is on PyPI or installed here)."""
+    import types
+    classes = {name: type(name, (_Action,), {}) for name in
+               ('LaunchDescription', 'DeclareLaunchArgument', 'OpaqueFunction', 'SetEnvironmentVariable',
+                'IfCondition', 'Node')}
+    classes['LaunchConfiguration'] = _LaunchConfiguration
+    modules = {'launch': ['LaunchDescription'],
+               'launch.actions': ['DeclareLaunchArgument', 'OpaqueFunction', 'SetEnvironmentVariable'],
+               'launch.conditions': ['IfCondition'], 'launch.substitutions': ['LaunchConfiguration'],
+               'launch_ros': [], 'launch_ros.actions': ['Node']}
+    for name, members in modules.items():
+        module = types.ModuleType(name)
+        for member in members:
+            setattr(module, member, classes[member])
+        monkeypatch.setitem(sys.modules, name, module)
+    ament = types.ModuleType('ament_index_python.packages')
+    ament.get_package_share_directory = lambda package: f'/opt/share/{package}'
+    monkeypatch.setitem(sys.modules, 'ament_index_python.packages', ament)
+    return classes
+
+
+def test_rig_launch_tf_starts_one_static_transform_publisher_per_camera_when_asked(monkeypatch):
+    """tf:=true (default false) runs the launch file's camera_frames: the rig file, read when the
+    launch runs, gives one static_transform_publisher per camera, in the graph's namespace and
+    respawned like the graph's nodes, with static_tf's arguments."""
+    import importlib.util
+
+    from mvpose_ros.core.evaluation.datasets import data_root
+    from mvpose_ros.core.geometry.rig import load_rig_file
+    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
+    from mvpose_ros.graph.static_tf import static_transform_nodes
+    classes = _stub_launch_modules(monkeypatch)
+    spec = importlib.util.spec_from_file_location('rig_launch', RIG_LAUNCH)
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    actions = launch_file.generate_launch_description().args[0]
+    (tf,) = [a for a in actions if isinstance(a, classes['DeclareLaunchArgument']) and a.args[0] == 'tf']
+    assert tf.kwargs['default_value'] == 'false'
+    (frames,) = [a for a in actions if isinstance(a, classes['OpaqueFunction'])]
+    condition = frames.kwargs['condition']
+    assert isinstance(condition, classes['IfCondition']) and condition.args[0].args == ('tf',)
+    (namespace,) = frames.kwargs['args']
+    assert namespace.args == ('namespace',)
+    monkeypatch.setenv('MVPOSE_DATA_ROOT', str(data_root()))
+    rig = REPO / 'config' / 'rigs' / 'shelf.yaml'
+    nodes = frames.kwargs['function']({'rig': str(rig)}, *frames.kwargs['args'])
+    expected = static_transform_nodes(load_rig_file(rig, data_root=data_root()))
+    assert len(nodes) == len(expected) == 5 and all(isinstance(n, classes['Node']) for n in nodes)
+    for node, want in zip(nodes, expected):
+        assert node.kwargs == {**want, 'namespace': namespace, 'output': 'screen', 'respawn': True,
+                               'respawn_delay': RESPAWN_DELAY_S}
