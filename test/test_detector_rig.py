@@ -13,6 +13,7 @@ from typing import Callable
 
 import cv2
 import numpy as np
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -324,3 +325,56 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
     people = [[len(msg_to_people(o[s][0])) for o in out] for s in stamps]
     assert min(people[0]) >= 2 and people[1] == [0, 0, 0] and people[2] == people[0], people
     assert 'Traceback' not in log.read_text()
+
+
+def _upside_down(cam):
+    """The camera mounted upside down (turned 180 degrees about its optical axis): its image is
+    cv2.ROTATE_180 of the upright one's."""
+    from mvpose_ros.core.geometry.camera import Camera
+    flip = np.diag([-1.0, -1.0, 1.0])
+    K = cam.K.copy()
+    K[0, 2], K[1, 2] = cam.width - 1 - cam.K[0, 2], cam.height - 1 - cam.K[1, 2]
+    k1, k2, p1, p2, k3 = cam.dist
+    return Camera(cam.name, K, flip @ cam.R, flip @ cam.t, [k1, k2, -p1, -p2, k3], cam.width, cam.height)
+
+
+def test_a_camera_mounted_upside_down_is_detected_turned_upright(domain, tmp_path):
+    """A ceiling camera (Shelf camera 4 turned 180 degrees about its optical axis, its image
+    turned with it): the node turns its image back before detection (parameter `upright`, on by
+    default), says so at start-up, and publishes the four people of frame 572 in the camera's own
+    pixels, as the ROS-free detector finds them with those turns; as it comes, MultiPose finds one."""
+    cam = _upside_down(shelf_cameras()[4])
+    rig = tmp_path / 'rig.yaml'
+    rig.write_text(yaml.safe_dump({'cameras': [{
+        'name': 'ceiling', 'image': 'ceiling/image/compressed', 'frame_id': 'ceiling_optical',
+        'position': cam.centre.tolist(), 'orientation': matrix_to_quaternion(cam.R.T).tolist(),
+        'width': cam.width, 'height': cam.height, 'K': cam.K.ravel().tolist(), 'D': cam.dist.tolist()}]}))
+    taken = cv2.rotate(_frame(4), cv2.ROTATE_180)
+    np.testing.assert_allclose(cam.project(np.array([0.5, 0.5, 1.0])),
+                               [cam.width - 1, cam.height - 1] - shelf_cameras()[4].project(np.array([0.5, 0.5, 1.0])),
+                               atol=1e-6)  # the camera and its image agree
+    jpeg = image_to_compressed_msg(taken, Header())
+    log = tmp_path / 'detector.log'
+    with probe(domain, 'upside_down_probe') as (node, executor):
+        out: dict[int, list[PointCloud2]] = {}
+        _collect(node, '/ceiling/people2d', out)
+        pub = node.create_publisher(CompressedImage, '/ceiling/image/compressed', qos_profile_sensor_data)
+        proc = start_node('heatmap_detector', domain, log, '-p', 'camera:=ceiling', '-p', 'backend:=onnx',
+                          '-p', 'threads:=1', '-p', f'rig:={rig}')
+        sent = iter(range(1000 * MS, 2000 * MS, 40 * MS))
+        try:
+            assert _stream_until(executor, lambda: pub.publish(CompressedImage(
+                header=_header(next(sent), 'ceiling_optical'), format=jpeg.format, data=bytes(jpeg.data))),
+                lambda: bool(out)), log.read_text()
+        finally:
+            stop(proc)
+    assert 'ceiling: backend onnx, /ceiling/image/compressed (CompressedImage, by name, turned 180 degrees ' \
+           'counterclockwise to stand people up)' in log.read_text()
+    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=data_root() / 'models', threads=1))
+    image = to_bgr(jpeg, reduce=detector.reduced_decoding(cam.width, cam.height))
+    (expected,) = detector.detect_set([image], sizes=[(cam.width, cam.height)], turns=[2])
+    (as_it_comes,) = detector.detect_set([image], sizes=[(cam.width, cam.height)])
+    got = msg_to_people(out[min(out)][0])
+    assert len(got) == len(expected) == 4 and len(as_it_comes) == 1
+    for a, b in zip(got, expected):
+        np.testing.assert_allclose(a.keypoints, b.keypoints, atol=0.05)

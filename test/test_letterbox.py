@@ -106,3 +106,43 @@ def test_whole_image_and_empty_regions():
     assert lb.roi == (0, 0, 1032, 776) and lb.content == (0, 47, 384, 289)
     with pytest.raises(ValueError, match='holds no pixel of the 1032x776 image'):
         letterbox(1032, 776, np.array([1100.0, 10.0, 1200.0, 50.0]), 224)
+
+
+@pytest.mark.parametrize('width, height, box, side', CASES)
+@pytest.mark.parametrize('turns', [1, 2, 3])
+def test_a_turned_letterbox_is_the_letterbox_turned(width, height, box, side, turns):
+    """Turned by quarter turns (a camera on its side or upside down): the input is np.rot90 of the
+    unturned input, a blob still lands at its mapped input pixel, the maps go both ways, and maps
+    the network gives in the turned input resample onto the image grid as the unturned maps do."""
+    plain = letterbox(width, height, np.array(box), side)
+    lb = letterbox(width, height, np.array(box), side, turns)
+    assert (lb.roi, lb.content, lb.turns) == (plain.roi, plain.content, turns)
+    x0, y0, x1, y1 = lb.roi
+    centre = np.array([x0 + 0.37 * (x1 - x0) + 0.3, y0 + 0.61 * (y1 - y0) + 0.7])
+    image = (255 * _blob((height, width), centre, 0.03 * max(x1 - x0, y1 - y0)))[..., None].repeat(3, axis=2)
+    net = lb.apply(image.astype(np.float32))
+    np.testing.assert_array_equal(net, np.rot90(plain.apply(image.astype(np.float32)), turns))
+    assert net.flags.c_contiguous
+    np.testing.assert_allclose(_centroid(net[..., 0]), lb.to_input(centre), atol=0.15)
+    uv = np.random.default_rng(1).uniform([x0, y0], [x1 - 1, y1 - 1], size=(50, 2))
+    np.testing.assert_allclose(lb.to_image(lb.to_input(uv)), uv, atol=1e-9)
+    if turns % 2:  # a quarter turn swaps the input's axes: an image row becomes an input column
+        assert np.ptp(lb.to_input(np.stack([uv[:, 0], np.full(50, uv[0, 1])], -1))[:, 1]) > 0
+    maps = np.random.default_rng(2).random((side, side, 3)).astype(np.float32)
+    origin, shape = lb.image_grid(4.0)
+    np.testing.assert_array_equal(lb.maps_to_image(np.rot90(maps, turns), origin, 4.0, shape),
+                                  plain.maps_to_image(maps, origin, 4.0, shape))
+
+
+def test_quarter_turns_of_the_input_square():
+    """Where the image's top-right pixel goes under each turn, on a 4 x 4 input the image fills:
+    counterclockwise as shown, to the top-left, the bottom-left, then the bottom-right corner."""
+    expected = {0: (3, 0), 1: (0, 0), 2: (0, 3), 3: (3, 3)}  # (x, y) input pixel
+    for turns, xy in expected.items():
+        lb = whole_image(4, 4, 4, turns)
+        marked = np.zeros((4, 4, 3), dtype=np.float32)
+        marked[0, 3] = 1.0  # row 0, column 3
+        (row_col,) = np.argwhere(lb.apply(marked)[..., 0] == 1.0)
+        assert tuple(row_col[::-1]) == xy
+        np.testing.assert_allclose(lb.to_input([3.0, 0.0]), xy, atol=1e-12)
+        np.testing.assert_allclose(lb.to_image(np.array(xy, dtype=float)), [3.0, 0.0], atol=1e-12)

@@ -56,6 +56,7 @@ from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.detection.onnx_detector import (HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector,
                                                      PendingSet)
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
+from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
 from mvpose_ros.core.evaluation.overlay import overlay, person_colour
 from mvpose_ros.core.stage import StageConfig, Stage3D
 from mvpose_ros.core.evaluation.predictions import frame_line
@@ -109,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--stride', type=float, default=DEFAULTS.stride, help='heatmap cell size, pixels (default: 4)')
     p.add_argument('--no-ears', dest='ears', action='store_false',
                    help="leave the ear joints empty instead of taking MultiPose's COCO ears")
+    p.add_argument('--no-upright', dest='upright', action='store_false', default=UPRIGHT,
+                   help='detect in every image as it comes, not turned by quarter turns so that the people of a '
+                        "camera mounted on its side or upside down stand up (from its orientation and the rig's up)")
     p.add_argument('--head-model', choices=HEAD_MODELS, default='anatomical',
                    help='how the head joints are derived in 3D (default: anatomical, from the COCO ears and the '
                         'MPII upper neck; direct: MPII upper neck and head top)')
@@ -200,6 +204,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     planner = CropPlanner(cameras, args.person_detector_every)
     # warm-up: onnxruntime's first run allocates; not a steady-state latency
     detector.detect(next(im for im in images if im is not None))
+    turns = [upright_turns(cam.R, up) if args.upright else 0 for cam in cameras]
     source = 'MultiPose keypoints' if args.heatmaps == 'multipose' else f'{args.heatmaps} {args.model.upper()}'
     print(f'{PROG}: {len(cameras)} cameras, heatmaps {source}, MultiPose input '
           f'{args.input_size} px, {",".join(detector.providers)}', file=out)
@@ -209,12 +214,12 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     nobody = FrameResult(args.frame, [], np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)))
     # With MultiPose on every set, the next set's runs start while this one finishes (its people
     # and 3D stage): crops from skeletons would need this set's 3D first.
-    ahead = _started_ahead(detector, images, args.sets) if planner.every == 1 else None
+    ahead = _started_ahead(detector, images, args.sets, turns) if planner.every == 1 else None
     times = []
     first = time.perf_counter()
     for n in range(args.sets):
         plan = planner.plan()
-        pending = next(ahead) if ahead is not None else detector.start_set(images, plan, planner.previous)
+        pending = next(ahead) if ahead is not None else detector.start_set(images, plan, planner.previous, turns=turns)
         people = detector.finish(pending)
         detected = time.perf_counter()
         results = stage.push(args.frame + n, people) + stage.flush()
@@ -253,7 +258,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     return 0
 
 
-def _started_ahead(detector: OnnxPoseDetector, images: list[np.ndarray | None], sets: int) -> Iterator[PendingSet]:
+def _started_ahead(detector: OnnxPoseDetector, images: list[np.ndarray | None], sets: int,
+                   turns: list[int]) -> Iterator[PendingSet]:
     """`sets` sets of the same images, each started (OnnxPoseDetector.start_set) by a feeder thread
     as soon as MultiPose has a worker free for it, one set at most waiting started."""
     ready: queue.Queue[PendingSet | Exception] = queue.Queue(maxsize=1)
@@ -261,7 +267,7 @@ def _started_ahead(detector: OnnxPoseDetector, images: list[np.ndarray | None], 
     def feed() -> None:
         try:
             for _ in range(sets):
-                ready.put(detector.start_set(images))
+                ready.put(detector.start_set(images, turns=turns))
         except Exception as exc:  # handed to the consumer, which raises it
             ready.put(exc)
 

@@ -103,6 +103,7 @@ from mvpose_ros.core.detection.newest_queue import NewestQueue
 from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
+from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
@@ -192,6 +193,7 @@ class _Camera:
     subscription: Subscription | None = None
     info_problems: set[str] = field(default_factory=set)
     checked_info: tuple | None = None  # camera_info_msg.info_key of the last CameraInfo checked
+    turns: int = 0  # onnx: quarter turns that stand its image up (upright.upright_turns)
 
 
 def _check_frame_id(cam: _Camera, frame_id: str) -> None:
@@ -255,6 +257,8 @@ class HeatmapDetectorNode(Node):
                   'are 0', 0.0, 0.999, live=True),
             Param('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
                   'needs them)'),
+            Param('upright', UPRIGHT, 'onnx: turn the image of a camera mounted on its side or upside down by quarter '
+                  "turns (from its orientation and the rig's up) so that the networks see people standing"),
             Param('queue_depth', CAMERA_QUEUE_DEPTH, 'camera inputs (images, CameraInfo): keep-last depth of the '
                   'best-effort subscriptions (a parameter file may override each topic: qos_overrides.<topic>...)',
                   1, 10000),
@@ -297,6 +301,7 @@ class HeatmapDetectorNode(Node):
             if self._backend == 'onnx':
                 cam.input_topic = in_namespace(namespace, rc.image)
                 cam.input_type, cam.typed_by = image_type(cam.input_topic, graph)
+                cam.turns = upright_turns(rc.R, rig.up) if p['upright'] else 0
             else:
                 cam.input_topic = in_namespace(namespace, camera_topic(rc.name, OPENPOSE))
             self._cameras.append(cam)
@@ -312,7 +317,8 @@ class HeatmapDetectorNode(Node):
             self._subscribe(cam)
             camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam), self._depth)
             typed = f'{cam.input_type.__name__}, by {cam.typed_by}' if self._backend == 'onnx' else 'PointCloud2'
-            self.get_logger().info(f'{cam.rig.name}: backend {self._backend}, {cam.input_topic} ({typed}) -> '
+            turned = f', turned {90 * cam.turns} degrees counterclockwise to stand people up' if cam.turns else ''
+            self.get_logger().info(f'{cam.rig.name}: backend {self._backend}, {cam.input_topic} ({typed}{turned}) -> '
                                    f'{self.resolve_topic_name(cam.output.topic_name)}')
         if self._backend == 'onnx' and any(c.typed_by == 'name' for c in self._cameras):
             self._recheck_timer = self.create_timer(TYPE_RECHECK, self._recheck_types)
@@ -451,7 +457,7 @@ class HeatmapDetectorNode(Node):
         if self._backend == 'openpose':
             self._admit(cam, msg)
             return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
-        (people,) = self._detector.detect_set([self._image(cam, msg)], sizes=[_size(cam.camera)])
+        (people,) = self._detector.detect_set([self._image(cam, msg)], sizes=[_size(cam.camera)], turns=[cam.turns])
         return people_to_msg(people, msg.header)
 
     def _image(self, cam: _Camera, msg: Any) -> Any:
@@ -635,7 +641,8 @@ class HeatmapDetectorNode(Node):
             images = [None if isinstance(image, ValueError) else image for image in images]
             sizes = [None if cam.camera is None else _size(cam.camera) for cam in self._cameras]
             plan = self._plan(synced.stamp_ns)
-            found = self._detector.detect_set(images, plan, None if plan is None else self._planner.previous, sizes)
+            found = self._detector.detect_set(images, plan, None if plan is None else self._planner.previous, sizes,
+                                              [cam.turns for cam in self._cameras])
             if plan is not None:
                 self._planner.update(plan, found)
             for cam, msg, people in zip(self._cameras, synced.items, found):

@@ -1,6 +1,7 @@
 """The letterbox transform: an image region scaled into a square network input, centred and
-padded with zeros, as an affine map both ways; and maps on the network's grid resampled onto an
-image-aligned grid of cells.
+padded with zeros, and turned by quarter turns (a camera mounted on its side or upside down: the
+network sees people upright), as an affine map both ways; and maps on the network's grid
+resampled onto an image-aligned grid of cells.
 
 Coordinates are pixel centres: pixel (0, 0) is at (0.0, 0.0) and covers [-0.5, 0.5]^2, as in
 OpenCV (cv2.resize, cv2.warpAffine). The region is cut at whole image pixels and resized with
@@ -19,22 +20,24 @@ import numpy as np
 @dataclass(frozen=True)
 class Letterbox:
     """roi: (x0, y0, x1, y1) image pixels cut (end exclusive); content: (x, y, w, h) where the
-    resized roi lies in the size x size input; scale, shift: (2,) u, v then x, y of the map
-    input = scale * image + shift."""
+    resized roi lies in the size x size input before it is turned; scale, shift: (2,) u, v then
+    x, y of the map unturned input = scale * image + shift; turns: quarter turns of the input,
+    counterclockwise as shown (np.rot90's), after that map."""
 
     roi: tuple[int, int, int, int]
     content: tuple[int, int, int, int]
     size: int
     scale: np.ndarray
     shift: np.ndarray
+    turns: int = 0
 
     def to_input(self, uv: np.ndarray) -> np.ndarray:
         """Network input pixels (..., 2) of image pixels uv (..., 2)."""
-        return np.asarray(uv, dtype=np.float64) * self.scale + self.shift
+        return _turned(np.asarray(uv, dtype=np.float64) * self.scale + self.shift, self.turns, self.size)
 
     def to_image(self, xy: np.ndarray) -> np.ndarray:
         """Image pixels (..., 2) of network input pixels xy (..., 2)."""
-        return (np.asarray(xy, dtype=np.float64) - self.shift) / self.scale
+        return (_turned(np.asarray(xy, dtype=np.float64), -self.turns, self.size) - self.shift) / self.scale
 
     def contains(self, uv: np.ndarray) -> np.ndarray:
         """(...,) whether image pixels uv (..., 2) lie in the cut region (False for NaN)."""
@@ -52,7 +55,7 @@ class Letterbox:
         out = np.zeros((self.size, self.size) + image.shape[2:], dtype=image.dtype)
         out[cy:cy + ch, cx:cx + cw] = cv2.resize(crop, (cw, ch),
                                                  interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
-        return out
+        return np.ascontiguousarray(np.rot90(out, self.turns)) if self.turns % 4 else out
 
     def image_grid(self, stride: float) -> tuple[np.ndarray, tuple[int, int]]:
         """An image-aligned grid of cells `stride` px apart over the roi: the pixel of cell
@@ -69,15 +72,28 @@ class Letterbox:
         stride * (c, r), shape (h, w): returns (J, h, w). Separable tent interpolation whose
         support widens to one output cell when cells are coarser than the input's pixels (bilinear
         otherwise), so a peak keeps its mass; 0 where a cell falls outside the input."""
+        maps = np.rot90(maps, -self.turns)  # back to the image's axes: the affine map's input
         h, w = shape
-        cols = self.to_input(np.stack([origin[0] + stride * np.arange(w), np.zeros(w)], -1))[:, 0]
-        rows = self.to_input(np.stack([np.zeros(h), origin[1] + stride * np.arange(h)], -1))[:, 1]
+        cols = origin[0] + stride * np.arange(w)
+        rows = origin[1] + stride * np.arange(h)
+        cols, rows = cols * self.scale[0] + self.shift[0], rows * self.scale[1] + self.shift[1]
         ix, wx = _tent_taps(cols, self.size, stride * self.scale[0])  # (w, K)
         iy, wy = _tent_taps(rows, self.size, stride * self.scale[1])  # (h, K)
         maps = np.asarray(maps, dtype=np.float32)
         # rows first: each tap is a whole contiguous input row, and only the grid's rows are read
         down = np.einsum('hk,hkxj->hxj', wy, maps[iy], optimize=True)  # (h, size, J)
         return np.einsum('wk,hwkj->jhw', wx, down[:, ix], optimize=True)  # (J, h, w)
+
+
+def _turned(xy: np.ndarray, turns: int, size: int) -> np.ndarray:
+    """Pixels (..., 2) of a size x size square turned `turns` quarter turns as np.rot90 turns an
+    array (counterclockwise as shown; negative: clockwise); pixel centres map to pixel centres."""
+    k = turns % 4
+    if k == 0:
+        return xy
+    x, y, far = xy[..., 0], xy[..., 1], size - 1
+    turned = {1: (y, far - x), 2: (far - x, far - y), 3: (far - y, x)}[k]
+    return np.stack(turned, axis=-1)
 
 
 def _tent_taps(positions: np.ndarray, n: int, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -95,10 +111,11 @@ def _tent_taps(positions: np.ndarray, n: int, step: float) -> tuple[np.ndarray, 
     return np.clip(index, 0, n - 1), weights.astype(np.float32)
 
 
-def letterbox(width: int, height: int, box: np.ndarray, size: int) -> Letterbox:
+def letterbox(width: int, height: int, box: np.ndarray, size: int, turns: int = 0) -> Letterbox:
     """The letterbox of the image region box (u0, v0, u1, v1), pixel edges in pixel-centre
     coordinates (the whole image is (-0.5, -0.5, width - 0.5, height - 0.5)), cut to the image
-    and to whole pixels, into a size x size input. ValueError when the region holds no pixel."""
+    and to whole pixels, into a size x size input turned `turns` quarter turns (np.rot90's).
+    ValueError when the region holds no pixel."""
     u0, v0, u1, v1 = np.asarray(box, dtype=np.float64)
     x0, y0 = max(0, int(np.floor(u0 + 0.5))), max(0, int(np.floor(v0 + 0.5)))
     x1, y1 = min(width, int(np.ceil(u1 + 0.5))), min(height, int(np.ceil(v1 + 0.5)))
@@ -112,9 +129,9 @@ def letterbox(width: int, height: int, box: np.ndarray, size: int) -> Letterbox:
     # edges map to edges: x + 0.5 = offset + scale * (u + 0.5 - x0)
     shift = offset + scale * (0.5 - np.array([x0, y0])) - 0.5
     return Letterbox(roi=(x0, y0, x1, y1), content=(int(offset[0]), int(offset[1]), int(fitted[0]), int(fitted[1])),
-                     size=int(size), scale=scale, shift=shift)
+                     size=int(size), scale=scale, shift=shift, turns=int(turns) % 4)
 
 
-def whole_image(width: int, height: int, size: int) -> Letterbox:
-    """The letterbox of a whole width x height image into size x size."""
-    return letterbox(width, height, np.array([-0.5, -0.5, width - 0.5, height - 0.5]), size)
+def whole_image(width: int, height: int, size: int, turns: int = 0) -> Letterbox:
+    """The letterbox of a whole width x height image into size x size, turned `turns` quarter turns."""
+    return letterbox(width, height, np.array([-0.5, -0.5, width - 0.5, height - 0.5]), size, turns)

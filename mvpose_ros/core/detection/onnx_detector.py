@@ -170,6 +170,7 @@ class PendingSet:
     images: list[np.ndarray | None]
     boxes: list[np.ndarray | None]
     previous: Sequence[np.ndarray] | None
+    turns: list[int]
     finds: list[Future[_Found]]
     regions: int
     started: float
@@ -213,7 +214,8 @@ class OnnxPoseDetector:
 
     def detect_set(self, images: Sequence[np.ndarray | None], boxes: Sequence[np.ndarray | None] | None = None,
                    previous: Sequence[np.ndarray] | None = None,
-                   sizes: Sequence[tuple[int, int] | None] | None = None) -> list[list[Person2D] | None]:
+                   sizes: Sequence[tuple[int, int] | None] | None = None,
+                   turns: Sequence[int] | None = None) -> list[list[Person2D] | None]:
         """The people of each image (H, W, 3) uint8 BGR of a set (None for a camera without an
         image: None out). boxes: per camera, None to find the people with MultiPose in the whole
         image, else where they are expected: boxes (Q, 4) u0, v0, u1, v1 (pixel edges;
@@ -223,10 +225,12 @@ class OnnxPoseDetector:
         EfficientPose takes them as its crops and MultiPose does not run. previous: per camera, the
         inference keypoints (R, 16, 3) of its people in the previous set, whose ears given crops
         carry; sizes: per camera, its (width, height) (None: the image's), of which a smaller image
-        is a shrunk copy (reduced_decoding): people come back in the camera's pixels. ValueError
-        naming the camera for an image that is not uint8 BGR, and for a shrunk image without
-        heatmaps 'multipose' (crops are cut from the image)."""
-        return self.finish(self.start_set(images, boxes, previous, sizes))
+        is a shrunk copy (reduced_decoding): people come back in the camera's pixels. turns: per
+        camera, the quarter turns (np.rot90's) that stand its people up before the networks see
+        them (upright.upright_turns; default none): people come back in the camera's own pixels.
+        ValueError naming the camera for an image that is not uint8 BGR, and for a shrunk image
+        without heatmaps 'multipose' (crops are cut from the image)."""
+        return self.finish(self.start_set(images, boxes, previous, sizes, turns))
 
     def reduced_decoding(self, width: int, height: int) -> int:
         """By how much (1, 2, 4 or 8) an image of a width x height camera may be shrunk before
@@ -241,7 +245,8 @@ class OnnxPoseDetector:
 
     def start_set(self, images: Sequence[np.ndarray | None], boxes: Sequence[np.ndarray | None] | None = None,
                   previous: Sequence[np.ndarray] | None = None,
-                  sizes: Sequence[tuple[int, int] | None] | None = None) -> PendingSet:
+                  sizes: Sequence[tuple[int, int] | None] | None = None,
+                  turns: Sequence[int] | None = None) -> PendingSet:
         """detect_set in two steps: check the set and start MultiPose on its images, returning once
         the last of them has a worker; finish() completes it. A caller that starts the next set
         then, while this one finishes, gives its first image the worker this set leaves idle (five
@@ -252,8 +257,9 @@ class OnnxPoseDetector:
             raise ValueError(f'detect_set: {len(images)} images, {len(boxes)} box lists and '
                              f'{len(previous) if previous is not None else "no"} previous people lists')
         sizes = sizes if sizes is not None else [None] * len(images)
-        if len(sizes) != len(images):
-            raise ValueError(f'detect_set: {len(images)} images and {len(sizes)} sizes')
+        turns = list(turns) if turns is not None else [0] * len(images)
+        if not len(sizes) == len(turns) == len(images):
+            raise ValueError(f'detect_set: {len(images)} images, {len(sizes)} sizes and {len(turns)} turns')
         shrunk = (bgr is not None and size is not None and bgr.shape[1::-1] != tuple(size)
                   for bgr, size in zip(images, sizes))
         if cfg.heatmaps != 'multipose' and any(shrunk):
@@ -265,24 +271,25 @@ class OnnxPoseDetector:
                                  f'got {bgr.dtype} {bgr.shape}')
         started = time.perf_counter()
         finds, regions = [], 0
-        for bgr, given, size in zip(images, boxes, sizes):
+        for bgr, given, size, turn in zip(images, boxes, sizes, turns):
             if bgr is None or not (given is None or cfg.heatmaps == 'multipose'):
                 continue
             size = size or (bgr.shape[1], bgr.shape[0])
             region = None if given is None or len(given) == 0 else people_region(given, size, cfg.region_margin)
-            finds.append(self._start_find(bgr, size, region))
+            finds.append(self._start_find(bgr, size, region, turn))
             regions += region is not None
-        return PendingSet(list(images), list(boxes), previous, finds, regions, started)
+        return PendingSet(list(images), list(boxes), previous, turns, finds, regions, started)
 
-    def _start_find(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None) -> Future[_Found]:
+    def _start_find(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None,
+                    turns: int) -> Future[_Found]:
         """_find_people on a free worker, waiting for one (at once without a pool)."""
         if self._pool is None:
             done: Future[_Found] = Future()
-            done.set_result(self._find_people(bgr, size, region))
+            done.set_result(self._find_people(bgr, size, region, turns))
             return done
         self._free_workers.acquire()
         try:
-            future = self._pool.submit(self._find_people, bgr, size, region)
+            future = self._pool.submit(self._find_people, bgr, size, region, turns)
         except BaseException:
             self._free_workers.release()
             raise
@@ -318,7 +325,8 @@ class OnnxPoseDetector:
                 keypoints, sigmas = [None] * len(given), np.zeros(len(given))
             grown = _grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
             for box, kp, sigma in zip(grown, keypoints, sigmas):
-                crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side), kp, float(sigma)))
+                crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side, pending.turns[c]), kp,
+                                   float(sigma)))
         t1 = time.perf_counter()
         maps = self._heatmaps(images, crops)
         t2 = time.perf_counter()
@@ -337,19 +345,20 @@ class OnnxPoseDetector:
                                       sum(len(p) for p in out if p is not None), len(found_all), pending.regions)
         return out
 
-    def _find_people(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None) -> _Found:
+    def _find_people(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None,
+                     turns: int) -> _Found:
         """MultiPose on the letterboxed frame, or on the region (4,) u0, v0, u1, v1 (camera pixel
-        edges) of it: people scoring at least min_person_score whose box holds pixels of the part
-        searched, in the pixels of a camera of size (width, height), of which bgr is a copy (shrunk
-        where smaller)."""
+        edges) of it, turned `turns` quarter turns: people scoring at least min_person_score whose
+        box holds pixels of the part searched, in the pixels of a camera of size (width, height),
+        of which bgr is a copy (shrunk where smaller)."""
         shrink = np.array(size, dtype=np.float64) / (bgr.shape[1], bgr.shape[0])  # camera px per bgr px
         if region is None:
             side = self.config.input_size
-            lb = whole_image(bgr.shape[1], bgr.shape[0], side)
+            lb = whole_image(bgr.shape[1], bgr.shape[0], side, turns)
         else:
             box = (np.asarray(region, dtype=np.float64).reshape(2, 2) + 0.5) / shrink - 0.5
             side = region_input_side(box[1] - box[0], (bgr.shape[1], bgr.shape[0]), self.config.input_size)
-            lb = letterbox(bgr.shape[1], bgr.shape[0], box.reshape(4), side)
+            lb = letterbox(bgr.shape[1], bgr.shape[0], box.reshape(4), side, turns)
         rgb = lb.apply(bgr)[None, ..., ::-1].astype(np.int32)  # BGR -> RGB on the small input, not the image
         (out,) = self._multipose.run([MULTIPOSE.output_name], {MULTIPOSE.input_name: rgb})
         rows = out[0]
@@ -358,7 +367,9 @@ class OnnxPoseDetector:
         # normalised (y, x) -> input pixels: 1.0 is the input's far edge, at pixel side - 0.5
         yx = rows[:, :n].reshape(-1, _MULTIPOSE_KEYPOINTS, 3)
         uv = lb.to_image(yx[..., 1::-1] * side - 0.5)
+        ordered = (rows[:, n + 2:n + 4] > rows[:, n:n + 2]).all(axis=1)  # ymax > ymin, xmax > xmin
         corners = lb.to_image(rows[:, [n + 1, n, n + 3, n + 2]].reshape(-1, 2, 2) * side - 0.5)
+        corners = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)  # a turned box's corners swap
         x0, y0, x1, y1 = lb.roi
         bounds = np.array([x0, y0, x1, y1], dtype=np.float64) - 0.5  # edges of the pixels searched
         if (bgr.shape[1], bgr.shape[0]) != tuple(size):  # a shrunk copy: to the camera's pixels, edges to edges
@@ -366,7 +377,7 @@ class OnnxPoseDetector:
             bounds = (bounds + 0.5) * np.tile(shrink, 2) - 0.5
         keypoints = np.concatenate([uv, yx[..., 2:]], axis=-1)
         boxes = corners.reshape(-1, 4)
-        keep = ((boxes[:, 2:] > boxes[:, :2]) & (boxes[:, 2:] > bounds[:2]) & (boxes[:, :2] < bounds[2:])).all(axis=1)
+        keep = ordered & ((boxes[:, 2:] > bounds[:2]) & (boxes[:, :2] < bounds[2:])).all(axis=1)
         return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), bounds,
                       time.perf_counter())
 
