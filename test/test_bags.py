@@ -438,6 +438,69 @@ def test_shelf_rig_raw_recipe_gives_rgb8_images_on_the_raw_topics():
     assert '/image_raw/compressed' not in recipe.rig_text() and "image: /rig/left/image_raw\n" in recipe.rig_text()
 
 
+def _rot90_pixels(uv: np.ndarray, turns: int, width: int, height: int) -> np.ndarray:
+    """Where pixels (N, 2) of a width x height image land in np.rot90(image, turns)."""
+    for _ in range(turns % 4):
+        uv = np.stack([uv[:, 1], width - 1 - uv[:, 0]], -1)
+        width, height = height, width
+    return uv
+
+
+@pytest.mark.parametrize('turns', [1, 2, 3, 4])
+def test_a_turned_camera_sees_the_turned_image(turns):
+    """recipes.turned_camera: the camera turned on its mount projects every point where np.rot90
+    moves the camera's pixel, with skew and tangential distortion too, its size swapped by odd turns."""
+    from mvpose_ros.bags.recipes import turned_camera
+    from mvpose_ros.core.geometry.camera import Camera
+    cam = shelf_cameras()[1]
+    K = cam.K.copy()
+    K[0, 1] = 2.5
+    cam = Camera('odd', K, cam.R, cam.t, [-0.2, 0.05, 0.004, -0.003, 0.01], cam.width, cam.height)
+    turned = turned_camera(cam, turns)
+    assert (turned.width, turned.height) == ((cam.height, cam.width) if turns % 2 else (cam.width, cam.height))
+    X = np.random.default_rng(3).uniform([-2.0, -2.0, 0.0], [2.0, 2.0, 2.0], (300, 3))
+    uv = cam.project(X)
+    seen = np.isfinite(uv).all(axis=1)
+    np.testing.assert_allclose(turned.project(X)[seen], _rot90_pixels(uv[seen], turns, cam.width, cam.height),
+                               atol=1e-6)
+    np.testing.assert_allclose(turned.centre, cam.centre, atol=1e-12)
+
+
+def test_shelf_rig_turned_recipe_turns_images_cameras_and_rig_file_together(tmp_path):
+    """shelf_rig_turned: each camera's image is np.rot90 of shelf_rig's by ForeignRig.TURNS, its
+    CameraInfo and the rig file's orientation turned with it, so a world point lands where the
+    turn moves shelf_rig's pixel; upright detection turns each camera back."""
+    from msg_adapters.camera_info_msg import info_to_intrinsics
+    from msg_adapters.image_msg import compressed_to_image
+    from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_recipe
+    from mvpose_ros.core.detection.upright import upright_turns
+    from mvpose_ros.core.geometry.rig import load_rig_file
+    plain, turned = shelf_rig_recipe(SHELF), shelf_rig_recipe(SHELF, turned=True)
+    assert turned.name == 'shelf_rig_turned' and turned.fingerprint() != plain.fingerprint()
+    first = {}
+    for recipe in (plain, turned):
+        items = {}
+        for topic, msg, _ in recipe.items():
+            items.setdefault(topic, msg)
+        first[recipe.name] = items
+    (tmp_path / 'turned.yaml').write_text(turned.rig_text())
+    (tmp_path / 'plain.yaml').write_text(plain.rig_text())
+    rig_file, plain_rig = load_rig_file(tmp_path / 'turned.yaml'), load_rig_file(tmp_path / 'plain.yaml')
+    point = np.array([[0.3, -0.2, 1.1]])
+    for name, k, rig_camera in zip(ForeignRig.NAMES, ForeignRig.TURNS, rig_file.cameras):
+        image = compressed_to_image(first['shelf_rig_turned'][f'/rig/{name}/image_raw/compressed'])
+        before = compressed_to_image(first['shelf_rig'][f'/rig/{name}/image_raw/compressed'])
+        assert image.shape[:2] == np.rot90(before, k).shape[:2]
+        assert np.abs(image.astype(int) - np.rot90(before, k).astype(int)).mean() < 2  # JPEG noise only
+        info = first['shelf_rig_turned'][f'/rig/{name}/camera_info']
+        camera = rig_camera.with_info(*info_to_intrinsics(info))
+        upright = plain_rig.cameras[ForeignRig.NAMES.index(name)]
+        unturned = upright.with_info(*info_to_intrinsics(first['shelf_rig'][f'/rig/{name}/camera_info']))
+        np.testing.assert_allclose(camera.project(point), _rot90_pixels(unturned.project(point), k, unturned.width,
+                                                                        unturned.height), atol=1e-4)
+        assert upright_turns(rig_camera.R, rig_file.up) == (4 - k) % 4
+
+
 def test_shelf_bag_with_a_bumped_or_an_unplugged_camera():
     """--rotate-camera: camera 2's candidates move (about fx tan 2 degrees) from frame 450 on, the
     others and earlier frames are the real ones; --unplug-camera: camera 3 sends nothing from then."""

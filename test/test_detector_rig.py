@@ -26,6 +26,7 @@ from msg_adapters.image_msg import image_to_compressed_msg, to_bgr
 from msg_adapters.people_msg import msg_to_people
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns
+from mvpose_ros.bags.recipes import turned_camera
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
@@ -327,23 +328,12 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
     assert 'Traceback' not in log.read_text()
 
 
-def _upside_down(cam):
-    """The camera mounted upside down (turned 180 degrees about its optical axis): its image is
-    cv2.ROTATE_180 of the upright one's."""
-    from mvpose_ros.core.geometry.camera import Camera
-    flip = np.diag([-1.0, -1.0, 1.0])
-    K = cam.K.copy()
-    K[0, 2], K[1, 2] = cam.width - 1 - cam.K[0, 2], cam.height - 1 - cam.K[1, 2]
-    k1, k2, p1, p2, k3 = cam.dist
-    return Camera(cam.name, K, flip @ cam.R, flip @ cam.t, [k1, k2, -p1, -p2, k3], cam.width, cam.height)
-
-
 def test_a_camera_mounted_upside_down_is_detected_turned_upright(domain, tmp_path):
     """A ceiling camera (Shelf camera 4 turned 180 degrees about its optical axis, its image
     turned with it): the node turns its image back before detection (parameter `upright`, on by
     default), says so at start-up, and publishes the four people of frame 572 in the camera's own
     pixels, as the ROS-free detector finds them with those turns; as it comes, MultiPose finds one."""
-    cam = _upside_down(shelf_cameras()[4])
+    cam = turned_camera(shelf_cameras()[4], 2)
     rig = tmp_path / 'rig.yaml'
     rig.write_text(yaml.safe_dump({'cameras': [{
         'name': 'ceiling', 'image': 'ceiling/image/compressed', 'frame_id': 'ceiling_optical',

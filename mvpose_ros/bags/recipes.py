@@ -11,6 +11,9 @@
   images upscaled to 1548x1164, per-camera stamp offsets with jitter, a late camera and three
   dropped frames; sensor_msgs/CompressedImage (jpeg) or, for `_raw`, sensor_msgs/Image (rgb8),
   plus CameraInfo with every image. Its rig file (extrinsics only) is written by `rig_file_text`.
+- `shelf_rig_turned`: `shelf_rig` with its cameras turned on their mounts (ForeignRig.TURNS: three
+  upside down, as ceiling cameras hang, and two on their sides), images, CameraInfo and rig file
+  turned with them: the same scene, for upright detection (core.detection.upright).
 - `shelf_crowd`: the `shelf` bag's camera infos and OpenPose output with the scene multiplied to
   about CROWD_PEOPLE people per frame (core.evaluation.crowd_openpose: shifted copies of its people, the
   crowd `mvpose-bench --people` builds), for the graph under a crowd; no images (they would not
@@ -56,7 +59,7 @@ from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
 # so bags made by older code count as out of date.
 RECIPE_VERSION = 1
-RECIPES = ('shelf', 'shelf_images', 'shelf_crowd', 'shelf_rig', 'shelf_rig_raw', 'campus')
+RECIPES = ('shelf', 'shelf_images', 'shelf_crowd', 'shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'campus')
 CROWD_PEOPLE = 20  # 3D people per frame the shelf_crowd bag aims at
 SHELF_IMAGE_FRAMES = (572,)
 GROUND_TRUTH_TOPIC = '/ground_truth/skeletons'
@@ -104,8 +107,9 @@ def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path 
                             fault=fault)
     if name == 'shelf_crowd':
         return shelf_crowd_recipe(dataset_dir('shelf', data_root))
-    if name in ('shelf_rig', 'shelf_rig_raw'):
-        return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name == 'shelf_rig')
+    if name in ('shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned'):
+        return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name != 'shelf_rig_raw',
+                                turned=name == 'shelf_rig_turned')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
 
 
@@ -239,6 +243,7 @@ class ForeignRig:
     DROPPED_SETS = (11, 22, 33)
     FRAME = 572  # the Shelf frame whose five images every set shows
     JPEG_QUALITY = 90
+    TURNS = (2, 2, 1, 3, 2)  # shelf_rig_turned: each image np.rot90'd this many times, its camera with it
 
     @staticmethod
     def image_topic(name: str, compressed: bool) -> str:
@@ -267,6 +272,21 @@ def scaled_camera(camera: Camera, scale: float) -> Camera:
     return replace(camera, K=K, width=round(camera.width * scale), height=round(camera.height * scale))
 
 
+def turned_camera(camera: Camera, turns: int) -> Camera:
+    """The camera turned on its mount about its optical axis so that its image is
+    np.rot90(image, turns) of the camera's (counterclockwise as shown): pixel (u, v) becomes
+    (v, width - 1 - u) per turn, the image's size swaps, and the plumb_bob distortion's tangential
+    terms turn with the image (p1, p2 -> -p2, p1); K' = T K M^T with T that pixel map and M the
+    turn of the optical frame."""
+    for _ in range(turns % 4):
+        T = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, camera.width - 1.0], [0.0, 0.0, 1.0]])
+        M = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # x' = y, y' = -x, z' = z
+        k1, k2, p1, p2, k3 = camera.dist
+        camera = Camera(camera.name, T @ camera.K @ M.T, M @ camera.R, M @ camera.t, [k1, k2, -p2, p1, k3],
+                        camera.height, camera.width)
+    return camera
+
+
 def shelf_rig_stamps(rig: type[ForeignRig] = ForeignRig) -> dict[str, list[int | None]]:
     """Camera name -> its stamp (ns) of every set, None where the camera has no frame."""
     rng = np.random.default_rng(rig.SEED)
@@ -283,11 +303,13 @@ def shelf_rig_stamps(rig: type[ForeignRig] = ForeignRig) -> dict[str, list[int |
     return out
 
 
-def rig_file_text(calibration: Path, compressed: bool = True) -> str:
+def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = False) -> str:
     """The shelf_rig bags' rig file: per camera its driver topics, frame id and extrinsics from the
-    Shelf calibration (position, orientation quaternion), and no intrinsics: those come from the
-    bag's CameraInfo, at the upscaled size."""
+    Shelf calibration (position, orientation quaternion; turned: each camera turned by
+    ForeignRig.TURNS), and no intrinsics: those come from the bag's CameraInfo, at the upscaled size."""
     cameras = dataset_cameras('shelf', calibration=calibration)
+    if turned:
+        cameras = [turned_camera(cam, k) for cam, k in zip(cameras, ForeignRig.TURNS)]
     entries = []
     for name, cam in zip(ForeignRig.NAMES, cameras):
         position = -cam.R.T @ cam.t
@@ -297,16 +319,19 @@ def rig_file_text(calibration: Path, compressed: bool = True) -> str:
                         'orientation': [round(float(v), 12) for v in matrix_to_quaternion(cam.R.T)]})
     doc = {'world_frame': 'world', 'up': [0.0, 0.0, 1.0], 'cameras': entries}
     kind = 'sensor_msgs/CompressedImage (jpeg)' if compressed else 'sensor_msgs/Image (rgb8)'
+    how = (f'# The cameras are turned {", ".join(str(90 * k) for k in ForeignRig.TURNS)} degrees on their mounts '
+           f'(np.rot90 of image and camera).\n' if turned else '')
     return (f'# The rig of the shelf_rig bags (mvpose-make-bag): the five Shelf cameras under a driver\'s\n'
             f'# names, {kind} images upscaled x{ForeignRig.SCALE:g}; extrinsics from\n'
             f'# {calibration.name}; intrinsics and image size come from each camera\'s CameraInfo.\n'
-            + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
+            + how + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
 
 
-def shelf_rig_recipe(shelf: Path, compressed: bool = True) -> Recipe:
-    """The `shelf_rig` bag (CompressedImage; `shelf_rig_raw` with compressed False: Image rgb8)
-    from the Shelf folder `shelf`: see ForeignRig. Each message is logged at its header stamp;
-    every image goes with a CameraInfo of the same stamp (camera_info first)."""
+def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False) -> Recipe:
+    """The `shelf_rig` bag (CompressedImage; `shelf_rig_raw` with compressed False: Image rgb8;
+    `shelf_rig_turned` with turned: its cameras turned by ForeignRig.TURNS) from the Shelf folder
+    `shelf`: see ForeignRig. Each message is logged at its header stamp; every image goes with a
+    CameraInfo of the same stamp (camera_info first)."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
     _require(calibration)
     cameras = dataset_cameras('shelf', calibration=calibration)
@@ -319,6 +344,9 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True) -> Recipe:
         scaled = [scaled_camera(cam, ForeignRig.SCALE) for cam in cameras]
         pixels = [cv2.resize(read_image(path, cam), (big.width, big.height), interpolation=cv2.INTER_LINEAR)
                   for path, cam, big in zip(images, cameras, scaled)]
+        if turned:
+            scaled = [turned_camera(cam, k) for cam, k in zip(scaled, ForeignRig.TURNS)]
+            pixels = [np.ascontiguousarray(np.rot90(p, k)) for p, k in zip(pixels, ForeignRig.TURNS)]
         header0 = Header()
         # One encoding per camera: every set shows the same capture, only the header changes.
         payload = ([image_to_compressed_msg(p, header0, 'jpeg', ForeignRig.JPEG_QUALITY) for p in pixels]
@@ -340,8 +368,8 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True) -> Recipe:
             yield ForeignRig.info_topic(name), camera_to_info(scaled[c], header), stamp
             yield ForeignRig.image_topic(name, compressed), image, stamp
 
-    return Recipe('shelf_rig' if compressed else 'shelf_rig_raw', (calibration, *images), items,
-                  lambda: rig_file_text(calibration, compressed))
+    name = 'shelf_rig_turned' if turned else 'shelf_rig' if compressed else 'shelf_rig_raw'
+    return Recipe(name, (calibration, *images), items, lambda: rig_file_text(calibration, compressed, turned))
 
 
 def campus_image(campus_dir: Path, camera: int, frame: int) -> Path:
