@@ -110,6 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--stride', type=float, default=DEFAULTS.stride, help='heatmap cell size, pixels (default: 4)')
     p.add_argument('--no-ears', dest='ears', action='store_false',
                    help="leave the ear joints empty instead of taking MultiPose's COCO ears")
+    p.add_argument('--tile-levels', type=int, default=DEFAULTS.tile_levels,
+                   help='a MultiPose run that comes back full (6 people) is repeated on two overlapping halves of '
+                        f'what it searched, at most this many levels deep (crowds; 0: never; default: '
+                        f'{DEFAULTS.tile_levels})')
     p.add_argument('--no-upright', dest='upright', action='store_false', default=UPRIGHT,
                    help='detect in every image as it comes, not turned by quarter turns so that the people of a '
                         "camera mounted on its side or upside down stand up (from its orientation and the rig's up)")
@@ -200,7 +204,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                                                    threads=args.threads, input_size=args.input_size,
                                                    stride=args.stride, ears=args.ears, max_batch=args.max_batch,
                                                    keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps,
-                                                   multipose_workers=args.multipose_workers))
+                                                   multipose_workers=args.multipose_workers,
+                                                   tile_levels=args.tile_levels))
     planner = CropPlanner(cameras, args.person_detector_every)
     # warm-up: onnxruntime's first run allocates; not a steady-state latency
     detector.detect(next(im for im in images if im is not None))
@@ -232,6 +237,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         found = ' '.join(f'cam{c}:{NO_IMAGE if p is None else len(p)}' for c, p in enumerate(people))
         scored = f'; MPJPE {_mpjpe(result, gt)}' if gt is not None else ''
         regions = f' ({t.multipose_regions} regions)' if t.multipose_regions else ''
+        regions += f' (+{t.crowd_tiles} crowd tiles)' if t.crowd_tiles else ''
         print(f'set {n}: MultiPose on {t.multipose_runs} images{regions} {1e3 * t.multipose:6.1f} ms, EfficientPose '
               f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * t.heatmaps:5.1f} ms, '
               f'association and 3D {1e3 * (end - detected):5.1f} ms, total {1e3 * times[-1][4]:6.1f} ms; people '

@@ -257,6 +257,9 @@ class HeatmapDetectorNode(Node):
                   'are 0', 0.0, 0.999, live=True),
             Param('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
                   'needs them)'),
+            Param('tile_levels', onnx.tile_levels, 'onnx: a MultiPose run that comes back full (6 people) is '
+                  'repeated on two overlapping halves of what it searched, at most this many levels deep (crowds; '
+                  '0: never)', 0, 4),
             Param('upright', UPRIGHT, 'onnx: turn the image of a camera mounted on its side or upside down by quarter '
                   "turns (from its orientation and the rig's up) so that the networks see people standing"),
             Param('queue_depth', CAMERA_QUEUE_DEPTH, 'camera inputs (images, CameraInfo): keep-last depth of the '
@@ -397,7 +400,7 @@ class HeatmapDetectorNode(Node):
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
                 ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'], heatmaps=p['heatmaps'],
                 keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'],
-                region_margin=p['region_margin'])
+                region_margin=p['region_margin'], tile_levels=p['tile_levels'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
             raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
