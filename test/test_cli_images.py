@@ -175,6 +175,24 @@ def test_a_rig_file_checks_the_image_sizes_it_gives(tmp_path, capsys):
     assert exit_info.value.code == 2 and 'not allowed with argument' in capsys.readouterr().err
 
 
+def test_a_rig_file_of_its_own_and_the_models_need_no_data_root(tmp_path, capsys, monkeypatch):
+    """A user's rig file giving every camera's pose and intrinsics, and --models: mvpose-images
+    runs where MVPOSE_DATA_ROOT names no folder (it looked for the data root before reading the rig
+    file and stopped there)."""
+    import yaml
+    from mvpose_ros.core.geometry.rig import matrix_to_quaternion
+    entries = [{'name': f'c{c}', 'position': cam.centre.tolist(), 'orientation': matrix_to_quaternion(cam.R.T).tolist(),
+                'width': cam.width, 'height': cam.height, 'K': cam.K.ravel().tolist(), 'D': cam.dist.tolist()}
+               for c, cam in enumerate(shelf_cameras())]
+    rig = tmp_path / 'rig.yaml'
+    rig.write_text(yaml.safe_dump({'cameras': entries}))
+    models = SHELF.parents[1] / 'models'
+    monkeypatch.setenv('MVPOSE_DATA_ROOT', str(tmp_path / 'no-data'))
+    assert images.main(['--rig', str(rig), '--images', *FRAMES, '--models', str(models), '--output',
+                        str(tmp_path / 'out')]) == 0, capsys.readouterr().err
+    assert re.search(r'set 0: .*; 4 in 3D', capsys.readouterr().out)
+
+
 def _png_bomb(path: Path, width: int, height: int) -> None:
     """A PNG of a few hundred bytes whose IHDR declares width x height (8-bit RGB)."""
     def chunk(kind: bytes, body: bytes) -> bytes:

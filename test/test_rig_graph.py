@@ -136,8 +136,9 @@ def test_rig_arguments_are_one_line_errors(argv, needle, rig_file, tmp_path, cap
     assert needle in err and len(err.strip().splitlines()) == 1, err
 
 
-def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path):
+def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path, monkeypatch):
     from mvpose_ros.bags.io import write_bag
+    monkeypatch.setenv('MVPOSE_DATA_ROOT', str(tmp_path / 'no-data'))  # the rig file needs no data root
     from sensor_msgs.msg import CompressedImage
     from std_msgs.msg import Header
     items = []

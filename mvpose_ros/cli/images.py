@@ -41,6 +41,7 @@ import sys
 import threading
 import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Iterator, Sequence, TextIO
 
@@ -133,7 +134,7 @@ def _rig_and_images(args: argparse.Namespace) -> tuple[list[Camera], np.ndarray,
     if sum(given) < 2:
         raise ValueError(f'--images: {sum(given)} of {len(given)} cameras have an image; 3D needs at least two')
     if args.rig is not None:
-        rig = load_rig_file(args.rig, data_root=data_root(args.data_root))
+        rig = load_rig_file(args.rig, data_root=partial(data_root, args.data_root))
         cameras = rig.calibrated_cameras()
         _same_count(args.images, cameras)
         return cameras, rig.up, [read_image(path, cam) if has else None

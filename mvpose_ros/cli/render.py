@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from functools import partial
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -54,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         width, height = (int(v) for v in args.size.lower().split('x'))
     except ValueError:
         raise ValueError(f'--size {args.size!r}: expected WIDTHxHEIGHT') from None
-    rig = load_rig_file(args.rig or package_path(SHELF_RIG), data_root=data_root(args.data_root))
+    rig = load_rig_file(args.rig or package_path(SHELF_RIG), data_root=partial(data_root, args.data_root))
     cameras = rig.calibrated_cameras()
     if args.camera is not None and not 0 <= args.camera < len(cameras):
         raise ValueError(f'--camera {args.camera}: the rig has cameras 0..{len(cameras) - 1}')

@@ -12,6 +12,7 @@ import shutil
 import signal
 import sys
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from contextlib import contextmanager
 from typing import Any, Iterator, Mapping, Sequence, TextIO
@@ -152,11 +153,10 @@ def _environment(config_dir: Path, domain_id: int | None) -> None:
 def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, list[Path], list[SyncSet]]:
     """What a --rig run will do: the rig, the run, the runner settings, the parameter files (the
     template, then --config) and the bag's synchronised sets. ValueError naming what is wrong."""
-    root = data_root(args.data_root)
     rig_path = args.rig.resolve()
     if not rig_path.is_file():
         raise FileNotFoundError(f'--rig: no such file: {args.rig}')
-    rig = load_rig_file(rig_path, data_root=root)
+    rig = load_rig_file(rig_path, data_root=partial(data_root, args.data_root))
     files = ([package_path(RIG_TEMPLATE)] + ([args.config.resolve()] if args.config else [])
              + _override_files(args.overrides))
     params_list = [load_params(f) for f in files]
