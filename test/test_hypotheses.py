@@ -10,8 +10,8 @@ from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
-from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, camera_subsets, sample_people,
-                                                  split_draws)
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, camera_subsets, own_bone_lengths,
+                                                  sample_people, split_draws)
 
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
@@ -172,7 +172,7 @@ def test_joint_seen_by_one_camera_at_its_bone_length(views, truth):
     wrist, elbow = 11, 10  # this actor's left forearm is 27 cm long in the ground truth (the prior: 26)
     assert INFERENCE_PARENT[wrist] == elbow
     sub = _without(views, [wrist], {0, 1, 3, 4})
-    limb = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    limb = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='limb'))
     centre = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='centre'))
     cam = sub[2][0]
     uv = cam.project(limb[wrist])
@@ -192,11 +192,70 @@ def test_joint_seen_by_one_camera_at_its_bone_length(views, truth):
     np.testing.assert_array_equal(limb[others], centre[others])
 
     no_parent = _without(sub, [elbow], {0, 1, 3, 4})
-    limb = sample_hypotheses(no_parent, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    limb = sample_hypotheses(no_parent, np.random.default_rng(0),
+                             SamplingConfig(hypotheses=32, single_view_depth='limb'))
     centre = sample_hypotheses(no_parent, np.random.default_rng(0),
                                SamplingConfig(hypotheses=32, single_view_depth='centre'))
     np.testing.assert_allclose(limb[wrist], centre[wrist], atol=1e-12)
     assert not np.allclose(limb[elbow], centre[elbow])  # the elbow's own parent is seen twice
+
+
+def _bone(points, joint):
+    return np.linalg.norm(points[joint] - points[INFERENCE_PARENT[joint]])
+
+
+def test_own_bone_lengths(truth):
+    """A joint's bone takes its counterpart's measured length, else the typical length times the
+    median ratio of the person's measured bones (at least two), else the typical length; a
+    measured bone beyond the plausible range counts for neither."""
+    r_wrist, l_wrist, r_elbow, l_elbow, l_shoulder = 6, 11, 7, 10, 9
+    child = truth[0] + 0.8 * (truth - truth[0])  # (16, 3) shrunk about the right ankle
+    lengths = own_bone_lengths(child[None])
+    assert lengths.shape == (1, 16)
+    has_parent = INFERENCE_PARENT >= 0
+    assert np.isnan(lengths[0, ~has_parent]).all()
+    assert lengths[0, r_wrist] == pytest.approx(_bone(child, l_wrist), abs=1e-12)
+    assert lengths[0, l_wrist] == pytest.approx(_bone(child, r_wrist), abs=1e-12)
+
+    ratios = np.array([_bone(child, j) / PRIOR_BONE_LENGTH[j] for j in np.flatnonzero(has_parent) if j != l_wrist])
+    no_left_wrist = child.copy()
+    no_left_wrist[l_wrist] = np.nan
+    lengths = own_bone_lengths(no_left_wrist[None])
+    assert lengths[0, r_wrist] == pytest.approx(PRIOR_BONE_LENGTH[r_wrist] * np.median(ratios), abs=1e-12)
+
+    # a left elbow anchored 2 m off: neither the right elbow's counterpart nor in the scale
+    wrong = no_left_wrist.copy()
+    wrong[l_elbow] += [2.0, 0.0, 0.0]
+    lengths = own_bone_lengths(wrong[None])
+    kept = [j for j in np.flatnonzero(has_parent) if j not in (l_wrist, l_elbow)]
+    scale = np.median([_bone(child, j) / PRIOR_BONE_LENGTH[j] for j in kept])
+    assert lengths[0, r_elbow] == pytest.approx(PRIOR_BONE_LENGTH[r_elbow] * scale, abs=1e-12)
+
+    # one measured bone is no scale: the typical lengths
+    one_bone = np.full_like(child, np.nan)
+    one_bone[[l_elbow, l_shoulder]] = child[[l_elbow, l_shoulder]]
+    np.testing.assert_array_equal(own_bone_lengths(one_bone[None])[0, r_wrist], PRIOR_BONE_LENGTH[r_wrist])
+    assert own_bone_lengths(one_bone[None])[0, r_elbow] == pytest.approx(_bone(child, l_elbow), abs=1e-12)
+    assert own_bone_lengths(np.zeros((0, 16, 3))).shape == (0, 16)
+
+
+def test_a_child_joint_seen_by_one_camera_at_his_own_bone_length(rig, truth):
+    """A person of 0.6 an adult's size whose left wrist camera 2 alone sees, and his right wrist
+    no camera: 'own_limb' puts the left wrist at the adult forearm's length times the median
+    ratio of his measured bones from the elbow, near his own forearm's length; 'limb' at an
+    adult's forearm, which misplaces it along camera 2's rays."""
+    wrist, other = 11, 6
+    child = truth[0] + 0.6 * (truth - truth[0])
+    views = _without(_without(_render(rig, child), [wrist], {0, 1, 3, 4}), [other], set(range(5)))
+    own = sample_hypotheses(views, np.random.default_rng(0), SamplingConfig(hypotheses=32))
+    adult = sample_hypotheses(views, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='limb'))
+    forearm = _bone(child, wrist)
+    for hyp, off in ((own, (0.0, 0.03)), (adult, (0.06, 1.0))):
+        dist = np.linalg.norm(hyp[wrist] - child[INFERENCE_PARENT[wrist]], axis=1)
+        assert off[0] < np.median(np.abs(dist - forearm)) < off[1]
+    err_own = np.median(np.linalg.norm(own[wrist] - child[wrist], axis=1))
+    err_adult = np.median(np.linalg.norm(adult[wrist] - child[wrist], axis=1))
+    assert err_own < 0.06 and err_adult > 0.1, (err_own, err_adult)
 
 
 def test_none_without_a_joint_seen_twice(views):
@@ -293,9 +352,12 @@ def _numpy_sample_people(people, stack, rngs, config):
     origin = centres[single_view]
     direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]
     depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
-    if config.single_view_depth == 'limb':
-        parent, length = INFERENCE_PARENT[single_j], PRIOR_BONE_LENGTH[single_j]
-        anchor = _anchors(out, config)[single_p, np.maximum(parent, 0)]
+    if config.single_view_depth != 'centre':
+        anchors = _anchors(out, config)
+        lengths = (own_bone_lengths(anchors) if config.single_view_depth == 'own_limb'
+                   else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
+        parent, length = INFERENCE_PARENT[single_j], lengths[single_p, single_j]
+        anchor = anchors[single_p, np.maximum(parent, 0)]
         rel = anchor - origin
         mid = np.einsum('nmd,nd->nm', direction, rel)
         half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
@@ -309,7 +371,7 @@ def _numpy_sample_people(people, stack, rngs, config):
 
 
 @pytest.mark.parametrize('config', [SamplingConfig(), SamplingConfig(27, False, 'centre'), SamplingConfig(5),
-                                    SamplingConfig(40, False, 'limb')])
+                                    SamplingConfig(40, False, 'limb'), SamplingConfig(40, False, 'own_limb')])
 def test_sampling_is_numpys_arithmetic(views, config):
     """Several people at once, as the kernels take them: one seen by all five cameras, one with a
     wrist seen once (its elbow twice) and a wrist seen by none, one seen once only, one whose

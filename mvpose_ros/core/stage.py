@@ -41,7 +41,8 @@ SOLVER_PARAMETERS = {
     'hypotheses': 'hypotheses M per joint (paper: 64)',
     'bp_hypotheses': 'hypotheses kept per joint inside BP, best data term first (0: all M)',
     'single_view_depth': f'depth of a joint seen by one camera on its rays, from {", ".join(SINGLE_VIEW_DEPTHS)}: '
-                         'nearest the person\'s centre, or at the bone\'s typical length from the parent joint',
+                         'nearest the person\'s centre, or at the bone\'s typical adult length from the parent '
+                         'joint, or at the person\'s own (measured in the same frame)',
     'terms': f'CRF terms, from {", ".join(TERMS)}',
     'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
     'seed': 'seed of the hypothesis sampling',

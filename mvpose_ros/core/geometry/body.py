@@ -100,6 +100,9 @@ _PARENTS: dict[str, tuple[str, float]] = {
 INFERENCE_PARENT = np.array([INFERENCE_NAMES.index(_PARENTS[n][0]) if n in _PARENTS else -1
                              for n in INFERENCE_NAMES])  # (16,)
 PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n in INFERENCE_NAMES])  # (16,) m
+# How far a person's bones may be from the typical lengths above, as a factor: people of 0.8 to 2.3 m,
+# children too, and the spread of where detectors put joints
+PLAUSIBLE_BONE_SCALE = (0.45, 1.3)
 # The bones above as (joint, parent) pairs of inference joints (10, 2), and their typical lengths (10,) m
 LIMB_BONES = np.array([(j, p) for j, p in enumerate(INFERENCE_PARENT) if p >= 0])
 LIMB_LENGTHS = PRIOR_BONE_LENGTH[LIMB_BONES[:, 0]]

@@ -12,6 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
+from mvpose_ros.core.geometry.body import PLAUSIBLE_BONE_SCALE
 from mvpose_ros.core.geometry.camera import Camera, rig_project
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
@@ -28,9 +29,8 @@ class FactorConfig:
     exp(-||d||^2 / (2 scale^2)). temporal_scale holds for frames one nominal period apart
     (window.InferenceConfig.frame_rate) and grows with the real step (temporal_table). The
     collision sigmoid is 1 / (1 + exp((centre - d) / width)). A limb is plausible between
-    limb_range times its typical adult length (people of 0.8 to 2.3 m, children too, and the spread
-    of where detectors put joints), and falls off as a Gaussian of std limb_sigma beyond
-    (limb_table).
+    limb_range times its typical adult length (body.PLAUSIBLE_BONE_SCALE), and falls off as a
+    Gaussian of std limb_sigma beyond (limb_table).
     """
 
     temporal_form: str = 'laplace'
@@ -38,7 +38,7 @@ class FactorConfig:
     collision_centre: float = 0.15
     collision_width: float = 0.10
     limb_sigma: float = 0.05
-    limb_range: tuple[float, float] = (0.45, 1.3)
+    limb_range: tuple[float, float] = PLAUSIBLE_BONE_SCALE
 
     def __post_init__(self) -> None:
         if self.temporal_form not in TEMPORAL_FORMS:

@@ -15,25 +15,26 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.compiled import kernel
-from mvpose_ros.core.geometry.body import INFERENCE_PARENT, PRIOR_BONE_LENGTH
+from mvpose_ros.core.compiled import kernel, kernel_array
+from mvpose_ros.core.geometry.body import INFERENCE_MIRROR, INFERENCE_PARENT, PLAUSIBLE_BONE_SCALE, PRIOR_BONE_LENGTH
 from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
-SINGLE_VIEW_DEPTHS = ('centre', 'limb')
+SINGLE_VIEW_DEPTHS = ('centre', 'limb', 'own_limb')
 
 
 @dataclass(frozen=True)
 class SamplingConfig:
     """hypotheses: M per joint; peak_hypotheses: add one peak triangulation per camera subset;
     single_view_depth: where on its rays a joint seen by one camera is put, 'centre' (the depth
-    nearest the person's centre) or 'limb' (where the ray meets the sphere of the bone's typical
-    length around the parent joint, when the parent is seen twice; else as 'centre')."""
+    nearest the person's centre), 'limb' (where the ray meets the sphere of the bone's typical
+    adult length around the parent joint, when the parent is seen twice; else as 'centre') or
+    'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths)."""
 
     hypotheses: int = 64
     peak_hypotheses: bool = True
-    single_view_depth: str = 'limb'
+    single_view_depth: str = 'own_limb'
 
     def __post_init__(self) -> None:
         if self.hypotheses < 1:
@@ -66,8 +67,8 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
 
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
     closest to the person's centre (so it stays near the body instead of being dropped) or, with
-    single_view_depth 'limb', at its bone's length from its parent; a joint seen by none gets the
-    centre itself.
+    single_view_depth 'limb' / 'own_limb', at its bone's length from its parent; a joint seen by
+    none gets the centre itself.
     """
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
@@ -118,12 +119,40 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     # the joints seen by one camera or none, from the person's centre (mean hypothesis) and
     # the anchors of the joints seen twice
     located = np.empty(n_people, dtype=np.bool_)
-    _complete(out, n_seen, seeing, first_draw, dirs, centres, _anchors(out, config),
-              config.single_view_depth == 'limb', _PARENT, PRIOR_BONE_LENGTH, located)
+    anchors = _anchors(out, config)
+    lengths = (own_bone_lengths(anchors) if config.single_view_depth == 'own_limb'
+               else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
+    _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors,
+              config.single_view_depth != 'centre', _PARENT, kernel_array(lengths, np.float64), located)
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
 _PARENT = INFERENCE_PARENT.astype(np.int64)
+
+
+def own_bone_lengths(anchors: np.ndarray) -> np.ndarray:
+    """(P, J) metres: each person's length of the bone from each limb joint to its parent (NaN for
+    the joints without one), as far as this frame shows it. anchors: (P, J, 3) best point of each
+    joint seen by two or more cameras (NaN for the others).
+
+    A bone whose two ends are anchored is measured. A joint seen once is not, so its bone takes
+    the length of its left/right counterpart where that is measured, else the typical adult length
+    times the person's scale: the median ratio of their measured bones to the typical lengths,
+    with at least two measured (else 1). A measured bone beyond PLAUSIBLE_BONE_SCALE times its
+    typical length (a wrong anchor) is not used. Children and tall people thus keep their own
+    proportions, which the typical length alone misplaces by up to the bone's length along a ray.
+    """
+    has_parent = INFERENCE_PARENT >= 0
+    ratio = np.full(anchors.shape[:2], np.nan)  # (P, J) measured / typical length
+    bone = anchors[:, has_parent] - anchors[:, INFERENCE_PARENT[has_parent]]
+    ratio[:, has_parent] = np.linalg.norm(bone, axis=-1) / PRIOR_BONE_LENGTH[has_parent]
+    low, high = PLAUSIBLE_BONE_SCALE
+    ratio[~((ratio >= low) & (ratio <= high))] = np.nan
+    scale = np.ones(len(anchors))
+    measured = np.count_nonzero(~np.isnan(ratio), axis=1) >= 2
+    scale[measured] = np.nanmedian(ratio[measured], axis=1)
+    counterpart = ratio[:, INFERENCE_MIRROR]
+    return PRIOR_BONE_LENGTH * np.where(np.isnan(counterpart), scale[:, None], counterpart)
 
 
 @kernel('void(float64[:, :, ::1], int64[::1], int64[:, ::1], int64[:, :, ::1])')
@@ -199,12 +228,12 @@ def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
 
 
 @kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
-        'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[::1], boolean[::1])')
+        'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[:, ::1], boolean[::1])')
 def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, located):
     # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
     # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
     # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
-    # or, with limb, where they meet the sphere of the bone's length around the parent's
+    # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
     # anchor (the nearer of the two to the centre's depth; a ray missing it: its point nearest
     # the parent); a joint seen by none, the centre.
     n_joints, m = out.shape[1], out.shape[2]
@@ -234,7 +263,8 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
             o = centres[v]
             to_centre = centre - o
             rel = np.zeros(3)  # from the view's centre to the parent's anchor, for 'limb'
-            on_limb = limb and parents[j] >= 0 and not np.isnan(lengths[j])
+            length = lengths[p, j]
+            on_limb = limb and parents[j] >= 0 and not np.isnan(length)
             if on_limb:
                 rel = anchors[p, parents[j]] - o
                 on_limb = not np.isnan(rel[0])
@@ -245,7 +275,7 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
                 depth = (d[0] * to_centre[0] + d[2] * to_centre[2]) + d[1] * to_centre[1]
                 if on_limb:
                     mid = (d[0] * rel[0] + d[2] * rel[2]) + d[1] * rel[1]
-                    half = np.sqrt(max(mid * mid - rel_sq + lengths[j] * lengths[j], 0.0))
+                    half = np.sqrt(max(mid * mid - rel_sq + length * length, 0.0))
                     near, far = mid - half, mid + half
                     depth = near if np.abs(near - depth) <= np.abs(far - depth) else far
                 for c in range(3):
