@@ -2,11 +2,13 @@
 of a ground-truth pose, and the data term that scores them."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
-from mvpose_ros.core.geometry.body import INFERENCE_MIRROR, INFERENCE_PARENT, PRIOR_BONE_LENGTH
+from mvpose_ros.core.geometry.body import HANGING, INFERENCE_MIRROR, INFERENCE_PARENT, PRIOR_BONE_LENGTH, UP
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
@@ -278,6 +280,29 @@ def test_a_child_joint_seen_by_one_camera_at_his_own_bone_length(rig, truth):
     assert err_own < 0.06 and err_adult > 0.1, (err_own, err_adult)
 
 
+def test_a_leg_joint_seen_by_one_camera_hangs_below_its_parent(views, truth):
+    """hanging_legs: the right ankle, seen by camera 2 alone, takes the crossing of camera 2's rays
+    with the sphere around the knee that is lower along up, near the truth; the crossing nearer the
+    person's centre is the one above the knee; with up reversed, the other crossing."""
+    ankle = 0
+    sub = _without(views, [ankle], {0, 1, 3, 4})
+    config = SamplingConfig(hypotheses=32)
+    hanging = sample_hypotheses(sub, np.random.default_rng(0), config)
+    nearer_centre = sample_hypotheses(sub, np.random.default_rng(0), replace(config, hanging_legs=False))
+    upside_down = sample_people([sub], HeatmapStack.of([hm for _, hm in sub]), [np.random.default_rng(0)], config,
+                                up=-UP)[0]
+
+    def error(hyp):
+        return np.median(np.linalg.norm(hyp[ankle] - truth[ankle], axis=1))
+
+    assert error(hanging) < 0.2 and error(nearer_centre) > 0.4, (error(hanging), error(nearer_centre))
+    moved = np.linalg.norm(hanging[ankle] - upside_down[ankle], axis=1) > 1e-6
+    assert moved.mean() > 0.5
+    assert np.all(hanging[ankle][moved] @ UP < upside_down[ankle][moved] @ UP)
+    others = np.setdiff1d(np.arange(16), [ankle])
+    np.testing.assert_array_equal(hanging[others], nearer_centre[others])
+
+
 def test_none_without_a_joint_seen_twice(views):
     config = SamplingConfig(hypotheses=16)
     assert sample_hypotheses(views[:1], np.random.default_rng(0), config) is None
@@ -383,6 +408,9 @@ def _numpy_sample_people(people, stack, rngs, config):
         half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
         near, far = mid - half, mid + half
         limb = np.where(np.abs(near - depth) <= np.abs(far - depth), near, far)
+        rise = np.einsum('nmd,d->nm', direction, UP)
+        lower = np.where(rise * (near - far) <= 0.0, near, far)
+        limb = np.where((HANGING[single_j] & config.hanging_legs)[:, None], lower, limb)
         depth = np.where(((parent >= 0) & ~np.isnan(anchor[:, 0]) & ~np.isnan(length))[:, None], limb, depth)
     out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
     unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
@@ -391,19 +419,21 @@ def _numpy_sample_people(people, stack, rngs, config):
 
 
 @pytest.mark.parametrize('config', [SamplingConfig(), SamplingConfig(27, False, 'centre'), SamplingConfig(5),
-                                    SamplingConfig(40, False, 'limb'), SamplingConfig(40, False, 'own_limb')])
+                                    SamplingConfig(40, False, 'limb'), SamplingConfig(40, False, 'own_limb', False)])
 def test_sampling_is_numpys_arithmetic(views, config):
     """Several people at once, as the kernels take them: one seen by all five cameras, one with a
     wrist seen once (its elbow twice) and a wrist seen by none, one seen once only, one whose
-    joints no two of its cameras share (None), one with an elbow and its wrist seen once."""
+    joints no two of its cameras share (None), one with an elbow and its wrist seen once, one with
+    both ankles seen once."""
     wrist_seen_once = _without(_without(views, [6], {0, 1, 3, 4}), [11], set(range(5)))
     split = _without(_without(views[:2], list(range(8, 16)), {0}), list(range(8)), {1})
     limb_seen_once = _without(views[1:4], [10, 11], {1, 2})
-    people = [views, wrist_seen_once, views[2:3], split, limb_seen_once]
+    ankles_seen_once = _without(views, [0, 5], {1, 2, 3, 4})
+    people = [views, wrist_seen_once, views[2:3], split, limb_seen_once, ankles_seen_once]
     stack = HeatmapStack.of([hm for person in people for _, hm in person])
-    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(5)], config)
-    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(5)], config)
-    assert [h is None for h in out] == [False, False, True, True, False]
+    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(6)], config)
+    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(6)], config)
+    assert [h is None for h in out] == [False, False, True, True, False, False]
     for got, want in zip(out, expected):
         if want is not None:
             np.testing.assert_array_equal(got, want)

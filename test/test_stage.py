@@ -37,16 +37,18 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     assert set(default.to_params()) == set(ALL_PARAMETERS)
     specs = parameter_specs(ALL_PARAMETERS)
     assert [s.name for s in specs] == list(ALL_PARAMETERS)
-    assert all(s.low is not None or s.high is not None for s in specs if isinstance(s.default, (int, float)))
+    assert all(s.low is not None or s.high is not None for s in specs
+               if isinstance(s.default, (int, float)) and not isinstance(s.default, bool))
     assert {s.name for s in specs if s.live} == {'collision_centre', 'collision_width', 'max_gap', 'track_iou',
                                                  'match_distance', 'max_view_residual'}
     changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
                                        'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored',
-                                       'max_gap': 0.5, 'frame_rate': 30.0, 'max_view_residual': 0.25})
+                                       'max_gap': 0.5, 'frame_rate': 30.0, 'max_view_residual': 0.25,
+                                       'hanging_legs': False})
     assert changed.solver.inference.window is None and changed.solver.inference.bp_hypotheses is None
     assert changed.solver.inference.slide_iterations is None and changed.solver.sampling.hypotheses == 32
     assert changed.solver.inference.terms == ('data', 'temp') and changed.association.matching.max_distance == 0.2
-    assert changed.association.max_view_residual == 0.25
+    assert changed.association.max_view_residual == 0.25 and not changed.solver.sampling.hanging_legs
     assert (changed.solver.inference.max_gap, changed.solver.inference.frame_rate) == (0.5, 30.0)
     assert StageConfig.from_params(changed.to_params()) == changed
 

@@ -70,6 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--bp-hypotheses', type=int, default=d['bp_hypotheses'], help=SOLVER_PARAMETERS['bp_hypotheses'])
     p.add_argument('--single-view-depth', choices=SINGLE_VIEW_DEPTHS, default=d['single_view_depth'],
                    help=SOLVER_PARAMETERS['single_view_depth'])
+    p.add_argument('--hanging-legs', action=argparse.BooleanOptionalAction, default=d['hanging_legs'],
+                   help=SOLVER_PARAMETERS['hanging_legs'])
     p.add_argument('--head-model', choices=HEAD_MODELS, default=d['head_model'])
     p.add_argument('--heatmap-stride', type=float, default=OpenPoseDetectorConfig.stride,
                    help='heatmap cell size in pixels (the ROS graph config uses 8)')

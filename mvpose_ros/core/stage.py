@@ -43,6 +43,8 @@ SOLVER_PARAMETERS = {
     'single_view_depth': f'depth of a joint seen by one camera on its rays, from {", ".join(SINGLE_VIEW_DEPTHS)}: '
                          'nearest the person\'s centre, or at the bone\'s typical adult length from the parent '
                          'joint, or at the person\'s own (measured in the same frame)',
+    'hanging_legs': 'a knee or ankle seen by one camera where its ray meets the sphere of its bone around the '
+                    'parent joint lower along up (legs hang from hips and knees), not nearer the person\'s centre',
     'terms': f'CRF terms, from {", ".join(TERMS)}',
     'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
     'seed': 'seed of the hypothesis sampling',
@@ -96,7 +98,7 @@ class StageConfig:
                                     frame_rate=float(d['frame_rate']), max_gap=float(d['max_gap']),
                                     threads=int(d['threads']))
         sampling = replace(SamplingConfig(), hypotheses=int(d['hypotheses']),
-                           single_view_depth=str(d['single_view_depth']))
+                           single_view_depth=str(d['single_view_depth']), hanging_legs=bool(d['hanging_legs']))
         solver = SolverConfig(sampling=sampling,
                               inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
         association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
@@ -111,6 +113,7 @@ class StageConfig:
             'window': inference.window or 0, 'lag': inference.lag, 'iterations': inference.iterations,
             'slide_iterations': inference.slide_iterations or 0, 'hypotheses': solver.sampling.hypotheses,
             'bp_hypotheses': inference.bp_hypotheses or 0, 'single_view_depth': solver.sampling.single_view_depth,
+            'hanging_legs': solver.sampling.hanging_legs,
             'terms': list(inference.terms),
             'head_model': solver.head_model, 'seed': solver.seed,
             'collision_centre': inference.factors.collision_centre,

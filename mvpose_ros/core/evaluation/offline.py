@@ -75,7 +75,8 @@ def drop_frames(seq: Sequence2D, drop: FrameDrop) -> Sequence2D:
 def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
     """Association, hypotheses and data term of every frame, in order."""
     stage = Stage3D(seq.cameras, config)
-    out = [person_frames(seq.cameras, stage.associate(frame, people), frame, config.solver, stage.timer)
+    out = [person_frames(seq.cameras, stage.associate(frame, people), frame, config.solver, stage.timer,
+                         stage.solver.up)
            for frame, people in zip(seq.frames, seq.people)]
     return Prepared(list(seq.frames), out, stage.timer)
 

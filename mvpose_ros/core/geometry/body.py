@@ -100,6 +100,8 @@ _PARENTS: dict[str, tuple[str, float]] = {
 INFERENCE_PARENT = np.array([INFERENCE_NAMES.index(_PARENTS[n][0]) if n in _PARENTS else -1
                              for n in INFERENCE_NAMES])  # (16,)
 PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n in INFERENCE_NAMES])  # (16,) m
+# The joints below their parent in a standing, walking or sitting person: knees below hips, ankles below knees
+HANGING = np.isin(INFERENCE_NAMES, ('r_knee', 'l_knee', 'r_ankle', 'l_ankle'))  # (16,)
 # How far a person's bones may be from the typical lengths above, as a factor: people of 0.8 to 2.3 m,
 # children too, and the spread of where detectors put joints
 PLAUSIBLE_BONE_SCALE = (0.45, 1.3)

@@ -16,7 +16,8 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array
-from mvpose_ros.core.geometry.body import INFERENCE_MIRROR, INFERENCE_PARENT, PLAUSIBLE_BONE_SCALE, PRIOR_BONE_LENGTH
+from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_PARENT, PLAUSIBLE_BONE_SCALE,
+                                           PRIOR_BONE_LENGTH, UP)
 from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
@@ -30,11 +31,14 @@ class SamplingConfig:
     single_view_depth: where on its rays a joint seen by one camera is put, 'centre' (the depth
     nearest the person's centre), 'limb' (where the ray meets the sphere of the bone's typical
     adult length around the parent joint, when the parent is seen twice; else as 'centre') or
-    'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths)."""
+    'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths). Of the sphere's two
+    crossings the one nearer the person's centre is taken, but with hanging_legs the lower one
+    (along up) for a knee or ankle (body.HANGING)."""
 
     hypotheses: int = 64
     peak_hypotheses: bool = True
     single_view_depth: str = 'own_limb'
+    hanging_legs: bool = True
 
     def __post_init__(self) -> None:
         if self.hypotheses < 1:
@@ -59,11 +63,12 @@ View = tuple[Camera, PersonHeatmap]
 
 
 def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
-                  rngs: Sequence[np.random.Generator], config: SamplingConfig) -> list[np.ndarray | None]:
+                  rngs: Sequence[np.random.Generator], config: SamplingConfig,
+                  up: np.ndarray = UP) -> list[np.ndarray | None]:
     """Hypotheses (J, M, 3) in metres of each person of a frame (None when no joint of theirs is
     seen twice), all people batched. people[p]: person p's views (camera, heatmap); stack: every
     view's heatmap, person after person; rngs[p]: person p's generator (draws per view in order,
-    so a person's hypotheses do not depend on who else is in the frame).
+    so a person's hypotheses do not depend on who else is in the frame); up: (3,) the world's up.
 
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
     closest to the person's centre (so it stays near the body instead of being dropped) or, with
@@ -122,8 +127,9 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     anchors = _anchors(out, config)
     lengths = (own_bone_lengths(anchors) if config.single_view_depth == 'own_limb'
                else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
-    _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors,
-              config.single_view_depth != 'centre', _PARENT, kernel_array(lengths, np.float64), located)
+    _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, config.single_view_depth != 'centre',
+              _PARENT, kernel_array(lengths, np.float64), HANGING & config.hanging_legs, kernel_array(up, np.float64),
+              located)
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
@@ -230,14 +236,15 @@ def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
 
 
 @kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
-        'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[:, ::1], boolean[::1])')
-def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, located):
+        'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[:, ::1], boolean[::1], float64[::1], '
+        'boolean[::1])')
+def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, hanging, up, located):
     # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
     # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
     # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
     # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
-    # anchor (the nearer of the two to the centre's depth; a ray missing it: its point nearest
-    # the parent); a joint seen by none, the centre.
+    # anchor (the nearer of the two to the centre's depth, the lower along up for a hanging joint;
+    # a ray missing it: its point nearest the parent); a joint seen by none, the centre.
     n_joints, m = out.shape[1], out.shape[2]
     for p in range(out.shape[0]):
         total = np.zeros(3)
@@ -279,7 +286,12 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
                     mid = (d[0] * rel[0] + d[2] * rel[2]) + d[1] * rel[1]
                     half = np.sqrt(max(mid * mid - rel_sq + length * length, 0.0))
                     near, far = mid - half, mid + half
-                    depth = near if np.abs(near - depth) <= np.abs(far - depth) else far
+                    if hanging[j]:
+                        # their heights differ by (near - far) times the ray's rise along up
+                        rise = (d[0] * up[0] + d[2] * up[2]) + d[1] * up[1]
+                        depth = near if rise * (near - far) <= 0.0 else far
+                    else:
+                        depth = near if np.abs(near - depth) <= np.abs(far - depth) else far
                 for c in range(3):
                     out[p, j, k, c] = o[c] + depth * d[c]
 

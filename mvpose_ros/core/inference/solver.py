@@ -38,9 +38,10 @@ class SolverConfig:
 
 
 def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: int,
-                  config: SolverConfig, timer: StageTimer | None = None) -> list[PersonFrame]:
+                  config: SolverConfig, timer: StageTimer | None = None, up: np.ndarray = UP) -> list[PersonFrame]:
     """Hypotheses and data term of each person of a frame (person id, camera index -> 2D
-    person), all people batched; a person none of whose joints is seen twice is left out.
+    person), all people batched; a person none of whose joints is seen twice is left out. up:
+    (3,) the world's up (sampling's hanging legs).
 
     Each person's generator is seeded by (seed, frame, person id), so the same frame gives the
     same hypotheses whatever the window, the order of processing, the other people or the
@@ -50,7 +51,7 @@ def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: in
     views = [[(cameras[c], p.heatmap) for c, p in sorted(v.items())] for _, v in people]
     stack = HeatmapStack.of([hm for person in views for _, hm in person])
     rngs = [np.random.default_rng([config.seed, frame, pid]) for pid, _ in people]
-    hyps = sample_people(views, stack, rngs, config.sampling)
+    hyps = sample_people(views, stack, rngs, config.sampling, up)
     if timer:
         t0 = timer.add('sampling', t0)
     kept = [p for p, h in enumerate(hyps) if h is not None]
@@ -67,7 +68,8 @@ class Inference3D:
     data term, sliding-window BP and the head model. The bp_solver node runs this."""
 
     def __init__(self, cameras: Sequence[Camera], config: SolverConfig, up: np.ndarray = UP) -> None:
-        """up (3,): the world's up, a unit vector (the rig's; the head model's gravity)."""
+        """up (3,): the world's up, a unit vector (the rig's; the head model's and the hanging legs'
+        gravity)."""
         self.cameras = list(cameras)
         self.config = config
         self.up = np.asarray(up, dtype=np.float64)
@@ -77,7 +79,7 @@ class Inference3D:
     def push(self, frame: int, people: Sequence[Bundle], time_s: float | None = None) -> list[FrameResult]:
         """people: (person id, camera index -> 2D person) of this frame, taken at time_s seconds
         (None: frame / the nominal frame rate; see window.SlidingWindow.push); returns the frames due."""
-        frames = person_frames(self.cameras, people, frame, self.config, self.timer)
+        frames = person_frames(self.cameras, people, frame, self.config, self.timer, self.up)
         return [self._finish(r) for r in self.window.push(frame, frames, time_s)]
 
     def live(self) -> FrameResult | None:
