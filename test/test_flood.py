@@ -123,8 +123,10 @@ def test_a_flood_of_junk_leaves_real_frames_flowing_and_memory_bounded(domain, t
     assert run.outputs('before') == len(run.sent['before']) >= 3, run.log
     assert run.outputs('during') >= max(1, len(run.sent['during']) // 4), (run.sent, run.out, run.log)
     assert run.outputs('after') == len(run.sent['after']), run.log
-    # junk refused by cause, logged once each and counted
-    for cause in ('header declares 30000x30000, expected 1032x776', 'bytes, more than a 1032x776 image takes',
+    # junk refused by cause, logged once each and counted. Not the 8 MB message's: best effort, in
+    # fragments, every one of its copies can be lost under load (so it was once in five full-suite
+    # runs); test_detector_inputs checks its refusal
+    for cause in ('header declares 30000x30000, expected 1032x776',
                   "frame_id 'intruder' is not this camera", 'not a JPEG or PNG', 'jpeg header declares 16x16'):
         assert cause in run.log, cause
     assert 'Traceback' not in run.log
