@@ -12,8 +12,8 @@ from mvpose_ros.core.geometry.body import HANGING, INFERENCE_MIRROR, INFERENCE_P
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
-from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, camera_subsets, own_bone_lengths,
-                                                  sample_people, split_draws)
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, _tree_depth, camera_subsets,
+                                                  own_bone_lengths, sample_people, split_draws)
 
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
@@ -170,7 +170,9 @@ def test_joint_seen_by_one_camera_at_its_bone_length(views, truth):
     """single_view_depth 'limb': the l_wrist seen by camera 2 only lies on camera 2's rays where
     they meet the sphere of the forearm's prior length around the elbow's peak triangulation (or,
     a ray missing it, at its point nearest the elbow), and nearer the truth than at the centre's
-    depth; with its elbow seen once too, it falls back to the centre's depth."""
+    depth. With its elbow seen once too, each wrist hypothesis hangs from the elbow hypothesis of
+    the same index (itself on camera 2's rays at the upper arm's length from the shoulder); with
+    its elbow seen by none, at the centre's depth."""
     wrist, elbow = 11, 10  # this actor's left forearm is 27 cm long in the ground truth (the prior: 26)
     assert INFERENCE_PARENT[wrist] == elbow
     sub = _without(views, [wrist], {0, 1, 3, 4})
@@ -193,13 +195,19 @@ def test_joint_seen_by_one_camera_at_its_bone_length(views, truth):
     others = np.setdiff1d(np.arange(16), [wrist])
     np.testing.assert_array_equal(limb[others], centre[others])
 
-    no_parent = _without(sub, [elbow], {0, 1, 3, 4})
-    limb = sample_hypotheses(no_parent, np.random.default_rng(0),
-                             SamplingConfig(hypotheses=32, single_view_depth='limb'))
-    centre = sample_hypotheses(no_parent, np.random.default_rng(0),
-                               SamplingConfig(hypotheses=32, single_view_depth='centre'))
+    config = SamplingConfig(hypotheses=32, single_view_depth='limb')
+    arm_seen_once = _without(sub, [elbow], {0, 1, 3, 4})
+    limb = sample_hypotheses(arm_seen_once, np.random.default_rng(0), config)
+    dist = np.linalg.norm(limb[wrist] - limb[elbow], axis=1)
+    assert np.isclose(dist, PRIOR_BONE_LENGTH[wrist], atol=1e-9).mean() > 0.5
+    assert np.all(dist >= PRIOR_BONE_LENGTH[wrist] - 1e-9)  # on the sphere, or its ray's point nearest the elbow
+    upper_arm = np.linalg.norm(limb[elbow] - limb[INFERENCE_PARENT[elbow], 0], axis=1)
+    assert np.isclose(upper_arm, PRIOR_BONE_LENGTH[elbow], atol=1e-9).mean() > 0.5
+
+    no_elbow = _without(sub, [elbow], set(range(5)))
+    limb = sample_hypotheses(no_elbow, np.random.default_rng(0), config)
+    centre = sample_hypotheses(no_elbow, np.random.default_rng(0), replace(config, single_view_depth='centre'))
     np.testing.assert_allclose(limb[wrist], centre[wrist], atol=1e-12)
-    assert not np.allclose(limb[elbow], centre[elbow])  # the elbow's own parent is seen twice
 
 
 def _bone(points, joint):
@@ -397,22 +405,30 @@ def _numpy_sample_people(people, stack, rngs, config):
     origin = centres[single_view]
     direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]
     depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
-    if config.single_view_depth != 'centre':
+    if config.single_view_depth == 'centre':
+        out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
+    else:
         anchors = _anchors(out, config)
         lengths = (own_bone_lengths(anchors) if config.single_view_depth == 'own_limb'
                    else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
-        parent, length = INFERENCE_PARENT[single_j], lengths[single_p, single_j]
-        anchor = anchors[single_p, np.maximum(parent, 0)]
-        rel = anchor - origin
-        mid = np.einsum('nmd,nd->nm', direction, rel)
-        half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nd,nd->n', rel, rel)[:, None] + length[:, None] ** 2, 0.0))
-        near, far = mid - half, mid + half
-        limb = np.where(np.abs(near - depth) <= np.abs(far - depth), near, far)
-        rise = np.einsum('nmd,d->nm', direction, UP)
-        lower = np.where(rise * (near - far) <= 0.0, near, far)
-        limb = np.where((HANGING[single_j] & config.hanging_legs)[:, None], lower, limb)
-        depth = np.where(((parent >= 0) & ~np.isnan(anchor[:, 0]) & ~np.isnan(length))[:, None], limb, depth)
-    out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
+        level = np.array([_tree_depth(j) for j in single_j], dtype=int)
+        for lv in np.unique(level):  # parents first: a parent seen once is the anchor of each hypothesis
+            s = level == lv
+            sp, sj = single_p[s], single_j[s]
+            parent, length = INFERENCE_PARENT[sj], lengths[sp, sj]
+            anchor = np.repeat(anchors[sp, np.maximum(parent, 0)][:, None], m, axis=1)  # (n, m, 3)
+            chained = (parent >= 0) & np.isnan(anchor[:, 0, 0]) & (n_seen[sp, np.maximum(parent, 0)] == 1)
+            anchor[chained] = out[sp[chained], parent[chained]]
+            rel = anchor - origin[s][:, None]
+            mid = np.einsum('nmd,nmd->nm', direction[s], rel)
+            half = np.sqrt(np.maximum(mid ** 2 - np.einsum('nmd,nmd->nm', rel, rel) + length[:, None] ** 2, 0.0))
+            near, far = mid - half, mid + half
+            limb = np.where(np.abs(near - depth[s]) <= np.abs(far - depth[s]), near, far)
+            rise = np.einsum('nmd,d->nm', direction[s], UP)
+            lower = np.where(rise * (near - far) <= 0.0, near, far)
+            limb = np.where((HANGING[sj] & config.hanging_legs)[:, None], lower, limb)
+            on_limb = (parent >= 0) & ~np.isnan(anchor[:, 0, 0]) & ~np.isnan(length)
+            out[sp, sj] = origin[s][:, None] + np.where(on_limb[:, None], limb, depth[s])[..., None] * direction[s]
     unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
     out[unseen_p, unseen_j] = centre[unseen_p, None]
     return [out[p] if located[p] else None for p in range(n_people)]

@@ -30,7 +30,8 @@ class SamplingConfig:
     """hypotheses: M per joint; peak_hypotheses: add one peak triangulation per camera subset;
     single_view_depth: where on its rays a joint seen by one camera is put, 'centre' (the depth
     nearest the person's centre), 'limb' (where the ray meets the sphere of the bone's typical
-    adult length around the parent joint, when the parent is seen twice; else as 'centre') or
+    adult length around the parent joint: around its best point when it is seen twice, around its
+    hypothesis of the same index when it is seen once; else as 'centre') or
     'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths). Of the sphere's two
     crossings the one nearer the person's centre is taken, but with hanging_legs the lower one
     (along up) for a knee or ankle (body.HANGING)."""
@@ -129,11 +130,19 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
                else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
     _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, config.single_view_depth != 'centre',
               _PARENT, kernel_array(lengths, np.float64), HANGING & config.hanging_legs, kernel_array(up, np.float64),
-              located)
+              _PARENTS_FIRST, located)
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
 _PARENT = INFERENCE_PARENT.astype(np.int64)
+
+
+def _tree_depth(j: int) -> int:
+    return 0 if INFERENCE_PARENT[j] < 0 else 1 + _tree_depth(INFERENCE_PARENT[j])
+
+
+# joints parents first, so that a joint seen once can hang from a parent seen once
+_PARENTS_FIRST = np.array(sorted(range(len(INFERENCE_PARENT)), key=_tree_depth), dtype=np.int64)
 
 
 def own_bone_lengths(anchors: np.ndarray) -> np.ndarray:
@@ -237,14 +246,16 @@ def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
 
 @kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
         'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[:, ::1], boolean[::1], float64[::1], '
-        'boolean[::1])')
-def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, hanging, up, located):
+        'int64[::1], boolean[::1])')
+def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, hanging, up, order,
+              located):
     # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
     # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
     # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
     # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
-    # anchor (the nearer of the two to the centre's depth, the lower along up for a hanging joint;
-    # a ray missing it: its point nearest the parent); a joint seen by none, the centre.
+    # anchor, or around the parent's k-th point when the parent is seen once (order: parents first)
+    # (the nearer of the two to the centre's depth, the lower along up for a hanging joint; a ray
+    # missing it: its point nearest the parent); a joint seen by none, the centre.
     n_joints, m = out.shape[1], out.shape[2]
     for p in range(out.shape[0]):
         total = np.zeros(3)
@@ -262,7 +273,7 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
         if not located[p]:
             continue
         centre = total / count
-        for j in range(n_joints):
+        for j in order:
             if n_seen[p, j] == 0:
                 for k in range(m):
                     out[p, j, k] = centre
@@ -274,12 +285,17 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
             rel = np.zeros(3)  # from the view's centre to the parent's anchor, for 'limb'
             length = lengths[p, j]
             on_limb = limb and parents[j] >= 0 and not np.isnan(length)
+            chained = False
             if on_limb:
                 rel = anchors[p, parents[j]] - o
-                on_limb = not np.isnan(rel[0])
+                chained = np.isnan(rel[0]) and n_seen[p, parents[j]] == 1
+                on_limb = not np.isnan(rel[0]) or chained
             rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
             for k in range(m):
                 d = dirs[first_draw[v, j] + k]
+                if chained:
+                    rel = out[p, parents[j], k] - o
+                    rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
                 # dot products summed x, z, then y: numpy's einsum, for the same bits
                 depth = (d[0] * to_centre[0] + d[2] * to_centre[2]) + d[1] * to_centre[1]
                 if on_limb:
