@@ -65,6 +65,7 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     ({'max_gap': 0.0}, 'max_gap'),
     ({'frame_rate': -25.0}, 'frame_rate'),
     ({'max_view_residual': -0.1}, 'max_view_residual'),
+    ({'hanging_legs': 'false'}, 'hanging_legs'),
 ])
 def test_invalid_parameters_name_the_problem(params, problem):
     with pytest.raises(ValueError, match=problem):

@@ -89,6 +89,8 @@ class StageConfig:
         ASSOCIATION_PARAMETERS; others are ignored, absent ones keep their defaults). ValueError
         naming the problem when a value is invalid."""
         d = {**cls().to_params(), **{k: v for k, v in params.items() if k in ALL_PARAMETERS}}
+        if not isinstance(d['hanging_legs'], (bool, np.bool_)):  # bool('false') would be True
+            raise ValueError(f'hanging_legs must be true or false, got {d["hanging_legs"]!r}')
         window = int(d['window']) or None
         factors = replace(FactorConfig(), collision_centre=float(d['collision_centre']),
                           collision_width=float(d['collision_width']))
