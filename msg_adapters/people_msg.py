@@ -105,14 +105,17 @@ def _people_records(people: Sequence[Person2D], keys: Sequence[tuple[str, str]],
     if not np.isfinite(stack.values).all():
         bad = next(p for p, person in enumerate(people) if not np.isfinite(person.heatmap.cells).all())
         raise ValueError(f'{label} {bad} heatmap maps: non-finite values')
-    stack = stack.trimmed()
+    # cut to the evidence that is sent: a cell below half a quantisation step goes as 0, and a map
+    # cut by its float values would keep such rows, which a decoded map then loses when encoded again
+    quantised = quantise(stack.values.astype(np.float32, copy=False))
+    stack = HeatmapStack(quantised.astype(np.float32), stack.start, stack.shape, stack.origin, stack.stride).trimmed()
     with np.errstate(over='ignore'):  # an origin moved beyond float32 is named below
         origin = stack.origin.astype(np.float32).reshape(n, 2 * J)
     beyond = ~np.isfinite(origin).all(axis=1)
     if beyond.any():
         p = int(np.argmax(beyond))
         raise ValueError(f'{label} {p} heatmap origin: beyond float32 once its maps are cut to their evidence')
-    cells = quantise(stack.values.astype(np.float32, copy=False))
+    cells = stack.values.astype(np.uint8)
     sizes = (stack.shape[..., 0] * stack.shape[..., 1]).sum(axis=1)
     n_cells = int(sizes.max())
     if n_cells > UINT32_MAX:
