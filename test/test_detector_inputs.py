@@ -18,8 +18,8 @@ from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compr
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.heatmap_detector import (_camera_indices, decode_image, image_type, image_type_by_name,
-                                               in_namespace, rig_namespace)
+from mvpose_ros.nodes.heatmap_detector import _camera_indices, decode_image, in_namespace, rig_namespace
+from mvpose_ros.nodes.image_topics import image_type, image_type_by_name
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
 

@@ -114,6 +114,7 @@ from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog, short_cause
 from mvpose_ros.nodes.health import NodeHealth
+from mvpose_ros.nodes.image_topics import image_type
 from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, StartupError,
                                       camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
@@ -123,7 +124,6 @@ from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_L
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
 BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
-IMAGE_TYPES = {'sensor_msgs/msg/Image': Image, 'sensor_msgs/msg/CompressedImage': CompressedImage}
 TYPE_RECHECK = 2.0  # s between graph look-ups of an image topic typed by its name
 # Skeletons older than this, against a set's stamp, place no one (the whole image is searched):
 # a few sets at the onnx backend's 2-5 sets per second, a walk of about a metre.
@@ -131,22 +131,6 @@ TRACK_MAX_AGE_S = 1.0
 # parameter -> the detector configuration field it sets, applied live
 LIVE_DETECTOR = {'openpose': ('secondary_radius',),
                  'onnx': ('box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor')}
-
-
-def image_type_by_name(topic: str) -> type:
-    """image_transport's naming: '<base>/compressed' carries CompressedImage, anything else Image."""
-    return CompressedImage if topic.rstrip('/').endswith('/compressed') else Image
-
-
-def image_type(topic: str, graph: list[tuple[str, list[str]]]) -> tuple[type, str]:
-    """The message type of the image topic `topic` (resolved) and how it was decided: 'graph' when
-    the graph (get_topic_names_and_types()) lists it with exactly one image type, else 'name'."""
-    for name, types in graph:
-        if name == topic:
-            known = {IMAGE_TYPES[t] for t in types if t in IMAGE_TYPES}
-            if len(known) == 1:
-                return known.pop(), 'graph'
-    return image_type_by_name(topic), 'name'
 
 
 def rig_namespace(node_namespace: str, camera: str | None) -> str:
