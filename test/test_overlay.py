@@ -40,3 +40,34 @@ def test_the_ground_truth_is_drawn_in_its_colour_at_its_joints_and_not_over_the_
     top = camera.project(truth[13])
     label = drawn[int(top[1]) - 40:int(top[1]), int(top[0]):int(top[0]) + 80]
     assert (np.abs(label.astype(int) - GROUND_TRUTH_BGR).sum(axis=2) < 60).sum() > 30
+
+
+def test_an_image_drawn_at_half_its_size_gets_everything_at_half_the_pixels_and_labels():
+    """scale 0.5 (an image decoded shrunk): the skeleton's joints and the detections land at half
+    the camera's pixels; each person's label is written in its colour beside its head top."""
+    from mvpose_ros.core.types import Person2D
+    camera = look_at(np.array([0.0, -6.0, 1.0]), np.array([0.0, 0.0, 1.0]), np.array([0, 0, 1.0]), 800, 600)
+    estimate = _person(-0.8)
+    colour = tuple(int(255 * c) for c in reversed(person_colour(7)))
+    keypoints = np.zeros((16, 3))
+    keypoints[:14, :2] = camera.project(_person(0.8))
+    keypoints[:14, 2] = 1.0
+    half = np.zeros((300, 400, 3), np.uint8)
+    drawn = overlay(half, camera, [Person2D.from_keypoints(keypoints, 4.0, 6.0)], estimate[None], [person_colour(7)],
+                    scale=0.5, labels=['id 7'])
+    for uv in camera.project(estimate):
+        assert _near(drawn, 0.5 * uv, colour, 3)
+    for u, v in np.round(0.5 * keypoints[:14, :2]).astype(int):  # thin anti-aliased white lines
+        assert (drawn[v - 2:v + 3, u - 2:u + 3].min(axis=2) > 100).any()
+    top = 0.5 * camera.project(estimate[13])
+    label = drawn[int(top[1]) - 25:int(top[1]), int(top[0]):int(top[0]) + 50]
+    assert (np.abs(label.astype(int) - colour).sum(axis=2) < 60).sum() > 10
+
+
+def test_the_caption_is_white_on_a_darkened_band_at_the_top_left():
+    from mvpose_ros.core.evaluation.overlay import draw_caption
+    image = np.full((300, 400, 3), 150, np.uint8)
+    draw_caption(image, 'left  set 1.000 s  2 people')
+    band = image[:12, :150]
+    assert (band == 50).any() and (band == 255).all(axis=2).any()  # darkened, and white text on it
+    assert (image[100:] == 150).all()
