@@ -12,6 +12,7 @@ OPENPOSE = 'openpose'  # raw OpenPose output (PointCloud2 encoding A)
 IMAGE = 'image_raw'  # sensor_msgs/Image
 CAMERA_INFO = 'camera_info'
 PEOPLE2D = 'people2d'  # 2D people with heatmaps (encoding B)
+OVERLAY = 'overlay/compressed'  # sensor_msgs/CompressedImage: the image with its people and skeletons drawn
 
 # the rig's
 BUNDLES = 'people/bundles'  # associated people, every view (encoding C)

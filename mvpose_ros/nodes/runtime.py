@@ -47,6 +47,11 @@ RECORDED_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORDED_
 # depth, so that a node slower than its cameras drops old frames in the middleware rather than
 # queueing them (see camera_subscription: the parameter file can override it).
 CAMERA_QUEUE_DEPTH = 2
+
+# A viewer's inputs (the overlay node, the runner's overlay files): best effort, so that it connects
+# to reliable publishers too and never holds them up, a few messages deep.
+VIEWER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
 SPIN_ONCE_S = 0.2  # s an idle node waits per executor turn: how long a stop signal can take to act
 
 
