@@ -10,7 +10,8 @@ relative to `namespace` (default: the root). A node that dies is started again a
 RESPAWN_DELAY_S (launch has no cap on restarts); association keeps its person ids in `state_dir`.
 `tf:=true` also puts each camera's pose from the rig file on /tf_static (tf2_ros's
 static_transform_publisher, one per camera): leave it off where something else, a robot's URDF for
-example, already publishes those frames.
+example, already publishes those frames. `overlay:=true` also starts the overlay node: each
+camera's image with its people and skeletons drawn, on <camera>/overlay/compressed (rqt_image_view).
 """
 import os
 
@@ -48,6 +49,9 @@ def generate_launch_description():
     nodes = [Node(package=PACKAGE, executable=name, name=name, namespace=namespace,
                   parameters=[params, overrides[name]], output='screen', respawn=True, respawn_delay=RESPAWN_DELAY_S)
              for name in NODES]
+    overlay = Node(package=PACKAGE, executable='overlay', name='overlay', namespace=namespace,
+                   parameters=[params, {'rig': rig}], output='screen', respawn=True, respawn_delay=RESPAWN_DELAY_S,
+                   condition=IfCondition(LaunchConfiguration('overlay')))
     ros_home = os.environ.get('ROS_HOME', os.path.join(os.path.expanduser('~'), '.ros'))
     return LaunchDescription([
         DeclareLaunchArgument('rig', description='rig file (YAML): cameras, topics, extrinsics; see README'),
@@ -59,8 +63,11 @@ def generate_launch_description():
                               description="folder where association keeps the person ids' state (restarts)"),
         DeclareLaunchArgument('tf', default_value='false',
                               description="publish each camera's pose from the rig file on /tf_static"),
+        DeclareLaunchArgument('overlay', default_value='false',
+                              description="draw each camera's people and skeletons on <camera>/overlay/compressed"),
         SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(config, 'fastdds.xml')),
         SetEnvironmentVariable('RMW_FASTRTPS_USE_QOS_FROM_XML', '1'),
         *nodes,
+        overlay,
         OpaqueFunction(function=camera_frames, args=[namespace], condition=IfCondition(LaunchConfiguration('tf'))),
     ])

@@ -160,13 +160,41 @@ def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
                       'association': {'rig': 'rig', 'state_dir': 'state_dir'}, 'bp_solver': {'rig': 'rig'}}
     args = {ast.literal_eval(c.args[0]): {k.arg: ast.unparse(k.value) for k in c.keywords}
             for c in _calls(tree, 'DeclareLaunchArgument')}
-    assert set(args) == {'rig', 'params', 'namespace', 'state_dir', 'tf'} and 'default_value' not in args['rig']
+    assert set(args) == {'rig', 'params', 'namespace', 'state_dir', 'tf', 'overlay'}
+    assert 'default_value' not in args['rig']
     assert args['params']['default_value'] == "os.path.join(config, 'rig_template.yaml')"
     env, qos = _calls(tree, 'SetEnvironmentVariable')
     assert ast.unparse(env) == ("SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE', "
                                 "os.path.join(config, 'fastdds.xml'))")
     assert ast.unparse(qos) == "SetEnvironmentVariable('RMW_FASTRTPS_USE_QOS_FROM_XML', '1')"
     assert (REPO / 'config' / 'rig_template.yaml').is_file()
+
+
+def test_rig_launch_overlay_starts_the_overlay_node_when_asked(monkeypatch):
+    """overlay:=true (default false) adds the overlay node, as `mvpose-graph --rig --overlay` does:
+    in the graph's namespace, with the parameter file and the rig file, respawned."""
+    import importlib.util
+
+    from mvpose_ros.graph.config import RigRun, rig_graph_nodes
+    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
+    classes = _stub_launch_modules(monkeypatch)
+    spec = importlib.util.spec_from_file_location('rig_launch', RIG_LAUNCH)
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    actions = launch_file.generate_launch_description().args[0]
+    (argument,) = [a for a in actions if isinstance(a, classes['DeclareLaunchArgument']) and a.args[0] == 'overlay']
+    assert argument.kwargs['default_value'] == 'false'
+    (node,) = [a for a in actions if isinstance(a, classes['Node']) and a.kwargs['executable'] == 'overlay']
+    kw = node.kwargs
+    assert kw['package'] == 'mvpose_ros' and kw['name'] == 'overlay' and kw['namespace'].args == ('namespace',)
+    params, rig = kw['parameters']
+    assert params.args == ('params',) and list(rig) == ['rig'] and rig['rig'].args == ('rig',)
+    assert kw['respawn'] is True and kw['respawn_delay'] == RESPAWN_DELAY_S
+    assert isinstance(kw['condition'], classes['IfCondition']) and kw['condition'].args[0].args == ('overlay',)
+    plain = [s.executable for s in rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0))]
+    drawn = rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0), overlay=True)
+    assert [s.executable for s in drawn] == [*plain[:-1], 'overlay', 'bag_player']
+    assert drawn[-2].parameters == {'rig': 'r', 'max_rate': 0.0}  # lockstep: every set
 
 
 def test_rig_template_sections_match_the_rig_graph_and_leave_command_line_values_out():

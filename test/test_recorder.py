@@ -79,3 +79,41 @@ def test_accounted_follows_the_outputs_and_drops_that_come(monkeypatch):
             node.destroy_node()
         finally:
             rclpy.shutdown(context=context)
+
+
+def test_overlay_images_are_written_per_camera_and_their_readers_count_as_outputs(tmp_path, monkeypatch):
+    """overlay_files: each overlay topic's images go to its folder as <stamp ns>.jpg, byte for byte;
+    until the overlay node's writers have matched, those readers keep the run from playing."""
+    import numpy as np
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import Header
+
+    from msg_adapters.image_msg import image_to_compressed_msg
+    from msg_adapters.stamp import stamp_of_ns
+    from mvpose_ros.graph.recorder import SkeletonRecorder
+    from mvpose_ros.nodes.runtime import VIEWER_QOS
+    from ros_harness import spin_until
+    with ros_domain(monkeypatch, profile=None):
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        try:
+            node = SkeletonRecorder(context=context, overlay_files={'left/overlay/compressed': tmp_path / 'left'})
+            assert '/left/overlay/compressed' in node.unmatched_outputs() and node.overlay_stamps == set()
+            writer = rclpy.create_node('overlay_writer', context=context)
+            pub = writer.create_publisher(CompressedImage, 'left/overlay/compressed', VIEWER_QOS)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            executor.add_node(writer)
+            assert spin_until(executor, lambda: node.unmatched_outputs() == ['/skeletons']
+                              and pub.get_subscription_count() > 0)
+            msg = image_to_compressed_msg(np.full((8, 8, 3), 200, np.uint8), Header(stamp=stamp_of_ns(1_500_000_000)))
+            assert spin_until(executor, lambda: pub.publish(msg) or node.overlays > 0)
+            assert (tmp_path / 'left' / '1500000000.jpg').read_bytes() == bytes(msg.data)
+            assert node.overlay_stamps == {1_500_000_000} and node.last_overlay > 0
+            assert SkeletonRecorder(context=context, name='plain').overlay_stamps is None
+            writer.destroy_node()
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)

@@ -116,6 +116,7 @@ def rig_file(tmp_path) -> Path:
     ([], 'one of --config'),
     (['--config', 'config/shelf.yaml', '--lockstep'], '--lockstep needs --rig'),
     (['--config', 'config/shelf.yaml', '--qos', 'sensor'], '--qos needs --rig'),
+    (['--config', 'config/shelf.yaml', '--overlay', 'out'], '--overlay needs --rig'),
     (['--rig', 'RIG', '--bag', 'B', '--lockstep', '--rate', '2'], 'exclude each other'),
     (['--rig', 'RIG', '--bag', 'B', '--loops', '0'], '--loops must be >= 1'),
     (['--rig', 'RIG', '--bag', 'B', '--ground-truth', 'shelf'], '--frame'),

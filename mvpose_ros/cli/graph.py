@@ -73,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--ground-truth', choices=('shelf',),
                    help="--rig: score every set against this dataset's actorsGT frame --frame")
     p.add_argument('--frame', type=int, help='--ground-truth: the actorsGT frame every set of the bag shows')
+    p.add_argument('--overlay', type=Path, metavar='DIR',
+                   help='--rig: also run the overlay node and write its images, DIR/<camera>/<stamp ns>.jpg (with '
+                        '--lockstep every set, else at most its max_rate per camera)')
     p.add_argument('--data-root', help='folder holding data/ and models/ (default: $MVPOSE_DATA_ROOT or ../shared)')
     p.add_argument('--bag', help='bag to play (default: mvpose_graph.bag)')
     p.add_argument('--rate', type=float,
@@ -113,7 +116,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
     if args.rig is None:
         if args.config is None:
             raise ValueError('one of --config (a graph parameter file) or --rig (a rig file) is required')
-        for name in ('lockstep', 'qos', 'ground_truth', 'frame'):
+        for name in ('lockstep', 'qos', 'ground_truth', 'frame', 'overlay'):
             if getattr(args, name):
                 raise ValueError(f'--{name.replace("_", "-")} needs --rig')
         return

@@ -252,10 +252,12 @@ def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> tuple
     return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
 
 
-def rig_graph_nodes(run: RigRun, data_root: str | None = None, start_topic: str = '') -> list[NodeSpec]:
+def rig_graph_nodes(run: RigRun, data_root: str | None = None, start_topic: str = '',
+                    overlay: bool = False) -> list[NodeSpec]:
     """The graph of a recorded rig in start order: ONE heatmap_detector for the whole rig (camera
-    'all'), association, bp_solver (each with the rig), then bag_player (lockstep: sets, rate 0,
-    one set in flight acknowledged on people/bundles; else `rate`, every message at its time)."""
+    'all'), association, bp_solver (each with the rig), with `overlay` the overlay node (in
+    lockstep drawing every set), then bag_player (lockstep: sets, rate 0, one set in flight
+    acknowledged on people/bundles; else `rate`, every message at its time)."""
     data = {'data_root': data_root} if data_root is not None else {}
     rig: dict[str, bool | int | float | str] = {'rig': run.rig, **data}
     waiting = {'waiting_sets': LOCKSTEP_WAITING_SETS} if run.lockstep else {}
@@ -269,9 +271,11 @@ def rig_graph_nodes(run: RigRun, data_root: str | None = None, start_topic: str 
         player |= {'rate': float(run.rate), 'sets': False}
     if start_topic:
         player['start_topic'] = start_topic
+    drawing = [NodeSpec('overlay', '', {**rig, **({'max_rate': 0.0} if run.lockstep else {})})] if overlay else []
     return [NodeSpec('heatmap_detector', '', {'camera': 'all', **rig, **waiting}),
             NodeSpec('association', '', dict(rig)),
             NodeSpec('bp_solver', '', dict(rig)),
+            *drawing,
             NodeSpec('bag_player', '', player)]
 
 

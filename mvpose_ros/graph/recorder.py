@@ -47,7 +47,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CameraInfo, PointCloud2
+from sensor_msgs.msg import CameraInfo, CompressedImage, PointCloud2
 from std_msgs.msg import Empty, Header
 from visualization_msgs.msg import MarkerArray
 
@@ -64,7 +64,7 @@ from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
 from mvpose_ros.nodes.bag_player import START_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
-from mvpose_ros.nodes.runtime import DATA_QOS
+from mvpose_ros.nodes.runtime import DATA_QOS, VIEWER_QOS
 from mvpose_ros.topics import (BUNDLES, CAMERA_INFO, DIAGNOSTICS, MARKERS, OPENPOSE, PEOPLE2D, SKELETONS,
                                SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic)
 
@@ -98,12 +98,17 @@ class SkeletonRecorder(Node):
     def __init__(self, name: str = 'skeleton_recorder', context: Context | None = None,
                  frame_rate: float = FRAME_RATE, stream: TextIO | None = None, measure_cameras: int = 0,
                  timing_topics: Sequence[str] = (TIMING_TOPIC,), timing_qos: QoSProfile = DATA_QOS,
-                 people_topics: Sequence[str] = (), watch_topics: Sequence[str] = ()) -> None:
+                 people_topics: Sequence[str] = (), watch_topics: Sequence[str] = (),
+                 overlay_files: Mapping[str, Path] | None = None) -> None:
         """timing_topics: camera_info topics a stamp's latency is timed from (read with timing_qos:
         best effort for a player or driver publishing so); people_topics: people2d topics whose
         stamps are kept in `people_stamps` (by the topic as given); watch_topics: topics (as given,
         PointCloud2: the nodes' outputs) that `arm` can watch, each read from its first `arm` on
-        (reading every node's output all along cost the runner 8% of a core at 25 Hz)."""
+        (reading every node's output all along cost the runner 8% of a core at 25 Hz);
+        overlay_files: overlay topic (CompressedImage, the overlay node's) -> folder each of its
+        images is written to as <stamp ns>.jpg (their stamps in `overlay_stamps`, None without
+        overlay_files; the monotonic s of the last in `last_overlay`); the run waits for these
+        readers to match as for the skeletons'."""
         super().__init__(name, context=context, start_parameter_services=False)
         self.frame_rate = frame_rate
         self.stream = stream
@@ -128,6 +133,13 @@ class SkeletonRecorder(Node):
                                      raw=True, event_callbacks=NO_EVENTS)
         self._outputs = [self.create_subscription(PointCloud2, OUTPUT_TOPIC, self._on_skeletons, DATA_QOS,
                                                   raw=True)]
+        self.overlays = 0
+        self.overlay_stamps: set[int] | None = set() if overlay_files else None
+        self.last_overlay = 0.0
+        for topic, folder in (overlay_files or {}).items():
+            self._outputs.append(self.create_subscription(
+                CompressedImage, topic, lambda msg, d=Path(folder): self._on_overlay(d, msg), VIEWER_QOS,
+                event_callbacks=NO_EVENTS))
         # timed when there, not waited for: only bp_solver publishes it
         self.create_subscription(PointCloud2, SKELETONS_LIVE, self._on_live, DATA_QOS, raw=True,
                                  event_callbacks=NO_EVENTS)
@@ -170,6 +182,14 @@ class SkeletonRecorder(Node):
         else:
             stamp = header_stamp_ns(cdr)
         self.sizes[topic].append((stamp, len(cdr)))
+
+    def _on_overlay(self, folder: Path, msg: CompressedImage) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        stamp = stamp_ns(msg.header.stamp)
+        (folder / f'{stamp}.jpg').write_bytes(bytes(msg.data))
+        self.overlays += 1
+        self.overlay_stamps.add(stamp)
+        self.last_overlay = time.monotonic()
 
     def _on_live(self, cdr: bytes, info: Any) -> None:
         self.live_at.setdefault(header_stamp_ns(cdr), info['received_timestamp'])

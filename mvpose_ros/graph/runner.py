@@ -44,6 +44,8 @@ from mvpose_ros.graph.respawn import Restart, Respawner
 PLAYER = 'bag_player'
 SPIN_S = 0.05
 DRAIN_S = 0.25  # at most this long for camera infos and live estimates still queued once every output has come
+OVERLAY_DRAIN_S = 1.0  # at most this long for the overlays of the last set (drawn after its live estimate)
+OVERLAY_QUIET_S = 0.2  # the last set's overlays are all in once none came for this long after its first
 # Node start-up (imports, calibration, models, DDS discovery, the player's wait for readers).
 STARTUP_TIMEOUT_S = 60.0
 LOG_TAIL = 15
@@ -187,6 +189,12 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     deadline = time.monotonic() + DRAIN_S
     solved = wanted - node.dropped
     while not (wanted <= node.info_at.keys() and solved <= node.live_at.keys()) and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=SPIN_S)
+    # A set's earliest image has the set's stamp: the last set's overlays come from when that one
+    # does until they stop.
+    deadline = time.monotonic() + OVERLAY_DRAIN_S
+    while node.overlay_stamps is not None and solved and time.monotonic() < deadline and (
+            max(solved) not in node.overlay_stamps or time.monotonic() - node.last_overlay < OVERLAY_QUIET_S):
         executor.spin_once(timeout_sec=SPIN_S)
     return False
 

@@ -39,7 +39,7 @@ from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
-from mvpose_ros.topics import PEOPLE2D, camera_topic
+from mvpose_ros.topics import OVERLAY, PEOPLE2D, camera_topic
 
 PROG = 'mvpose-graph'
 RECORDER_NAME = 'mvpose_graph'
@@ -225,7 +225,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     """mvpose-graph --rig: the graph on a recorded rig; returns the exit code."""
     rig, run, settings, files, sets = rig_run_plan(args)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
-    nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC)
+    nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC, overlay=args.overlay is not None)
     _warn_unknown(files[1:], nodes, err)
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
@@ -235,8 +235,9 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
     files = [*files, write_overrides(nodes, log_dir / 'runner_overrides.yaml')]
     _environment(files[0].parent, args.domain_id)
+    overlays = {camera_topic(c.name, OVERLAY): args.overlay / c.name for c in rig.cameras} if args.overlay else {}
     with _recording(timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
-                    people_topics=people, watch_topics=_watched(watch)) as (node, executor):
+                    people_topics=people, watch_topics=_watched(watch), overlay_files=overlays) as (node, executor):
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
         print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
               f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
@@ -261,6 +262,8 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     partial.write_text(''.join(line + '\n' for line in lines), encoding='utf-8')
     os.replace(partial, predictions)
     print(f'wrote {len(lines)} sets to {predictions}', file=out)
+    if overlays:
+        print(f'wrote {node.overlays} overlay images to {args.overlay}', file=out)
     if outcome.interrupted is not None:
         print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped', file=err)
         return 128 + outcome.interrupted
