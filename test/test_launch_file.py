@@ -170,33 +170,6 @@ def test_rig_launch_starts_one_set_mode_detector_association_and_bp_solver():
     assert (REPO / 'config' / 'rig_template.yaml').is_file()
 
 
-def test_rig_launch_overlay_starts_the_overlay_node_when_asked(monkeypatch):
-    """overlay:=true (default false) adds the overlay node, as `mvpose-graph --rig --overlay` does:
-    in the graph's namespace, with the parameter file and the rig file, respawned."""
-    import importlib.util
-
-    from mvpose_ros.graph.config import RigRun, rig_graph_nodes
-    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
-    classes = _stub_launch_modules(monkeypatch)
-    spec = importlib.util.spec_from_file_location('rig_launch', RIG_LAUNCH)
-    launch_file = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch_file)
-    actions = launch_file.generate_launch_description().args[0]
-    (argument,) = [a for a in actions if isinstance(a, classes['DeclareLaunchArgument']) and a.args[0] == 'overlay']
-    assert argument.kwargs['default_value'] == 'false'
-    (node,) = [a for a in actions if isinstance(a, classes['Node']) and a.kwargs['executable'] == 'overlay']
-    kw = node.kwargs
-    assert kw['package'] == 'mvpose_ros' and kw['name'] == 'overlay' and kw['namespace'].args == ('namespace',)
-    params, rig = kw['parameters']
-    assert params.args == ('params',) and list(rig) == ['rig'] and rig['rig'].args == ('rig',)
-    assert kw['respawn'] is True and kw['respawn_delay'] == RESPAWN_DELAY_S
-    assert isinstance(kw['condition'], classes['IfCondition']) and kw['condition'].args[0].args == ('overlay',)
-    plain = [s.executable for s in rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0))]
-    drawn = rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0), overlay=True)
-    assert [s.executable for s in drawn] == [*plain[:-1], 'overlay', 'bag_player']
-    assert drawn[-2].parameters == {'rig': 'r', 'max_rate': 0.0}  # lockstep: every set
-
-
 def test_rig_template_sections_match_the_rig_graph_and_leave_command_line_values_out():
     from mvpose_ros.graph.config import load_params
     params = load_params(REPO / 'config' / 'rig_template.yaml')
@@ -240,21 +213,25 @@ def _stub_launch_modules(monkeypatch) -> dict[str, type]:
     return classes
 
 
-def test_rig_launch_tf_starts_one_static_transform_publisher_per_camera_when_asked(monkeypatch):
-    """tf:=true (default false) runs the launch file's camera_frames: the rig file, read when the
-    launch runs, gives one static_transform_publisher per camera, in the graph's namespace and
-    respawned like the graph's nodes, with static_tf's arguments."""
+def _rig_launch_actions(monkeypatch) -> tuple[dict[str, type], list]:
+    """The stub classes and the actions of rig.launch.py's launch description, run against them."""
     import importlib.util
-
-    from mvpose_ros.core.evaluation.datasets import data_root
-    from mvpose_ros.core.geometry.rig import load_rig_file
-    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
-    from mvpose_ros.graph.static_tf import static_transform_nodes
     classes = _stub_launch_modules(monkeypatch)
     spec = importlib.util.spec_from_file_location('rig_launch', RIG_LAUNCH)
     launch_file = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(launch_file)
-    actions = launch_file.generate_launch_description().args[0]
+    return classes, launch_file.generate_launch_description().args[0]
+
+
+def test_rig_launch_tf_starts_one_static_transform_publisher_per_camera_when_asked(monkeypatch):
+    """tf:=true (default false) runs the launch file's camera_frames: the rig file, read when the
+    launch runs, gives one static_transform_publisher per camera, in the graph's namespace and
+    respawned like the graph's nodes, with static_tf's arguments."""
+    from mvpose_ros.core.evaluation.datasets import data_root
+    from mvpose_ros.core.geometry.rig import load_rig_file
+    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
+    from mvpose_ros.graph.static_tf import static_transform_nodes
+    classes, actions = _rig_launch_actions(monkeypatch)
     (tf,) = [a for a in actions if isinstance(a, classes['DeclareLaunchArgument']) and a.args[0] == 'tf']
     assert tf.kwargs['default_value'] == 'false'
     (frames,) = [a for a in actions if isinstance(a, classes['OpaqueFunction'])]
@@ -270,3 +247,24 @@ def test_rig_launch_tf_starts_one_static_transform_publisher_per_camera_when_ask
     for node, want in zip(nodes, expected):
         assert node.kwargs == {**want, 'namespace': namespace, 'output': 'screen', 'respawn': True,
                                'respawn_delay': RESPAWN_DELAY_S}
+
+
+def test_rig_launch_overlay_starts_the_overlay_node_when_asked(monkeypatch):
+    """overlay:=true (default false) adds the overlay node, as `mvpose-graph --rig --overlay` does:
+    in the graph's namespace, with the parameter file and the rig file, respawned."""
+    from mvpose_ros.graph.config import RigRun, rig_graph_nodes
+    from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
+    classes, actions = _rig_launch_actions(monkeypatch)
+    (argument,) = [a for a in actions if isinstance(a, classes['DeclareLaunchArgument']) and a.args[0] == 'overlay']
+    assert argument.kwargs['default_value'] == 'false'
+    (node,) = [a for a in actions if isinstance(a, classes['Node']) and a.kwargs['executable'] == 'overlay']
+    kw = node.kwargs
+    assert kw['package'] == 'mvpose_ros' and kw['name'] == 'overlay' and kw['namespace'].args == ('namespace',)
+    params, rig = kw['parameters']
+    assert params.args == ('params',) and list(rig) == ['rig'] and rig['rig'].args == ('rig',)
+    assert kw['respawn'] is True and kw['respawn_delay'] == RESPAWN_DELAY_S
+    assert isinstance(kw['condition'], classes['IfCondition']) and kw['condition'].args[0].args == ('overlay',)
+    plain = [s.executable for s in rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0))]
+    drawn = rig_graph_nodes(RigRun('r', 'b', True, 0.0, 'sensor', 0.02, 0.5, 5.0), overlay=True)
+    assert [s.executable for s in drawn] == [*plain[:-1], 'overlay', 'bag_player']
+    assert drawn[-2].parameters == {'rig': 'r', 'max_rate': 0.0}  # lockstep: every set
