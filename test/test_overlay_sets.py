@@ -79,3 +79,25 @@ def test_the_image_the_people_were_detected_in_wins_over_an_earlier_one_in_the_w
     images, people = _buffers([[0], [2 * MS, 9 * MS]], [[0], [9 * MS]])
     (_, member) = set_members(0, 20 * MS, images, people)
     assert member.stamp_ns == 9 * MS and member.image == f'cam1@{9 * MS}'
+
+
+def test_the_members_are_those_the_synchroniser_put_in_each_set():
+    """Five cameras at 25 Hz, offsets up to +-8 ms, 1 ms of jitter, dropped frames: every set that
+    core.association.approximate_sync releases (as the association does, at half a frame period)
+    gets from set_members exactly its members' stamps, people and images."""
+    import numpy as np
+
+    from mvpose_ros.core.association.approximate_sync import ApproximateSync, default_max_skew
+    rng = np.random.default_rng(3)
+    max_skew = default_max_skew(25.0)
+    offsets = rng.uniform(-8, 8, 5) * MS
+    stamps = [[int(1e9 + k * 40 * MS + o + rng.uniform(-1, 1) * MS) for k in range(60) if rng.random() > 0.1]
+              for o in offsets]
+    sync = ApproximateSync(5, 0.5, max_skew)
+    arrivals = sorted((t, c) for c, ts in enumerate(stamps) for t in ts)
+    released = [s for t, c in arrivals for s in sync.add(t, c, t, t / 1e9)] + sync.flush()
+    images, people = _buffers(stamps, stamps)
+    assert len(released) > 50
+    for s in released:
+        members = set_members(s.stamp_ns, round(max_skew * 1e9), images, people)
+        assert {m.camera: m.stamp_ns for m in members} == {c: t for c, t in enumerate(s.stamps) if t is not None}
