@@ -101,3 +101,11 @@ def test_the_members_are_those_the_synchroniser_put_in_each_set():
     for s in released:
         members = set_members(s.stamp_ns, round(max_skew * 1e9), images, people)
         assert {m.camera: m.stamp_ns for m in members} == {c: t for c, t in enumerate(s.stamps) if t is not None}
+
+
+def test_dropped_sets_do_not_take_the_place_of_sets_with_skeletons():
+    from mvpose_ros.core.overlay_sets import DROPPED_PERIOD_S, due
+    assert due(10.6, 10.0, 0.5, dropped=False) and not due(10.4, 10.0, 0.5, dropped=False)
+    assert not due(10.6, 10.0, 0.5, dropped=True) and due(10.0 + DROPPED_PERIOD_S, 10.0, 0.5, dropped=True)
+    assert due(10.0, 10.0, 0.0, dropped=True) and due(10.0, 10.0, 0.0, dropped=False)  # max_rate 0: every set
+    assert due(14.0, 10.0, 3.0, dropped=True) and not due(12.5, 10.0, 3.0, dropped=True)  # the longer wait wins

@@ -14,6 +14,11 @@ from typing import Any, Generic, TypeVar
 
 T = TypeVar('T')
 
+# A set without skeletons (dropped) is drawn only once a camera has had no image for this long: in
+# an overloaded graph most sets are dropped, and their images would take the place of the few
+# with skeletons.
+DROPPED_PERIOD_S = 1.0
+
 
 class RecentByStamp(Generic[T]):
     """Items keyed by stamp (integer ns), kept while within `keep_ns` of the newest stamp and, with
@@ -98,3 +103,11 @@ def set_members(set_stamp_ns: int, max_skew_ns: int, images: list[RecentByStamp]
         if image is not None:
             members.append(Member(camera, image[0], image[1], camera_people.get(image[0])))
     return members
+
+
+def due(now: float, last_drawn: float, period: float, dropped: bool) -> bool:
+    """Whether a camera whose last image was drawn at last_drawn (s) draws a set now: one with
+    skeletons once `period` s have passed (0: every set), a dropped one once
+    max(period, DROPPED_PERIOD_S) have (every set too when period is 0)."""
+    wait = max(period, DROPPED_PERIOD_S) if dropped and period > 0 else period
+    return now - last_drawn >= wait

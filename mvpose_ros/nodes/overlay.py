@@ -13,9 +13,11 @@ Which image goes with a set: its 2D people's stamp, in [set stamp, set stamp + m
 (core.overlay_sets). Images wait for their set's skeletons for at most `keep` s and
 `max_image_mib` MiB per camera (raw images are large): what falls out, or arrives after its
 set, is not drawn (counted in the diagnostics). At most `max_rate` images per second per camera
-are drawn, each decoded at 1/`reduce` of its size. It still receives every image: at 5 cameras
-x 25 Hz about 15% of a core (README, "Your own cameras"). Every input is best effort, so this node
-never slows the graph's reliable publishers down, and a lost message only costs a picture.
+are drawn, each decoded at 1/`reduce` of its size; a dropped set only when a camera has had no
+image for a second (core.overlay_sets.due: under overload most sets are dropped). It still
+receives every image: at 5 cameras x 25 Hz about 15% of a core (README, "Your own cameras").
+Every input is best effort, so this node never slows the graph's reliable publishers down, and a
+lost message only costs a picture.
 
 Diagnostics: ms per image drawn; sets seen, images drawn, and cameras not drawn by cause ('no image
 held': no image of the camera in the set's window: not in the set, never came, or fallen out).
@@ -48,7 +50,7 @@ from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
-from mvpose_ros.core.overlay_sets import Member, RecentByStamp, set_members
+from mvpose_ros.core.overlay_sets import Member, RecentByStamp, due, set_members
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.nodes.health import NodeHealth
@@ -148,7 +150,7 @@ class OverlayNode(Node):
         cameras = self._intrinsics.known
         drawn = 0
         for c in self._drawn:
-            if start - self._last_drawn[c] < self._period:
+            if not due(start, self._last_drawn[c], self._period, ids is None):
                 continue
             member = members.get(c)
             if member is None or cameras[c] is None:
