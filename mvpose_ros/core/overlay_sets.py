@@ -78,7 +78,8 @@ class RecentByStamp(Generic[T]):
 @dataclass(frozen=True)
 class Member:
     """A camera's part of a skeleton set: its image's stamp, the image, and the 2D people detected
-    in it (None when they are no longer, or not yet, held)."""
+    in it as they are held (the overlay node holds the people2d message; None when it is no longer,
+    or not yet, held)."""
 
     camera: int
     stamp_ns: int
@@ -96,8 +97,9 @@ def set_members(set_stamp_ns: int, max_skew_ns: int, images: list[RecentByStamp]
     members = []
     for camera, (camera_images, camera_people) in enumerate(zip(images, people)):
         found = camera_people.first_in(set_stamp_ns, high)
-        if found is not None and camera_images.get(found[0]) is not None:
-            members.append(Member(camera, found[0], camera_images.get(found[0]), found[1]))
+        image_of_people = None if found is None else camera_images.get(found[0])
+        if image_of_people is not None:
+            members.append(Member(camera, found[0], image_of_people, found[1]))
             continue
         image = camera_images.first_in(set_stamp_ns, high)
         if image is not None:
