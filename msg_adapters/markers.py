@@ -22,6 +22,7 @@ MIN_ALPHA = 0.15  # a joint of confidence 0 stays faintly visible; confidence 1 
 MAX_MARKER_ID = (1 << 31) - 1  # Marker.id is INT32
 _BONE_ENDS = np.array(BONES).ravel()  # (2 * bones,) joint of each LINE_LIST point
 FRUSTUM_DEPTH_M = 0.5  # how far from its centre a camera's frustum is drawn
+MIN_AXIS_COSINE = 0.5  # corners further out than 60 degrees from the axis are drawn at that distance
 CAMERA_RGB = (0.85, 0.85, 0.85)
 TEXT_HEIGHT_M = 0.12
 
@@ -71,10 +72,12 @@ def skeleton_markers(ids: np.ndarray, joints: np.ndarray, header: Header, *, con
 
 def frustum(camera: Camera, depth: float = FRUSTUM_DEPTH_M) -> np.ndarray:
     """(5, 3) world points: the camera's centre, then its image corners (top left, top right,
-    bottom right, bottom left) at `depth` metres along the optical axis."""
+    bottom right, bottom left) at `depth` metres along the optical axis (a corner more than
+    60 degrees out, as a fisheye has, at twice `depth` along its ray)."""
     corners = np.array([[0, 0], [camera.width, 0], [camera.width, camera.height], [0, camera.height]], dtype=float)
     rays = camera.directions(corners)  # (4, 3) unit
-    along_axis = rays @ camera.R[2]  # cosine to the optical axis
+    # cosine to the optical axis; a fisheye's corners can lie 90 degrees out: drawn as if at 60
+    along_axis = np.maximum(rays @ camera.R[2], MIN_AXIS_COSINE)
     return np.concatenate([camera.centre[None], camera.centre + rays * (depth / along_axis)[:, None]])
 
 

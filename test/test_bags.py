@@ -398,7 +398,8 @@ def test_shelf_rig_bag_is_a_foreign_driver_recording_with_its_rig_file(tmp_path,
         c = names.index(name)
         if isinstance(msg, CameraInfo):
             per_camera[name].append(stamp)
-            K, D, width, height = info_to_intrinsics(msg)
+            K, D, width, height, model = info_to_intrinsics(msg)
+            assert model == 'plumb_bob'
             assert (width, height) == (1548, 1164)
             assert np.allclose(K[:2, :2], 1.5 * shelf[c].K[:2, :2])
             assert np.allclose(K[:2, 2], 1.5 * (shelf[c].K[:2, 2] + 0.5) - 0.5)

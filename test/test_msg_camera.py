@@ -29,7 +29,8 @@ def test_camera_info_round_trip(rig):
         np.testing.assert_array_equal(np.reshape(msg.r, (3, 3)), np.eye(3))
         np.testing.assert_array_equal(np.reshape(msg.p, (3, 4)), np.column_stack([cam.K, np.zeros(3)]))
         back = deserialize_message(serialize_message(msg), CameraInfo)
-        K, dist, width, height = info_to_intrinsics(back)
+        K, dist, width, height, model = info_to_intrinsics(back)
+        assert model == 'plumb_bob'
         np.testing.assert_array_equal(K, cam.K)
         np.testing.assert_array_equal(dist, cam.dist)
         assert (width, height) == (cam.width, cam.height)
@@ -77,12 +78,12 @@ def test_info_key_changes_with_what_the_checks_read_only(rig):
 
 def test_info_to_intrinsics_rejects(rig):
     msg = camera_to_info(rig[0], Header())
-    msg.distortion_model = 'equidistant'
-    with pytest.raises(ValueError, match="distortion_model: expected 'plumb_bob'"):
+    msg.distortion_model = 'kannala_brandt'
+    with pytest.raises(ValueError, match="distortion_model: 'kannala_brandt' is not supported"):
         info_to_intrinsics(msg)
     msg = camera_to_info(rig[0], Header())
     msg.d = [0.0] * 4
-    with pytest.raises(ValueError, match='CameraInfo d: expected 5'):
+    with pytest.raises(ValueError, match='CameraInfo d: expected 5 values for plumb_bob'):
         info_to_intrinsics(msg)
     msg = camera_to_info(rig[0], Header())
     msg.k[8] = 0
@@ -91,16 +92,21 @@ def test_info_to_intrinsics_rejects(rig):
 
 
 @pytest.mark.parametrize('change, problem', [
-    (dict(distortion_model='rational_polynomial', d=[0.0] * 8),
-     "CameraInfo distortion_model: expected 'plumb_bob' (k1 k2 p1 p2 k3), got 'rational_polynomial'"),
-    (dict(distortion_model='equidistant', d=[0.0] * 4), "got 'equidistant'"),
+    (dict(distortion_model='fisheye', d=[0.0] * 4),
+     "CameraInfo distortion_model: 'fisheye' is not supported (supported: plumb_bob (k1 k2 p1 p2 k3), "
+     "rational_polynomial (k1 k2 p1 p2 k3 k4 k5 k6), equidistant (k1 k2 k3 k4))"),
+    (dict(distortion_model='rational_polynomial', d=[0.0] * 5),
+     'CameraInfo d: expected 8 or 14 values for rational_polynomial (k1 k2 p1 p2 k3 k4 k5 k6) (or none), got 5'),
+    (dict(distortion_model='equidistant', d=[0.0] * 5), 'CameraInfo d: expected 4 values for equidistant'),
+    (dict(distortion_model='rational_polynomial', d=[0.0] * 13 + [0.01]),
+     'CameraInfo d: thin prism and tilt terms (s1-s4, tau_x, tau_y) are not supported'),
     (dict(k=[0.0] * 9), 'fx, fy > 0 and K[2, 2] = 1, got [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] (all zeros: '
                         'the camera is not calibrated)'),
     (dict(k=[float('nan')] + [0.0] * 7 + [1.0]), 'CameraInfo k: expected a finite'),
     (dict(k=[-500.0, 0, 320, 0, 500, 240, 0, 0, 1]), 'CameraInfo k: expected a finite upper-triangular K with fx'),
     (dict(width=0), 'CameraInfo size: expected width, height >= 1, got 0x776'),
     (dict(height=0), 'CameraInfo size: expected width, height >= 1, got 1032x0'),
-    (dict(d=[0.0, float('inf'), 0, 0, 0]), 'CameraInfo d: expected 5 finite values'),
+    (dict(d=[0.0, float('inf'), 0, 0, 0]), 'CameraInfo d: expected finite values'),
 ])
 def test_info_to_intrinsics_errors_are_one_line(rig, change, problem):
     msg = camera_to_info(rig[0], Header())
@@ -123,8 +129,8 @@ def test_camera_info_completes_a_rig_camera(rig):
         np.testing.assert_allclose(ours.project(X), cam.project(X), atol=1e-9)
     msg = camera_to_info(rig[0], Header())
     msg.d = []
-    K, dist, width, height = info_to_intrinsics(msg)
-    assert dist.tolist() == [0.0] * 5 and (width, height) == (1032, 776)
+    K, dist, width, height, model = info_to_intrinsics(msg)
+    assert dist.tolist() == [0.0] * 5 and (width, height) == (1032, 776) and model == 'plumb_bob'
 
 
 def _image(h: int = 6, w: int = 7) -> np.ndarray:

@@ -17,7 +17,7 @@ from hypothesis.extra import numpy as hnp
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header
 
-from msg_adapters.camera_info_msg import DISTORTION_MODEL, camera_to_info, check_info, info_to_intrinsics
+from msg_adapters.camera_info_msg import camera_to_info, check_info, info_to_intrinsics
 from msg_adapters.image_msg import (ENCODINGS, compressed_to_image, image_to_compressed_msg, image_to_msg,
                                     msg_to_image)
 from msg_adapters.openpose_msg import OPENPOSE_DTYPE, msg_to_openpose, openpose_to_msg
@@ -27,6 +27,7 @@ from msg_adapters.records import to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
 from mvpose_ros.core.detection.encoded_image import MAX_PIXELS, decode_encoded, max_image_bytes
 from mvpose_ros.core.evaluation.datasets import shelf_cameras
+from mvpose_ros.core.geometry import lens
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.types import Person2D
@@ -367,17 +368,17 @@ def test_the_image_decoder_on_random_sizes_with_an_expected_size(encoding, width
 
 
 @FUZZ
-@given(st.sampled_from([DISTORTION_MODEL, 'equidistant', '']),
-       st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=0, max_size=8),
+@given(st.sampled_from([*lens.MODELS, 'fisheye', '']),
+       st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=0, max_size=15),
        hnp.arrays(np.float64, 9, elements=st.one_of(st.floats(-2e3, 2e3), st.sampled_from([0.0, 1.0, np.nan]))),
        st.integers(0, 3000), st.integers(0, 3000))
 def test_camera_info_decoder_on_random_fields(model, d, k, width, height):
     msg = CameraInfo(header=HEADER, distortion_model=model, d=d, k=k.tolist(), width=width, height=height)
     out = _decodes_or_value_error(info_to_intrinsics, msg)
     if out is not None:
-        K, dist, w, h = out
+        K, dist, w, h, lens_model = out
         assert np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1
-        assert dist.shape == (5,) and np.isfinite(dist).all() and w >= 1 and h >= 1
+        assert dist.shape == (len(lens.MODELS[lens_model]),) and np.isfinite(dist).all() and w >= 1 and h >= 1
 
 
 @FUZZ

@@ -78,8 +78,8 @@ def test_extrinsics_only_camera_is_completed_from_camera_info(tmp_path, shelf):
         ours = rc.with_info(cam.K, cam.dist, cam.width, cam.height, 'plumb_bob')
         assert (ours.width, ours.height) == (1032, 776)
         assert _max_px(ours.project(X), cam.project(X)) < 1e-6
-    with pytest.raises(ValueError, match=r"camera 'cam0': distortion_model: 'equidistant' is not supported"):
-        rig.cameras[0].with_info(shelf[0].K, np.zeros(4), 1032, 776, 'equidistant')
+    with pytest.raises(ValueError, match=r"camera 'cam0': distortion_model: 'fisheye' is not supported"):
+        rig.cameras[0].with_info(shelf[0].K, np.zeros(4), 1032, 776, 'fisheye')
     with pytest.raises(ValueError, match=r"camera 'cam0': width: expected a whole number of pixels >= 1, got 0"):
         rig.cameras[0].with_info(shelf[0].K, np.zeros(5), 0, 776)
 
@@ -169,9 +169,14 @@ def _explicit(tmp_path, shelf, change) -> Path:
     (lambda d, e: e.update(orientation=[0, 0, 0, 0.5]),
      "camera 'cam1': orientation: not a rotation (quaternion x y z w of norm 0.5"),
     (lambda d, e: e.update(orientation=[0, 0, 0, float('nan')]), "camera 'cam1': orientation: not finite"),
-    (lambda d, e: e.update(distortion_model='rational_polynomial'),
-     "camera 'cam1': distortion_model: 'rational_polynomial' is not supported (only plumb_bob"),
+    (lambda d, e: e.update(distortion_model='kannala_brandt'),
+     "camera 'cam1': distortion_model: 'kannala_brandt' is not supported (supported: plumb_bob (k1 k2 p1 p2 k3), "
+     "rational_polynomial"),
+    (lambda d, e: e.update(distortion_model=['plumb_bob']),
+     "camera 'cam1': distortion_model: expected a non-empty string, got ['plumb_bob']"),
     (lambda d, e: e.update(D=[0.0] * 8), "camera 'cam1': D: plumb_bob has at most 5 coefficients"),
+    (lambda d, e: e.update(distortion_model='equidistant', D=[0.0] * 5),
+     "camera 'cam1': D: equidistant has at most 4 coefficients (k1 k2 k3 k4), got 5"),
     (lambda d, e: e.pop('K'), "camera 'cam1': missing K (intrinsics are all of width, height, K"),
     (lambda d, e: e.update(K=[0, 1, 2, 3]), "camera 'cam1': K: focal lengths fx, fy must be > 0"),
     (lambda d, e: e.update(width=10.5), "camera 'cam1': width: expected a whole number of pixels >= 1"),

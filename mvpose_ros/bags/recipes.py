@@ -51,6 +51,7 @@ from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.geometry import lens
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.geometry.bump import axis_rotation, bumped_camera, bumped_pixels
 from mvpose_ros.core.geometry.camera import Camera
@@ -275,15 +276,17 @@ def scaled_camera(camera: Camera, scale: float) -> Camera:
 def turned_camera(camera: Camera, turns: int) -> Camera:
     """The camera turned on its mount about its optical axis so that its image is
     np.rot90(image, turns) of the camera's (counterclockwise as shown): pixel (u, v) becomes
-    (v, width - 1 - u) per turn, the image's size swaps, and the plumb_bob distortion's tangential
-    terms turn with the image (p1, p2 -> -p2, p1); K' = T K M^T with T that pixel map and M the
-    turn of the optical frame."""
+    (v, width - 1 - u) per turn, the image's size swaps, and the distortion's tangential terms
+    turn with the image (p1, p2 -> -p2, p1; a fisheye's is radial only); K' = T K M^T with T that
+    pixel map and M the turn of the optical frame."""
     for _ in range(turns % 4):
         T = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, camera.width - 1.0], [0.0, 0.0, 1.0]])
         M = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # x' = y, y' = -x, z' = z
-        k1, k2, p1, p2, k3 = camera.dist
-        camera = Camera(camera.name, T @ camera.K @ M.T, M @ camera.R, M @ camera.t, [k1, k2, -p2, p1, k3],
-                        camera.height, camera.width)
+        dist = camera.dist.copy()
+        if camera.distortion_model != lens.EQUIDISTANT:
+            dist[2:4] = -camera.dist[3], camera.dist[2]
+        camera = Camera(camera.name, T @ camera.K @ M.T, M @ camera.R, M @ camera.t, dist,
+                        camera.height, camera.width, camera.distortion_model)
     return camera
 
 

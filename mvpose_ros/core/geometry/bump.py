@@ -4,6 +4,8 @@ recording of a bumped camera from a good one (mvpose-make-bag shelf --rotate-cam
 that diagnostics notice it."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from mvpose_ros.core.geometry.camera import Camera
@@ -29,7 +31,7 @@ def bumped_camera(camera: Camera, rotation: np.ndarray) -> Camera:
     """The camera turned by `rotation` (3, 3, in its own frame) about its optical centre: same
     intrinsics and centre, world-to-camera rotation rotation @ R."""
     R = np.asarray(rotation) @ camera.R
-    return Camera(camera.name, camera.K, R, -R @ camera.centre, camera.dist, camera.width, camera.height)
+    return dataclasses.replace(camera, R=R, t=-R @ camera.centre)
 
 
 def bumped_pixels(camera: Camera, bumped: Camera, uv: np.ndarray) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Calibrated pinhole cameras with OpenCV lens distortion, rig loading, and ray geometry.
 
 Convention: a world point X (metres) maps to camera coordinates x_cam = R @ X + t, then to
-normalised coordinates (x/z, y/z), through the radial-tangential distortion (OpenCV order k1, k2,
-p1, p2, k3), and to pixels through K.
+normalised coordinates (x/z, y/z), through the lens distortion (core.geometry.lens: plumb_bob,
+rational_polynomial or equidistant, with CameraInfo's coefficients), and to pixels through K.
 """
 from __future__ import annotations
 
@@ -16,19 +16,17 @@ import numpy as np
 import scipy.linalg
 
 from mvpose_ros.core.compiled import inline_kernel, kernel, kernel_array
-
-
-# Newton steps for undistortion; quadratic convergence makes this exact to float precision for
-# any lens whose distortion map is monotone over the image.
-_UNDISTORT_ITERATIONS = 10
+from mvpose_ros.core.geometry import lens
+from mvpose_ros.core.geometry.lens import distort_point
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Camera:
     """One calibrated camera.
 
-    K: (3, 3) intrinsics; R: (3, 3) world-to-camera rotation; t: (3,) metres;
-    dist: (5,) k1, k2, p1, p2, k3 (zeros = no distortion); width, height: image size in pixels.
+    K: (3, 3) intrinsics; R: (3, 3) world-to-camera rotation; t: (3,) metres; dist: the
+    coefficients of distortion_model in CameraInfo's order (lens.MODELS: plumb_bob (5,) k1, k2, p1,
+    p2, k3, zeros for none); width, height: image size in pixels.
     """
 
     name: str
@@ -38,9 +36,14 @@ class Camera:
     dist: np.ndarray
     width: int
     height: int
+    distortion_model: str = lens.DEFAULT_MODEL
 
     def __post_init__(self) -> None:
-        for field, shape in (('K', (3, 3)), ('R', (3, 3)), ('t', (3,)), ('dist', (5,))):
+        if self.distortion_model not in lens.MODELS:
+            raise ValueError(f'camera {self.name}: distortion_model {self.distortion_model!r} is not one of '
+                             f'{", ".join(lens.MODELS)}')
+        n = len(lens.MODELS[self.distortion_model])
+        for field, shape in (('K', (3, 3)), ('R', (3, 3)), ('t', (3,)), ('dist', (n,))):
             value = np.array(getattr(self, field), dtype=float, order='C').reshape(shape)  # C: what kernels take
             value.flags.writeable = False  # frozen means the arrays too
             object.__setattr__(self, field, value)
@@ -53,14 +56,13 @@ class Camera:
         to_normalised[:2, :2] = self._k_inv.T
         to_normalised[:2, 2] = -self._k_inv.T @ self.K[:2, 2]
         object.__setattr__(self, '_pixel_to_ray', self.R.T @ to_normalised)
-        object.__setattr__(self, '_distorted', bool(np.any(self.dist != 0)))
+        object.__setattr__(self, '_distorted', lens.distorts(self.distortion_model, self.dist))
         centre = -self.R.T @ self.t
         centre.flags.writeable = False
         object.__setattr__(self, '_centre', centre)
-        # the projection's parameters as project_point takes them: R, t, K row-major, dist, then
-        # 1 for a lens with distortion (0 without)
-        object.__setattr__(self, '_model', np.concatenate([self.R.ravel(), self.t, self.K.ravel(), self.dist,
-                                                           [float(self._distorted)]]))
+        # the projection's parameters as project_point takes them: R, t, K row-major, then the lens
+        object.__setattr__(self, '_model', np.concatenate([self.R.ravel(), self.t, self.K.ravel(),
+                                                           lens.kernel_form(self.distortion_model, self.dist)]))
 
     @classmethod
     def from_projection(cls, name: str, P: np.ndarray, width: int, height: int) -> Camera:
@@ -88,7 +90,7 @@ class Camera:
 
     @property
     def has_distortion(self) -> bool:
-        """Any non-zero distortion coefficient (most rigs have none)."""
+        """The lens moves points (a non-zero coefficient, or a fisheye; most rigs have none)."""
         return self._distorted
 
     def project(self, X: np.ndarray) -> np.ndarray:
@@ -108,38 +110,10 @@ class Camera:
         uv = np.asarray(uv, dtype=float)
         xy = (uv - self.K[:2, 2]) @ self._k_inv
         if self.has_distortion:
-            xy = self._undistort(xy)
+            xy = lens.undistort(self.distortion_model, self.dist, xy)
         d = xy @ self.R[:2] + self.R[2]  # R.T @ (x, y, 1) for each ray
         d /= np.sqrt(np.einsum('...i,...i->...', d, d))[..., None]
         return d
-
-    def _distort(self, xy: np.ndarray) -> np.ndarray:
-        """(..., 2) undistorted -> distorted normalised coordinates."""
-        k1, k2, p1, p2, k3 = self.dist
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x + y * y
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        return np.stack([x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                         y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y], axis=-1)
-
-    def _undistort(self, xy_d: np.ndarray) -> np.ndarray:
-        """(..., 2) distorted -> undistorted normalised coordinates by Newton's method."""
-        k1, k2, p1, p2, k3 = self.dist
-        xy = xy_d.copy()
-        for _ in range(_UNDISTORT_ITERATIONS):
-            x, y = xy[..., 0], xy[..., 1]
-            r2 = x * x + y * y
-            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            d_radial = 2 * (k1 + r2 * (2 * k2 + 3 * k3 * r2))  # d radial / d r2, times 2
-            # Jacobian of _distort at (x, y).
-            j_xx = radial + x * x * d_radial + 2 * p1 * y + 6 * p2 * x
-            j_xy = x * y * d_radial + 2 * p1 * x + 2 * p2 * y  # symmetric: also d y_d / d x
-            j_yy = radial + y * y * d_radial + 6 * p1 * y + 2 * p2 * x
-            r = self._distort(xy) - xy_d
-            det = j_xx * j_yy - j_xy * j_xy
-            xy = xy - np.stack([j_yy * r[..., 0] - j_xy * r[..., 1],
-                                j_xx * r[..., 1] - j_xy * r[..., 0]], axis=-1) / det[..., None]
-        return xy
 
 
 def _image_size(path: Path, width: int | None, height: int | None) -> tuple[int, int]:
@@ -240,11 +214,11 @@ def load_rig(path: str | Path, width: int | None = None, height: int | None = No
 
 
 def rig_model(cameras: Sequence[Camera | None]) -> np.ndarray:
-    """(C, 27) every camera's projection as the kernels take it (project_point): R, t, K row-major,
-    dist, then 1 for a lens with distortion; a camera not known yet (None) projects every point to
-    NaN."""
+    """(C, MODEL_SIZE) every camera's projection as the kernels take it (project_point): R, t, K
+    row-major, then its lens (lens.kernel_form); a camera not known yet (None) projects every point
+    to NaN."""
     if not len(cameras):
-        return np.zeros((0, 27))
+        return np.zeros((0, MODEL_SIZE))
     return np.stack([cam._model if cam is not None else _UNKNOWN_MODEL for cam in cameras])
 
 
@@ -262,23 +236,22 @@ def rig_project(cameras: Sequence[Camera], which: np.ndarray, points: np.ndarray
 
 
 _ZERO = np.zeros(1, dtype=np.int64)  # one row, of the first camera
-_UNKNOWN_MODEL = np.zeros(27)  # depth 0 for every point: NaN pixels
+_LENS = 21  # where a rig_model row's lens starts (after R, t and K)
+MODEL_SIZE = _LENS + lens.KERNEL_SIZE
+_KIND = MODEL_SIZE - 1
+_UNKNOWN_MODEL = np.zeros(MODEL_SIZE)  # depth 0 for every point: NaN pixels
 
 
 @inline_kernel
 def project_point(model, c, x, y, z):
-    """Pixel (u, v) of the world point (x, y, z) m in camera c of a rig_model (C, 27); NaN at or
-    behind the camera. For other kernels; the arithmetic of numpy on whole arrays, in the same order."""
+    """Pixel (u, v) of the world point (x, y, z) m in camera c of a rig_model (C, MODEL_SIZE); NaN at
+    or behind the camera. For other kernels; the arithmetic of numpy on whole arrays, in the same order."""
     depth = model[c, 6] * x + model[c, 7] * y + model[c, 8] * z + model[c, 11]
     inv = 1.0 / depth if depth > 0 else np.nan
     xn = (model[c, 0] * x + model[c, 1] * y + model[c, 2] * z + model[c, 9]) * inv
     yn = (model[c, 3] * x + model[c, 4] * y + model[c, 5] * z + model[c, 10]) * inv
-    if model[c, 26] != 0:  # Camera._distort
-        k1, k2, p1, p2, k3 = model[c, 21], model[c, 22], model[c, 23], model[c, 24], model[c, 25]
-        r2 = xn * xn + yn * yn
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xn, yn = (xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
-                  yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
+    if model[c, _KIND] != lens.NONE:
+        xn, yn = distort_point(model[c, _LENS:], xn, yn)
     return (model[c, 12] * xn + model[c, 13] * yn + model[c, 14],
             model[c, 15] * xn + model[c, 16] * yn + model[c, 17])
 

@@ -17,8 +17,8 @@ A rig file lists, per camera, its name, topics, frame id and extrinsics; intrins
         width: 1920                             # pixels
         height: 1080
         K: [fx, fy, cx, cy]                     # or 9 numbers / 3x3 rows; pixels
-        distortion_model: plumb_bob             # the only model supported (k1 k2 p1 p2 k3)
-        D: [k1, k2, p1, p2, k3]                 # default zeros
+        distortion_model: plumb_bob             # default; or rational_polynomial, equidistant (core.geometry.lens)
+        D: [k1, k2, p1, p2, k3]                 # the model's coefficients in CameraInfo's order; default zeros
 
 or, for a rig calibrated in the Shelf layout (see camera.load_rig)::
 
@@ -42,9 +42,9 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
+from mvpose_ros.core.geometry import lens
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 
-DISTORTION_MODEL = 'plumb_bob'  # k1, k2, p1, p2, k3 (OpenCV's order, as Camera.dist)
 UNIT_TOLERANCE = 1e-3  # |norm(q) - 1| above this: not a rotation (rather than a rounded one)
 DATA_ROOT_TOKEN = '{data_root}'
 DataRoot = str | Path | Callable[[], str | Path] | None  # a folder, or a function finding it
@@ -86,24 +86,21 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
 
 
 def intrinsics_camera(where: str, name: str, R: np.ndarray, t: np.ndarray, K: Any, D: Any, width: Any,
-                      height: Any, distortion_model: str = DISTORTION_MODEL) -> Camera:
+                      height: Any, distortion_model: str = lens.DEFAULT_MODEL) -> Camera:
     """A Camera from extrinsics (R (3, 3) world -> camera, t (3,) metres) and intrinsics: K (3, 3),
-    9 numbers or fx, fy, cx, cy (pixels); D up to 5 plumb_bob coefficients k1 k2 p1 p2 k3 (missing
-    ones 0); width, height pixels. ValueError of one line starting with `where`."""
-    if distortion_model != DISTORTION_MODEL:
-        raise ValueError(f'{where}: distortion_model: {distortion_model!r} is not supported '
-                         f'(only {DISTORTION_MODEL}: k1 k2 p1 p2 k3)')
+    9 numbers or fx, fy, cx, cy (pixels); D the coefficients of distortion_model (lens.MODELS, in
+    CameraInfo's order; missing trailing ones 0); width, height pixels. ValueError of one line
+    starting with `where`."""
+    if distortion_model not in lens.MODELS:
+        raise ValueError(f'{where}: {lens.unsupported(distortion_model)}')
     K = _intrinsic_matrix(where, K)
-    d = _numbers(where, 'D', D)
-    if d.size > 5:
-        raise ValueError(f'{where}: D: {DISTORTION_MODEL} has at most 5 coefficients (k1 k2 p1 p2 k3), '
-                         f'got {d.size}')
+    d = lens.coefficients(distortion_model, _numbers(where, 'D', D), f'{where}: D')
     size = []
     for field, value in (('width', width), ('height', height)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f'{where}: {field}: expected a whole number of pixels >= 1, got {value!r}')
         size.append(int(value))
-    return Camera(name, K, R, t, np.pad(d, (0, 5 - d.size)), *size)
+    return Camera(name, K, R, t, d, *size, distortion_model)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -133,9 +130,9 @@ class RigCamera:
         return matrix_to_quaternion(self.R.T)
 
     def with_info(self, K: np.ndarray, D: np.ndarray, width: int, height: int,
-                  distortion_model: str = DISTORTION_MODEL) -> Camera:
-        """This camera's Camera with intrinsics from a CameraInfo: K (3, 3) pixels, D (<= 5,)
-        plumb_bob k1 k2 p1 p2 k3, image size in pixels. ValueError naming the camera and field."""
+                  distortion_model: str = lens.DEFAULT_MODEL) -> Camera:
+        """This camera's Camera with intrinsics from a CameraInfo: K (3, 3) pixels, D the
+        coefficients of distortion_model, image size in pixels. ValueError naming the camera and field."""
         return intrinsics_camera(f'camera {self.name!r}', self.name, self.R, self.t, np.asarray(K).tolist(),
                                  np.asarray(D).tolist(), width, height, distortion_model)
 
@@ -285,7 +282,7 @@ def _explicit_camera(path: Path, index: int, e: Any) -> RigCamera:
         if missing:
             raise ValueError(f'{where}: missing {", ".join(missing)} (intrinsics are all of width, height, K, '
                              f'or none: then they come from CameraInfo)')
-        model = e.get('distortion_model', DISTORTION_MODEL)
+        model = e.get('distortion_model', lens.DEFAULT_MODEL)
         camera = intrinsics_camera(where, name, R, t, e['K'], e.get('D', []), e['width'], e['height'],
                                    _string(where, 'distortion_model', model))
     return RigCamera(name, image, info, frame_id, R, t, camera)
