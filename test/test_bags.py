@@ -502,6 +502,64 @@ def test_shelf_rig_turned_recipe_turns_images_cameras_and_rig_file_together(tmp_
         assert upright_turns(rig_camera.R, rig_file.up) == (4 - k) % 4
 
 
+def _seen_points(camera) -> np.ndarray:
+    """(4, 3) world points 3 m out on the rays of four pixels towards the corners of the camera's
+    image, where lenses move points most."""
+    pixels = np.array([[0.15, 0.2], [0.85, 0.8], [0.2, 0.75], [0.8, 0.25]]) * [camera.width, camera.height]
+    origins, dirs = camera.rays(pixels)
+    return origins + 3.0 * dirs
+
+
+def test_through_lens_puts_a_point_where_the_lens_projects_it(shelf_rig):
+    """A dot drawn where a pinhole camera sees a point lands where each of ForeignRig.LENSES,
+    at the same pose, projects it."""
+    from mvpose_ros.bags.recipes import ForeignRig, lensed_camera, through_lens
+    cam = shelf_rig[2]
+    for model, dist, focal in ForeignRig.LENSES:
+        lensed = lensed_camera(cam, model, dist, focal)
+        assert lensed.distortion_model == model and lensed.has_distortion
+        for point in _seen_points(cam):
+            u, v = np.round(cam.project(point)).astype(int)
+            dot = np.zeros((cam.height, cam.width), np.float32)
+            dot[v - 3:v + 4, u - 3:u + 4] = 1.0
+            seen = through_lens(dot, cam, lensed)
+            centre = np.argwhere(seen > 0.5).mean(axis=0)[::-1]  # (u, v)
+            assert np.abs(centre - lensed.project(point)).max() < 1.0, (model, point)
+
+
+def test_shelf_rig_lenses_recipe_gives_each_camera_its_lens(tmp_path):
+    """shelf_rig_lenses: each CameraInfo carries its camera's lens of ForeignRig.LENSES, the rig
+    file is shelf_rig's extrinsics, and a world point's pixel in the lensed image shows what its
+    pixel in shelf_rig's image shows."""
+    from msg_adapters.camera_info_msg import info_to_intrinsics
+    from msg_adapters.image_msg import compressed_to_image
+    from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_recipe
+    from mvpose_ros.core.geometry.rig import load_rig_file
+    plain, lensed = shelf_rig_recipe(SHELF), shelf_rig_recipe(SHELF, lenses=True)
+    assert lensed.name == 'shelf_rig_lenses' and lensed.fingerprint() != plain.fingerprint()
+    first = {}
+    for recipe in (plain, lensed):
+        items = {}
+        for topic, msg, _ in recipe.items():
+            items.setdefault(topic, msg)
+        first[recipe.name] = items
+    (tmp_path / 'rig.yaml').write_text(lensed.rig_text())
+    rig = load_rig_file(tmp_path / 'rig.yaml')
+    for name, (model, dist, _), rig_camera in zip(ForeignRig.NAMES, ForeignRig.LENSES, rig.cameras):
+        info = first['shelf_rig_lenses'][f'/rig/{name}/camera_info']
+        assert info.distortion_model == model and list(info.d) == list(dist)
+        camera = rig_camera.with_info(*info_to_intrinsics(info))
+        pinhole = rig_camera.with_info(*info_to_intrinsics(first['shelf_rig'][f'/rig/{name}/camera_info']))
+        image = compressed_to_image(first['shelf_rig_lenses'][f'/rig/{name}/image_raw/compressed']).astype(int)
+        before = compressed_to_image(first['shelf_rig'][f'/rig/{name}/image_raw/compressed']).astype(int)
+        X = _seen_points(pinhole)
+        for (u, v), (u0, v0) in zip(np.round(camera.project(X)).astype(int), np.round(pinhole.project(X)).astype(int)):
+            # a 5 x 5 patch's mean colour: the remap's interpolation and JPEG noise only (at most 4.3
+            # here, where the patch at the pinhole pixel (u0, v0) of the lensed image is up to 166 off)
+            assert np.abs(image[v - 2:v + 3, u - 2:u + 3].mean(axis=(0, 1))
+                          - before[v0 - 2:v0 + 3, u0 - 2:u0 + 3].mean(axis=(0, 1))).max() < 8, name
+
+
 def test_shelf_bag_with_a_bumped_or_an_unplugged_camera():
     """--rotate-camera: camera 2's candidates move (about fx tan 2 degrees) from frame 450 on, the
     others and earlier frames are the real ones; --unplug-camera: camera 3 sends nothing from then."""

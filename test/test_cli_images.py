@@ -2,7 +2,6 @@
 near the ground truth, the skeletons file, and one overlay per camera."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import re
 import struct
@@ -201,20 +200,18 @@ def test_a_fisheye_rig_scores_frame_572_as_the_pinhole_one(tmp_path, capsys):
     the real images; the same warped images taken for pinhole cameras (no distortion): 53.5, 72.7
     and 142.0 mm."""
     import yaml
+    from mvpose_ros.bags.recipes import lensed_camera, through_lens
     from mvpose_ros.core.geometry.rig import matrix_to_quaternion
-    fisheye = np.array([0.1, -0.05, 0.01, -0.002])
+    fisheye = [0.1, -0.05, 0.01, -0.002]
     entries, paths = [], []
     for c, cam in enumerate(shelf_cameras()):
-        lens = dataclasses.replace(cam, K=cam.K * [[0.9, 1, 1], [1, 0.9, 1], [1, 1, 1]], dist=fisheye,
-                                   distortion_model='equidistant')
-        v, u = np.mgrid[0:cam.height, 0:cam.width].astype(float)
-        seen = cam.project(cam.centre + lens.directions(np.stack([u, v], axis=-1))).astype(np.float32)
+        lens = lensed_camera(cam, 'equidistant', fisheye, 0.9)
         paths.append(str(tmp_path / f'fisheye{c}.png'))
-        cv2.imwrite(paths[-1], cv2.remap(cv2.imread(FRAMES[c]), seen[..., 0], seen[..., 1], cv2.INTER_LINEAR))
+        cv2.imwrite(paths[-1], through_lens(cv2.imread(FRAMES[c]), cam, lens))
         entries.append({'name': f'c{c}', 'position': cam.centre.tolist(),
                         'orientation': matrix_to_quaternion(cam.R.T).tolist(), 'width': cam.width,
                         'height': cam.height, 'K': lens.K.tolist(), 'distortion_model': 'equidistant',
-                        'D': fisheye.tolist()})
+                        'D': fisheye})
     rig = tmp_path / 'rig.yaml'
     rig.write_text(yaml.safe_dump({'cameras': entries}))
     assert images.main(['--rig', str(rig), '--images', *paths, '--frame', '572', '--ground-truth', 'shelf',

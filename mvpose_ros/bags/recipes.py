@@ -14,6 +14,9 @@
 - `shelf_rig_turned`: `shelf_rig` with its cameras turned on their mounts (ForeignRig.TURNS: three
   upside down, as ceiling cameras hang, and two on their sides), images, CameraInfo and rig file
   turned with them: the same scene, for upright detection (core.detection.upright).
+- `shelf_rig_lenses`: `shelf_rig` seen through the lenses of ForeignRig.LENSES (two fisheyes, two
+  rational_polynomial lenses, one barrel plumb_bob), each image remapped to what that lens takes
+  from the same pose, and its CameraInfo giving the lens (core.geometry.lens).
 - `shelf_crowd`: the `shelf` bag's camera infos and OpenPose output with the scene multiplied to
   about CROWD_PEOPLE people per frame (core.evaluation.crowd_openpose: shifted copies of its people, the
   crowd `mvpose-bench --people` builds), for the graph under a crowd; no images (they would not
@@ -60,7 +63,8 @@ from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
 # so bags made by older code count as out of date.
 RECIPE_VERSION = 1
-RECIPES = ('shelf', 'shelf_images', 'shelf_crowd', 'shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'campus')
+RECIPES = ('shelf', 'shelf_images', 'shelf_crowd', 'shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'shelf_rig_lenses',
+           'campus')
 CROWD_PEOPLE = 20  # 3D people per frame the shelf_crowd bag aims at
 SHELF_IMAGE_FRAMES = (572,)
 GROUND_TRUTH_TOPIC = '/ground_truth/skeletons'
@@ -108,9 +112,9 @@ def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path 
                             fault=fault)
     if name == 'shelf_crowd':
         return shelf_crowd_recipe(dataset_dir('shelf', data_root))
-    if name in ('shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned'):
+    if name in ('shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'shelf_rig_lenses'):
         return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name != 'shelf_rig_raw',
-                                turned=name == 'shelf_rig_turned')
+                                turned=name == 'shelf_rig_turned', lenses=name == 'shelf_rig_lenses')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
 
 
@@ -245,6 +249,13 @@ class ForeignRig:
     FRAME = 572  # the Shelf frame whose five images every set shows
     JPEG_QUALITY = 90
     TURNS = (2, 2, 1, 3, 2)  # shelf_rig_turned: each image np.rot90'd this many times, its camera with it
+    # shelf_rig_lenses: per camera (distortion model, D, focal length factor): fisheyes of a wider
+    # view, lenses with the coefficients' magnitudes of an Azure Kinect colour camera, a webcam's barrel
+    LENSES = (('equidistant', (0.1, -0.05, 0.01, -0.002), 0.9),
+              ('rational_polynomial', (0.5, -2.5, 0.001, -0.0005, 1.4, 0.4, -2.3, 1.3), 1.0),
+              ('plumb_bob', (-0.2, 0.05, 0.001, -0.001, 0.0), 1.0),
+              ('equidistant', (0.05, 0.0, 0.0, 0.0), 0.8),
+              ('rational_polynomial', (0.3, -1.5, 0.0, 0.001, 0.8, 0.25, -1.4, 0.75), 1.0))
 
     @staticmethod
     def image_topic(name: str, compressed: bool) -> str:
@@ -271,6 +282,22 @@ def scaled_camera(camera: Camera, scale: float) -> Camera:
     K[0, 1] *= scale
     K[:2, 2] = scale * (K[:2, 2] + 0.5) - 0.5
     return replace(camera, K=K, width=round(camera.width * scale), height=round(camera.height * scale))
+
+
+def lensed_camera(camera: Camera, model: str, dist: Sequence[float], focal: float = 1.0) -> Camera:
+    """The camera at the same pose and principal point with another lens: distortion `model` with
+    coefficients `dist`, focal lengths times `focal`."""
+    K = np.array(camera.K, dtype=float)
+    K[:2, :2] *= focal
+    return replace(camera, K=K, dist=np.asarray(dist, dtype=float), distortion_model=model)
+
+
+def through_lens(image: np.ndarray, camera: Camera, lensed: Camera) -> np.ndarray:
+    """The image `lensed` (at camera's pose) takes of the scene `image` of `camera` shows: each
+    pixel's ray looked up in `image` (bilinear); black where `image` does not reach."""
+    v, u = np.mgrid[0:lensed.height, 0:lensed.width].astype(np.float64)
+    uv = camera.project(camera.centre + lensed.directions(np.stack([u, v], axis=-1))).astype(np.float32)
+    return cv2.remap(image, uv[..., 0], uv[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
 
 def turned_camera(camera: Camera, turns: int) -> Camera:
@@ -306,7 +333,7 @@ def shelf_rig_stamps(rig: type[ForeignRig] = ForeignRig) -> dict[str, list[int |
     return out
 
 
-def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = False) -> str:
+def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = False, lenses: bool = False) -> str:
     """The shelf_rig bags' rig file: per camera its driver topics, frame id and extrinsics from the
     Shelf calibration (position, orientation quaternion; turned: each camera turned by
     ForeignRig.TURNS), and no intrinsics: those come from the bag's CameraInfo, at the upscaled size."""
@@ -324,17 +351,20 @@ def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = Fal
     kind = 'sensor_msgs/CompressedImage (jpeg)' if compressed else 'sensor_msgs/Image (rgb8)'
     how = (f'# The cameras are turned {", ".join(str(90 * k) for k in ForeignRig.TURNS)} degrees on their mounts '
            f'(np.rot90 of image and camera).\n' if turned else '')
+    if lenses:
+        how += f'# Their lenses (CameraInfo\'s distortion_model): {", ".join(m for m, _, _ in ForeignRig.LENSES)}.\n'
     return (f'# The rig of the shelf_rig bags (mvpose-make-bag): the five Shelf cameras under a driver\'s\n'
             f'# names, {kind} images upscaled x{ForeignRig.SCALE:g}; extrinsics from\n'
             f'# {calibration.name}; intrinsics and image size come from each camera\'s CameraInfo.\n'
             + how + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
 
 
-def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False) -> Recipe:
+def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False, lenses: bool = False) -> Recipe:
     """The `shelf_rig` bag (CompressedImage; `shelf_rig_raw` with compressed False: Image rgb8;
-    `shelf_rig_turned` with turned: its cameras turned by ForeignRig.TURNS) from the Shelf folder
-    `shelf`: see ForeignRig. Each message is logged at its header stamp; every image goes with a
-    CameraInfo of the same stamp (camera_info first)."""
+    `shelf_rig_turned` with turned: its cameras turned by ForeignRig.TURNS; `shelf_rig_lenses` with
+    lenses: seen through ForeignRig.LENSES) from the Shelf folder `shelf`: see ForeignRig. Each
+    message is logged at its header stamp; every image goes with a CameraInfo of the same stamp
+    (camera_info first)."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
     _require(calibration)
     cameras = dataset_cameras('shelf', calibration=calibration)
@@ -350,6 +380,10 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False)
         if turned:
             scaled = [turned_camera(cam, k) for cam, k in zip(scaled, ForeignRig.TURNS)]
             pixels = [np.ascontiguousarray(np.rot90(p, k)) for p, k in zip(pixels, ForeignRig.TURNS)]
+        if lenses:
+            lensed = [lensed_camera(cam, *lens_of) for cam, lens_of in zip(scaled, ForeignRig.LENSES)]
+            pixels = [through_lens(p, cam, new) for p, cam, new in zip(pixels, scaled, lensed)]
+            scaled = lensed
         header0 = Header()
         # One encoding per camera: every set shows the same capture, only the header changes.
         payload = ([image_to_compressed_msg(p, header0, 'jpeg', ForeignRig.JPEG_QUALITY) for p in pixels]
@@ -371,8 +405,9 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False)
             yield ForeignRig.info_topic(name), camera_to_info(scaled[c], header), stamp
             yield ForeignRig.image_topic(name, compressed), image, stamp
 
-    name = 'shelf_rig_turned' if turned else 'shelf_rig' if compressed else 'shelf_rig_raw'
-    return Recipe(name, (calibration, *images), items, lambda: rig_file_text(calibration, compressed, turned))
+    name = ('shelf_rig_turned' if turned else 'shelf_rig_lenses' if lenses else 'shelf_rig' if compressed
+            else 'shelf_rig_raw')
+    return Recipe(name, (calibration, *images), items, lambda: rig_file_text(calibration, compressed, turned, lenses))
 
 
 def campus_image(campus_dir: Path, camera: int, frame: int) -> Path:

@@ -1,7 +1,7 @@
 """`mvpose-make-bag`: build a rosbag2 (MCAP) bag of the real data for the ROS graph.
 
-    mvpose-make-bag shelf|shelf_images|shelf_crowd|shelf_rig|shelf_rig_raw|shelf_rig_turned [--data-root DIR]
-                    [--output DIR] [--force]
+    mvpose-make-bag shelf|shelf_images|shelf_crowd|shelf_rig|shelf_rig_raw|shelf_rig_turned|shelf_rig_lenses
+                    [--data-root DIR] [--output DIR] [--force]
     mvpose-make-bag shelf --drop-every N | --drop-fraction F [--drop-seed S]   (bags/shelf_every2, ...)
     mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]
     mvpose-make-bag shelf --rotate-camera C --degrees D [--axis y] --from-frame F   (a bumped camera)
@@ -10,8 +10,8 @@
 A bag that is complete and made from the current inputs by the current recipe is left alone
 (exit 0), so scripts can call this every time; any other existing output needs --force. The
 shelf_rig bags (a foreign rig recorded by its driver; shelf_rig_turned: its cameras turned on their
-mounts) also get their rig file, `rig.yaml` inside the bag folder: `mvpose-graph --rig
-bags/shelf_rig/rig.yaml --bag bags/shelf_rig`.
+mounts; shelf_rig_lenses: behind fisheye and other lenses) also get their rig file, `rig.yaml`
+inside the bag folder: `mvpose-graph --rig bags/shelf_rig/rig.yaml --bag bags/shelf_rig`.
 """
 from __future__ import annotations
 
