@@ -28,15 +28,20 @@ def info_key(msg: CameraInfo) -> tuple | None:
     holds more values than any model has (such a message is refused anyway, and is not copied)."""
     if len(msg.d) > lens.OPENCV_FULL:
         return None
-    return msg.distortion_model, int(msg.width), int(msg.height), tuple(msg.k), tuple(msg.d)
+    roi = msg.roi
+    return (msg.distortion_model, int(msg.width), int(msg.height), tuple(msg.k), tuple(msg.d), int(msg.binning_x),
+            int(msg.binning_y), int(roi.x_offset), int(roi.y_offset), int(roi.width), int(roi.height))
 
 
 def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, int, str]:
     """K (3, 3) pixels, dist (the model's coefficients), width, height (pixels) and distortion
-    model of a CameraInfo, as RigCamera.with_info takes them. An empty d is no distortion.
-    ValueError of one line for a model core.geometry.lens does not have, a d of another length
-    than the model's, a K that is not finite, upper-triangular with fx, fy > 0 (an uncalibrated
-    driver publishes zeros), or a size below 1x1."""
+    model of the images that come with a CameraInfo, as RigCamera.with_info takes them. An empty d
+    is no distortion. A driver that bins or cuts a region of interest (binning_x/y, roi) sends the
+    calibration of the whole sensor with them: K and the size are those of the image it sends, as
+    image_geometry computes them (cx' = (cx - x_offset) / binning_x, ...). ValueError of one line
+    for a model core.geometry.lens does not have, a d of another length than the model's, a K that
+    is not finite, upper-triangular with fx, fy > 0 (an uncalibrated driver publishes zeros), a
+    size below 1x1, or a region of interest outside the sensor."""
     model = msg.distortion_model
     if model not in lens.MODELS:
         raise ValueError(f'CameraInfo {lens.unsupported(model)}')
@@ -58,7 +63,22 @@ def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, in
     if msg.width < 1 or msg.height < 1:
         raise ValueError(f'CameraInfo size: expected width, height >= 1, got '
                          f'{msg.width}x{msg.height}')
-    return K, dist, int(msg.width), int(msg.height), model
+    width, height = int(msg.width), int(msg.height)
+    roi = msg.roi
+    if roi.width and roi.height:  # else the whole sensor (a zero roi means that)
+        if roi.x_offset + roi.width > width or roi.y_offset + roi.height > height:
+            raise ValueError(f'CameraInfo roi: {roi.width}x{roi.height} at ({roi.x_offset}, {roi.y_offset}) '
+                             f'reaches outside the {width}x{height} sensor')
+        K[0, 2] -= roi.x_offset
+        K[1, 2] -= roi.y_offset
+        width, height = int(roi.width), int(roi.height)
+    binning = (max(1, int(msg.binning_x)), max(1, int(msg.binning_y)))  # 0 and 1 are none
+    K[:2] /= np.array(binning, dtype=np.float64)[:, None]
+    width, height = width // binning[0], height // binning[1]
+    if width < 1 or height < 1:
+        raise ValueError(f'CameraInfo binning: {binning[0]}x{binning[1]} leaves no pixel of the '
+                         f'{msg.width}x{msg.height} sensor')
+    return K, dist, width, height, model
 
 
 def check_info(msg: CameraInfo, camera: Camera, tol_px: float = 0.5) -> None:

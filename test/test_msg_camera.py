@@ -133,6 +133,35 @@ def test_camera_info_completes_a_rig_camera(rig):
     assert dist.tolist() == [0.0] * 5 and (width, height) == (1032, 776) and model == 'plumb_bob'
 
 
+def test_binning_and_a_region_of_interest_give_the_sent_images_intrinsics(rig):
+    """A driver that bins and cuts a region sends the whole sensor's calibration with binning and
+    roi: the camera is that of the image it sends (image_geometry's convention, full-sensor pixel
+    u is (u - x_offset) / binning_x)."""
+    cam = rig[1]
+    rc = RigCamera('c1', 'image_raw', 'camera_info', 'c1', cam.R, cam.t)
+    X = np.random.default_rng(1).uniform([-2, -2, 0], [2, 2, 2], (100, 3))
+    full = cam.project(X)
+    for binning, (x0, y0, w, h), size, offset in (((2, 2), (0, 0, 0, 0), (516, 388), (0, 0)),
+                                                  ((0, 0), (100, 50, 600, 400), (600, 400), (100, 50)),
+                                                  ((2, 4), (100, 50, 601, 400), (300, 100), (100, 50))):
+        msg = camera_to_info(cam, Header())
+        msg.binning_x, msg.binning_y = binning
+        msg.roi.x_offset, msg.roi.y_offset, msg.roi.width, msg.roi.height = x0, y0, w, h
+        sent = rc.with_info(*info_to_intrinsics(msg))
+        assert (sent.width, sent.height) == size
+        np.testing.assert_allclose(sent.project(X), (full - offset) / np.maximum(binning, 1), atol=1e-9)
+        assert info_key(msg) != info_key(camera_to_info(cam, Header()))
+    msg = camera_to_info(cam, Header())
+    msg.roi.x_offset, msg.roi.width, msg.roi.height = 500, 600, 400
+    with pytest.raises(ValueError) as err:
+        info_to_intrinsics(msg)
+    assert str(err.value) == 'CameraInfo roi: 600x400 at (500, 0) reaches outside the 1032x776 sensor'
+    msg = camera_to_info(cam, Header())
+    msg.binning_x = 2000
+    with pytest.raises(ValueError, match='CameraInfo binning: 2000x1 leaves no pixel of the 1032x776 sensor'):
+        info_to_intrinsics(msg)
+
+
 def _image(h: int = 6, w: int = 7) -> np.ndarray:
     return np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
 

@@ -371,9 +371,12 @@ def test_the_image_decoder_on_random_sizes_with_an_expected_size(encoding, width
 @given(st.sampled_from([*lens.MODELS, 'fisheye', '']),
        st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=0, max_size=15),
        hnp.arrays(np.float64, 9, elements=st.one_of(st.floats(-2e3, 2e3), st.sampled_from([0.0, 1.0, np.nan]))),
-       st.integers(0, 3000), st.integers(0, 3000))
-def test_camera_info_decoder_on_random_fields(model, d, k, width, height):
-    msg = CameraInfo(header=HEADER, distortion_model=model, d=d, k=k.tolist(), width=width, height=height)
+       st.integers(0, 3000), st.integers(0, 3000), st.integers(0, 4000), st.integers(0, 4000),
+       st.lists(st.integers(0, 4000), min_size=4, max_size=4))
+def test_camera_info_decoder_on_random_fields(model, d, k, width, height, binning_x, binning_y, roi):
+    msg = CameraInfo(header=HEADER, distortion_model=model, d=d, k=k.tolist(), width=width, height=height,
+                     binning_x=binning_x, binning_y=binning_y)
+    msg.roi.x_offset, msg.roi.y_offset, msg.roi.width, msg.roi.height = roi
     out = _decodes_or_value_error(info_to_intrinsics, msg)
     if out is not None:
         K, dist, w, h, lens_model = out
