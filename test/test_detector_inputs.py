@@ -6,6 +6,7 @@ once per camera and cause."""
 from __future__ import annotations
 
 import struct
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -19,7 +20,7 @@ from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.nodes.heatmap_detector import _camera_indices, decode_image, in_namespace, rig_namespace
-from mvpose_ros.nodes.image_topics import image_type, image_type_by_name
+from mvpose_ros.nodes.image_topics import TYPE_RECHECK_S, ImageTypes, image_type, image_type_by_name
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
 
@@ -84,18 +85,58 @@ def test_images_of_another_size_or_undecodable_are_refused_with_their_cause(shel
                            data=bytes(1032 * 776)), camera)
 
 
-def test_the_image_type_comes_from_the_graph_else_from_the_topic_name():
+def test_the_image_type_comes_from_the_publishers_else_from_the_topic_name():
     assert image_type_by_name('/rig/left/image_raw/compressed') is CompressedImage
     assert image_type_by_name('/rig/left/image_raw') is Image
     assert image_type_by_name('/rig/left/compressed_image') is Image
-    graph = [('/rig/left/image_raw/compressed', ['sensor_msgs/msg/CompressedImage']),
-             ('/rig/right/frames', ['sensor_msgs/msg/CompressedImage']),
-             ('/rig/odd/compressed', ['sensor_msgs/msg/Image']),
-             ('/rig/both', ['sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'])]
-    assert image_type('/rig/right/frames', graph) == (CompressedImage, 'graph')
-    assert image_type('/rig/odd/compressed', graph) == (Image, 'graph')  # the graph wins over the name
-    assert image_type('/rig/both', graph) == (Image, 'name')  # ambiguous: by the name
-    assert image_type('/rig/absent/compressed', graph) == (CompressedImage, 'name')
+    compressed, raw = 'sensor_msgs/msg/CompressedImage', 'sensor_msgs/msg/Image'
+    assert image_type('/rig/right/frames', [compressed, compressed]) == (CompressedImage, 'graph')
+    assert image_type('/rig/odd/compressed', [raw]) == (Image, 'graph')  # the publishers win over the name
+    assert image_type('/rig/both', [raw, compressed]) == (Image, 'name')  # ambiguous: by the name
+    assert image_type('/rig/absent/compressed', []) == (CompressedImage, 'name')
+
+
+class _GraphNode:
+    """What ImageTypes uses of a node: publishers that can come, a timer, a logger."""
+
+    def __init__(self, publishers):
+        self.publishers, self.timers, self.warnings = publishers, [], []
+
+    def get_publishers_info_by_topic(self, topic):
+        return [SimpleNamespace(topic_type=kind) for name, kind in self.publishers if name == topic]
+
+    def create_timer(self, period, callback):
+        timer = SimpleNamespace(period=period, callback=callback, cancelled=False)
+        timer.cancel = lambda: setattr(timer, 'cancelled', True)
+        self.timers.append(timer)
+        return timer
+
+    def get_logger(self):
+        return SimpleNamespace(warning=self.warnings.append)
+
+
+def test_image_types_follow_a_camera_that_comes_up_after_the_node():
+    """A topic no publisher shows yet is typed by its name and looked up again until one does;
+    publishers of the other type make the node subscribe again, once."""
+    node = _GraphNode([('/rig/left/image_raw', 'sensor_msgs/msg/Image')])
+    again = []
+    types = ImageTypes(node, again.append)
+    assert types.add(0, 'left', '/rig/left/image_raw').typed_by == 'graph' and not node.timers
+    late = types.add(1, 'right', '/rig/right/frames')
+    same = types.add(2, 'door', '/rig/door/image_raw/compressed')
+    assert (late.kind, late.typed_by, same.kind) == (Image, 'name', CompressedImage)
+    (timer,) = node.timers  # one for the node, however many topics wait
+    assert timer.period == TYPE_RECHECK_S
+    timer.callback()  # nobody publishes yet
+    assert not again and late.typed_by == 'name' and not timer.cancelled
+    node.publishers.append(('/rig/right/frames', 'sensor_msgs/msg/CompressedImage'))
+    timer.callback()
+    assert again == [1] and late.kind is CompressedImage and late.typed_by == 'graph'
+    assert node.warnings == ['right: /rig/right/frames carries CompressedImage, not Image as its name suggests: '
+                             'subscribing again'] and not timer.cancelled  # door still waits
+    node.publishers.append(('/rig/door/image_raw/compressed', 'sensor_msgs/msg/CompressedImage'))
+    timer.callback()
+    assert again == [1] and same.typed_by == 'graph' and timer.cancelled  # as its name said
 
 
 def test_rig_topics_resolve_in_the_rig_namespace():

@@ -32,11 +32,11 @@ and frame_id. The rig's namespace is the node's own, except that a one-camera no
 namespace ends with the camera's name (the Shelf graph's `/cam1`, or `/rig/cam1`) is in the
 camera's namespace: the rig's is then its parent. Outputs are `<camera name>/people2d` there.
 
-Image type: sensor_msgs/Image or CompressedImage (jpeg, png), taken from the ROS graph when a
-publisher of the topic is known at start-up (get_topic_names_and_types), else by image_transport's
-naming: a topic ending in '/compressed' is CompressedImage, any other an Image. A topic decided by
-its name is looked up again every TYPE_RECHECK s until the graph knows it; if its publishers then
-have the other type, the subscription is re-made (logged). A JPEG is decoded shrunk by as much as
+Image type: sensor_msgs/Image or CompressedImage (jpeg, png), its publishers' when one is known at
+start-up (get_publishers_info_by_topic), else by image_transport's naming: a topic ending in
+'/compressed' is CompressedImage, any other an Image. A topic decided by its name is looked up
+again every image_topics.TYPE_RECHECK_S s until a publisher shows; if that has the other type,
+the subscription is re-made (logged; nodes.image_topics.ImageTypes). A JPEG is decoded shrunk by as much as
 the detector allows (OnnxPoseDetector.reduced_decoding: with heatmaps 'multipose', down to
 MultiPose's input side), its people mapped back to the camera's pixels.
 
@@ -114,7 +114,7 @@ from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog, short_cause
 from mvpose_ros.nodes.health import NodeHealth
-from mvpose_ros.nodes.image_topics import image_type
+from mvpose_ros.nodes.image_topics import ImageInput, ImageTypes
 from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, StartupError,
                                       camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
@@ -124,7 +124,6 @@ from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_L
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
 BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
-TYPE_RECHECK = 2.0  # s between graph look-ups of an image topic typed by its name
 # Skeletons older than this, against a set's stamp, place no one (the whole image is searched):
 # a few sets at the onnx backend's 2-5 sets per second, a walk of about a metre.
 TRACK_MAX_AGE_S = 1.0
@@ -172,8 +171,7 @@ class _Camera:
     output: Any  # Publisher
     camera: Camera | None = None
     source: str = 'the rig file'  # where the intrinsics came from
-    input_type: type = PointCloud2
-    typed_by: str = 'backend'  # 'graph', 'name' or 'backend' (openpose)
+    image: ImageInput | None = None  # onnx: its image topic's type (openpose: PointCloud2)
     subscription: Subscription | None = None
     info_problems: set[str] = field(default_factory=set)
     checked_info: tuple | None = None  # camera_info_msg.info_key of the last CameraInfo checked
@@ -277,7 +275,7 @@ class HeatmapDetectorNode(Node):
         self._monitor = NodeMonitor()
         self._released: dict[int, float] = {}  # whole rig: set index -> when released (monotonic)
         namespace = rig_namespace(self.get_namespace(), None if self._whole_rig else rig.cameras[indices[0]].name)
-        graph = self.get_topic_names_and_types()
+        self._image_types = ImageTypes(self, self._resubscribe)
         self._cameras: list[_Camera] = []
         for index in indices:
             rc = rig.cameras[index]
@@ -287,7 +285,7 @@ class HeatmapDetectorNode(Node):
                           'the rig file' if rc.camera is not None else '')
             if self._backend == 'onnx':
                 cam.input_topic = in_namespace(namespace, rc.image)
-                cam.input_type, cam.typed_by = image_type(cam.input_topic, graph)
+                cam.image = self._image_types.add(index, rc.name, cam.input_topic)
                 cam.turns = upright_turns(rc.R, rig.up) if p['upright'] else 0
             else:
                 cam.input_topic = in_namespace(namespace, camera_topic(rc.name, OPENPOSE))
@@ -303,12 +301,10 @@ class HeatmapDetectorNode(Node):
         for cam in self._cameras:
             self._subscribe(cam)
             camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam), self._depth)
-            typed = f'{cam.input_type.__name__}, by {cam.typed_by}' if self._backend == 'onnx' else 'PointCloud2'
+            typed = f'{cam.image.kind.__name__}, by {cam.image.typed_by}' if cam.image else 'PointCloud2'
             turned = f', turned {90 * cam.turns} degrees counterclockwise to stand people up' if cam.turns else ''
             self.get_logger().info(f'{cam.rig.name}: backend {self._backend}, {cam.input_topic} ({typed}{turned}) -> '
                                    f'{self.resolve_topic_name(cam.output.topic_name)}')
-        if self._backend == 'onnx' and any(c.typed_by == 'name' for c in self._cameras):
-            self._recheck_timer = self.create_timer(TYPE_RECHECK, self._recheck_types)
         now = time.monotonic()
         self._inputs = {cam.index: InputMonitor(cam.rig.name, now) for cam in self._cameras}
         self._health = NodeHealth(self, self._statuses)
@@ -352,26 +348,13 @@ class HeatmapDetectorNode(Node):
                                                         partial(self._on_openpose_cdr, cam, callback),
                                                         RECORDED_INPUT_QOS, raw=True)
             return
-        cam.subscription = camera_subscription(self, cam.input_type, cam.input_topic, callback, self._depth)
+        cam.subscription = camera_subscription(self, cam.image.kind, cam.input_topic, callback, self._depth)
 
-    def _recheck_types(self) -> None:
-        """A topic typed by its name: re-subscribe if the graph shows publishers of the other type."""
-        graph = self.get_topic_names_and_types()
-        for cam in self._cameras:
-            if cam.typed_by != 'name':
-                continue
-            found, how = image_type(cam.input_topic, graph)
-            if how != 'graph':
-                continue
-            cam.typed_by = 'graph'
-            if found is not cam.input_type:
-                self.get_logger().warning(f'{cam.rig.name}: {cam.input_topic} carries {found.__name__}, not '
-                                          f'{cam.input_type.__name__} as its name suggests: subscribing again')
-                self.destroy_subscription(cam.subscription)
-                cam.input_type = found
-                self._subscribe(cam)
-        if all(c.typed_by != 'name' for c in self._cameras):
-            self._recheck_timer.cancel()
+    def _resubscribe(self, index: int) -> None:
+        """Camera `index`'s image topic has another type than subscribed (ImageTypes)."""
+        cam = next(c for c in self._cameras if c.index == index)
+        self.destroy_subscription(cam.subscription)
+        self._subscribe(cam)
 
     @staticmethod
     def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:

@@ -17,7 +17,9 @@ are drawn, each decoded at 1/`reduce` of its size; a dropped set only when a cam
 image for a second (core.overlay_sets.due: under overload most sets are dropped). It still
 receives every image: at 5 cameras x 25 Hz about 15% of a core (README, "Your own cameras").
 Every input is best effort, so this node never slows the graph's reliable publishers down, and a
-lost message only costs a picture.
+lost message only costs a picture. An image topic's type (Image or CompressedImage) is the
+detector's rule (nodes.image_topics.ImageTypes): its publishers', or the name's until a publisher
+shows, then subscribed again if it differs.
 
 Diagnostics: ms per image drawn; sets seen, images drawn, and cameras not drawn by cause ('no image
 held': no image of the camera in the set's window: not in the set, never came, or fallen out).
@@ -54,7 +56,7 @@ from mvpose_ros.core.overlay_sets import Member, RecentByStamp, due, set_members
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.nodes.health import NodeHealth
-from mvpose_ros.nodes.image_topics import image_type
+from mvpose_ros.nodes.image_topics import ImageTypes
 from mvpose_ros.nodes.runtime import (VIEWER_QOS, RigIntrinsics, StartupError, camera_subscription, declare,
                                       live_parameters, load_rig_parameter, rig_parameters, run)
 
@@ -101,16 +103,17 @@ class OverlayNode(Node):
         self._log = ThrottledLog(self.get_logger())
         self._monitor = NodeMonitor()
         self._counts: Counter[str] = Counter()
-        graph = self.get_topic_names_and_types()
+        self._image_types = ImageTypes(self, self._subscribe_image)
+        self._image_subscriptions: dict[int, Any] = {}
         for c in self._drawn:
             rc = rig.cameras[c]
-            kind, how = image_type(self.resolve_topic_name(rc.image), graph)
-            camera_subscription(self, kind, rc.image, partial(self._on_image, c))
+            image = self._image_types.add(c, rc.name, self.resolve_topic_name(rc.image))
+            self._subscribe_image(c)
             self.create_subscription(PointCloud2, topics.camera_topic(rc.name, topics.PEOPLE2D),
                                      partial(self._on_people, c), VIEWER_QOS)
             self._outputs[c] = self.create_publisher(CompressedImage, topics.camera_topic(rc.name, topics.OVERLAY),
                                                      VIEWER_QOS)
-            self.get_logger().info(f'{rc.name}: {self.resolve_topic_name(rc.image)} ({kind.__name__}, by {how}) -> '
+            self.get_logger().info(f'{rc.name}: {image.topic} ({image.kind.__name__}, by {image.typed_by}) -> '
                                    f'{self._outputs[c].topic_name}')
         self.create_subscription(PointCloud2, topics.SKELETONS_LIVE, self._on_skeletons, VIEWER_QOS)
         self.create_subscription(Header, topics.SKELETONS_DROPPED, self._on_dropped, VIEWER_QOS)
@@ -121,6 +124,15 @@ class OverlayNode(Node):
         if 'max_rate' in changes:
             self._period = 1.0 / changes['max_rate'] if changes['max_rate'] else 0.0
         self._quality = changes.get('jpeg_quality', self._quality)
+
+    def _subscribe_image(self, camera: int) -> None:
+        """Subscribe camera `camera`'s images with the type ImageTypes has for them (again, when it
+        found the other type)."""
+        if camera in self._image_subscriptions:
+            self.destroy_subscription(self._image_subscriptions[camera])
+        image = self._image_types.inputs[camera]
+        self._image_subscriptions[camera] = camera_subscription(self, image.kind, image.topic,
+                                                                partial(self._on_image, camera))
 
     def _on_image(self, camera: int, msg: Any) -> None:
         self._images[camera].add(stamp_ns(msg.header.stamp), msg, len(msg.data))
