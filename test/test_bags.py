@@ -467,6 +467,17 @@ def test_a_turned_camera_sees_the_turned_image(turns):
     np.testing.assert_allclose(turned.centre, cam.centre, atol=1e-12)
 
 
+def _first_messages(*recipes) -> dict[str, dict[str, object]]:
+    """Per recipe name, the first message of each of its topics."""
+    first = {}
+    for recipe in recipes:
+        items = {}
+        for topic, msg, _ in recipe.items():
+            items.setdefault(topic, msg)
+        first[recipe.name] = items
+    return first
+
+
 def test_shelf_rig_turned_recipe_turns_images_cameras_and_rig_file_together(tmp_path):
     """shelf_rig_turned: each camera's image is np.rot90 of shelf_rig's by ForeignRig.TURNS, its
     CameraInfo and the rig file's orientation turned with it, so a world point lands where the
@@ -478,12 +489,7 @@ def test_shelf_rig_turned_recipe_turns_images_cameras_and_rig_file_together(tmp_
     from mvpose_ros.core.geometry.rig import load_rig_file
     plain, turned = shelf_rig_recipe(SHELF), shelf_rig_recipe(SHELF, turned=True)
     assert turned.name == 'shelf_rig_turned' and turned.fingerprint() != plain.fingerprint()
-    first = {}
-    for recipe in (plain, turned):
-        items = {}
-        for topic, msg, _ in recipe.items():
-            items.setdefault(topic, msg)
-        first[recipe.name] = items
+    first = _first_messages(plain, turned)
     (tmp_path / 'turned.yaml').write_text(turned.rig_text())
     (tmp_path / 'plain.yaml').write_text(plain.rig_text())
     rig_file, plain_rig = load_rig_file(tmp_path / 'turned.yaml'), load_rig_file(tmp_path / 'plain.yaml')
@@ -537,12 +543,7 @@ def test_shelf_rig_lenses_recipe_gives_each_camera_its_lens(tmp_path):
     from mvpose_ros.core.geometry.rig import load_rig_file
     plain, lensed = shelf_rig_recipe(SHELF), shelf_rig_recipe(SHELF, lenses=True)
     assert lensed.name == 'shelf_rig_lenses' and lensed.fingerprint() != plain.fingerprint()
-    first = {}
-    for recipe in (plain, lensed):
-        items = {}
-        for topic, msg, _ in recipe.items():
-            items.setdefault(topic, msg)
-        first[recipe.name] = items
+    first = _first_messages(plain, lensed)
     (tmp_path / 'rig.yaml').write_text(lensed.rig_text())
     rig = load_rig_file(tmp_path / 'rig.yaml')
     for name, (model, dist, _), rig_camera in zip(ForeignRig.NAMES, ForeignRig.LENSES, rig.cameras):
