@@ -29,37 +29,24 @@ def info_key(msg: CameraInfo) -> tuple | None:
     if len(msg.d) > lens.OPENCV_FULL:
         return None
     roi = msg.roi
-    return (msg.distortion_model, int(msg.width), int(msg.height), tuple(msg.k), tuple(msg.d), int(msg.binning_x),
-            int(msg.binning_y), int(roi.x_offset), int(roi.y_offset), int(roi.width), int(roi.height))
+    return (msg.distortion_model, int(msg.width), int(msg.height), tuple(msg.k), tuple(msg.d), tuple(msg.r),
+            tuple(msg.p), int(msg.binning_x), int(msg.binning_y), int(roi.x_offset), int(roi.y_offset),
+            int(roi.width), int(roi.height))
 
 
-def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, int, str]:
+def info_to_intrinsics(msg: CameraInfo, rectified: bool = False) -> tuple[np.ndarray, np.ndarray, int, int, str]:
     """K (3, 3) pixels, dist (the model's coefficients), width, height (pixels) and distortion
     model of the images that come with a CameraInfo, as RigCamera.with_info takes them. An empty d
-    is no distortion. A driver that bins or cuts a region of interest (binning_x/y, roi) sends the
-    calibration of the whole sensor with them: K and the size are those of the image it sends, as
-    image_geometry computes them (cx' = (cx - x_offset) / binning_x, ...). ValueError of one line
-    for a model core.geometry.lens does not have, a d of another length than the model's, a K that
-    is not finite, upper-triangular with fx, fy > 0 (an uncalibrated driver publishes zeros), a
-    size below 1x1, or a region of interest outside the sensor."""
-    model = msg.distortion_model
-    if model not in lens.MODELS:
-        raise ValueError(f'CameraInfo {lens.unsupported(model)}')
-    n = len(lens.MODELS[model])
-    lengths = (0, n, lens.OPENCV_FULL) if model == lens.RATIONAL_POLYNOMIAL else (0, n)
-    if len(msg.d) not in lengths:  # before copying: a message can carry millions
-        raise ValueError(f'CameraInfo d: expected {" or ".join(map(str, lengths[1:]))} values for '
-                         f'{lens.describe(model)} (or none), got {len(msg.d)}')
-    dist = np.array(msg.d, dtype=np.float64)
-    if not np.isfinite(dist).all():
-        raise ValueError(f'CameraInfo d: expected finite values, got {dist.tolist()}')
-    dist = lens.coefficients(model, dist, 'CameraInfo d')
-    K = np.array(msg.k, dtype=np.float64).reshape(3, 3)
-    if not (np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0
-            and (K[1, 0], K[2, 0], K[2, 1], K[2, 2]) == (0, 0, 0, 1)):
-        hint = ' (all zeros: the camera is not calibrated)' if not K.any() else ''
-        raise ValueError(f'CameraInfo k: expected a finite upper-triangular K with fx, fy > 0 and '
-                         f'K[2, 2] = 1, got {K.ravel().tolist()}{hint}')
+    is no distortion. For `rectified` images (image_proc's image_rect, which goes with the raw
+    camera's CameraInfo) K is P's left 3 x 3 and there is no distortion: d and its model are not
+    read. A driver that bins or cuts a region of interest (binning_x/y, roi) sends the calibration
+    of the whole sensor with them: K and the size are those of the image it sends, as image_geometry
+    computes them (cx' = (cx - x_offset) / binning_x, ...). ValueError of one line for a model
+    core.geometry.lens does not have, a d of another length than the model's, a K (or P) that is
+    not finite, upper-triangular with fx, fy > 0 (an uncalibrated driver publishes zeros), a
+    rectified frame of a stereo pair (P with a baseline, R not the identity), a size below 1x1, or a
+    region of interest outside the sensor."""
+    K, dist, model = _rectified(msg) if rectified else _raw(msg)
     if msg.width < 1 or msg.height < 1:
         raise ValueError(f'CameraInfo size: expected width, height >= 1, got '
                          f'{msg.width}x{msg.height}')
@@ -81,11 +68,54 @@ def info_to_intrinsics(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, int, in
     return K, dist, width, height, model
 
 
-def check_info(msg: CameraInfo, camera: Camera, tol_px: float = 0.5) -> None:
+def _raw(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, str]:
+    """K, dist, model of the raw image: CameraInfo's k, d and distortion_model."""
+    model = msg.distortion_model
+    if model not in lens.MODELS:
+        raise ValueError(f'CameraInfo {lens.unsupported(model)}')
+    n = len(lens.MODELS[model])
+    lengths = (0, n, lens.OPENCV_FULL) if model == lens.RATIONAL_POLYNOMIAL else (0, n)
+    if len(msg.d) not in lengths:  # before copying: a message can carry millions
+        raise ValueError(f'CameraInfo d: expected {" or ".join(map(str, lengths[1:]))} values for '
+                         f'{lens.describe(model)} (or none), got {len(msg.d)}')
+    dist = np.array(msg.d, dtype=np.float64)
+    if not np.isfinite(dist).all():
+        raise ValueError(f'CameraInfo d: expected finite values, got {dist.tolist()}')
+    return _intrinsic_matrix('k', msg.k), lens.coefficients(model, dist, 'CameraInfo d'), model
+
+
+def _rectified(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, str]:
+    """K, dist, model of the rectified image of a monocular camera: P's left 3 x 3, none, plumb_bob."""
+    P = np.array(msg.p, dtype=np.float64).reshape(3, 4)
+    K = _intrinsic_matrix('p', P[:, :3])
+    if P[:, 3].any():
+        raise ValueError(f"CameraInfo p: a baseline {P[:, 3].tolist()}: a stereo pair's second camera, whose "
+                         f'rectified image is not at its own pose; use its raw image (rectified: false)')
+    R = np.array(msg.r, dtype=np.float64).reshape(3, 3)
+    if R.any() and not np.allclose(R, np.eye(3), rtol=0, atol=1e-9):  # zeros: not given
+        raise ValueError(f"CameraInfo r: {R.ravel().tolist()} is not the identity: a stereo pair's rectified "
+                         f"frame, turned from the camera's; use the raw image (rectified: false)")
+    return K, np.zeros(len(lens.MODELS[lens.DEFAULT_MODEL])), lens.DEFAULT_MODEL
+
+
+def _intrinsic_matrix(field: str, values: np.ndarray) -> np.ndarray:
+    """(3, 3) of CameraInfo's `field` (k, or P's left 3 x 3), checked: finite, upper triangular,
+    fx, fy > 0, 1 at [2, 2]."""
+    K = np.array(values, dtype=np.float64).reshape(3, 3)
+    if not (np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0
+            and (K[1, 0], K[2, 0], K[2, 1], K[2, 2]) == (0, 0, 0, 1)):
+        hint = ' (all zeros: the camera is not calibrated)' if not K.any() else ''
+        raise ValueError(f'CameraInfo {field}: expected a finite upper-triangular {field.upper()} with fx, fy > 0 '
+                         f'and {field.upper()}[2, 2] = 1, got {K.ravel().tolist()}{hint}')
+    return K
+
+
+def check_info(msg: CameraInfo, camera: Camera, tol_px: float = 0.5, rectified: bool = False) -> None:
     """Raise ValueError naming the first item (size, fx, fy, cx, cy, skew, distortion) where msg
-    disagrees with camera; intrinsics within tol_px pixels pass. Distortion is compared by
-    where it moves the image's corners, edge midpoints and centre."""
-    K, dist, width, height, model = info_to_intrinsics(msg)
+    disagrees with camera (of `rectified` images: info_to_intrinsics); intrinsics within tol_px
+    pixels pass. Distortion is compared by where it moves the image's corners, edge midpoints and
+    centre."""
+    K, dist, width, height, model = info_to_intrinsics(msg, rectified)
     if (width, height) != (camera.width, camera.height):
         raise ValueError(f'CameraInfo size: {width}x{height}, camera {camera.name} is '
                          f'{camera.width}x{camera.height}')

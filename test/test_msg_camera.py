@@ -162,6 +162,44 @@ def test_binning_and_a_region_of_interest_give_the_sent_images_intrinsics(rig):
         info_to_intrinsics(msg)
 
 
+def test_a_rectified_image_is_described_by_p_without_distortion(rig):
+    """image_proc's image_rect goes with the raw camera's CameraInfo: with `rectified` the camera is
+    P's, without distortion, whatever d and its model say; a point lands where OpenCV's
+    rectification (undistortPoints onto P) puts its raw pixel. A stereo pair's rectified frames
+    (a baseline in P, R not the identity) are refused."""
+    import cv2
+    raw = dataclasses.replace(rig[1], dist=np.array([-0.25, 0.08, 0.001, -0.002, 0.0]))
+    new_K, _ = cv2.getOptimalNewCameraMatrix(raw.K, raw.dist, (raw.width, raw.height), 0.0)
+    msg = camera_to_info(raw, Header())
+    msg.p = np.column_stack([new_K, np.zeros(3)]).ravel()
+    rc = RigCamera('c1', 'image_rect', 'camera_info', 'c1', raw.R, raw.t, rectified=True)
+    K, dist, width, height, model = info_to_intrinsics(msg, rectified=True)
+    np.testing.assert_array_equal(K, new_K)
+    assert dist.tolist() == [0.0] * 5 and model == 'plumb_bob' and (width, height) == (raw.width, raw.height)
+    X = np.random.default_rng(2).uniform([-1, -1, 0], [1, 1, 2], (100, 3))
+    X = X[np.all((raw.project(X) > 0) & (raw.project(X) < [raw.width, raw.height]), axis=1)]
+    rectified = cv2.undistortPoints(raw.project(X)[:, None], raw.K, raw.dist, None, None, new_K,
+                                    (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))[:, 0]
+    np.testing.assert_allclose(rc.with_info(*info_to_intrinsics(msg, True)).project(X), rectified, atol=1e-6)
+    assert np.abs(raw.project(X) - rectified).max() > 5  # the lens matters here
+    check_info(msg, rc.with_info(*info_to_intrinsics(msg, True)), rectified=True)
+    msg.distortion_model, msg.d = 'kannala_brandt', [0.1] * 9  # the raw lens is not read
+    np.testing.assert_array_equal(info_to_intrinsics(msg, True)[0], new_K)
+    for field, value, problem in (
+            ('p', np.column_stack([new_K, [-50.0, 0, 0]]).ravel(), "CameraInfo p: a baseline [-50.0, 0.0, 0.0]: "
+             "a stereo pair's second camera"),
+            ('r', np.array([[1.0, 0, 0], [0, 0.8, -0.6], [0, 0.6, 0.8]]).ravel(), 'CameraInfo r: [1.0, 0.0, 0.0, '
+             "0.0, 0.8, -0.6, 0.0, 0.6, 0.8] is not the identity: a stereo pair's rectified frame"),
+            ('p', np.zeros(12), 'CameraInfo p: expected a finite upper-triangular P with fx, fy > 0')):
+        bad = camera_to_info(raw, Header())
+        bad.p = np.column_stack([new_K, np.zeros(3)]).ravel()
+        setattr(bad, field, value)
+        with pytest.raises(ValueError) as err:
+            info_to_intrinsics(bad, rectified=True)
+        assert str(err.value).startswith(problem) and '\n' not in str(err.value)
+        info_to_intrinsics(bad)  # the raw image's K and d are fine
+
+
 def _image(h: int = 6, w: int = 7) -> np.ndarray:
     return np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
 

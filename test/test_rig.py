@@ -175,6 +175,8 @@ def _explicit(tmp_path, shelf, change) -> Path:
     (lambda d, e: e.update(distortion_model=['plumb_bob']),
      "camera 'cam1': distortion_model: expected a non-empty string, got ['plumb_bob']"),
     (lambda d, e: e.update(D=[0.0] * 8), "camera 'cam1': D: plumb_bob has at most 5 coefficients"),
+    (lambda d, e: e.update(rectified='yes'), "camera 'cam1': rectified: expected true or false, got 'yes'"),
+    (lambda d, e: e.update(rectified=True), "camera 'cam1': rectified: only for intrinsics from CameraInfo"),
     (lambda d, e: e.update(distortion_model='equidistant', D=[0.0] * 5),
      "camera 'cam1': D: equidistant has at most 4 coefficients (k1 k2 k3 k4), got 5"),
     (lambda d, e: e.pop('K'), "camera 'cam1': missing K (intrinsics are all of width, height, K"),

@@ -379,7 +379,7 @@ class HeatmapDetectorNode(Node):
             if msg.header.frame_id != cam.rig.frame_id:
                 raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
             if cam.camera is None:
-                cam.camera = cam.rig.with_info(*info_to_intrinsics(msg))
+                cam.camera = cam.rig.with_info(*info_to_intrinsics(msg, cam.rig.rectified))
                 cam.source = f'the CameraInfo of stamp {stamp_ns(msg.header.stamp)} ns'
                 self.get_logger().info(f'{cam.rig.name}: intrinsics from {cam.info_topic} '
                                        f'({cam.camera.width}x{cam.camera.height})')
@@ -391,7 +391,7 @@ class HeatmapDetectorNode(Node):
             if key is not None and key == cam.checked_info:
                 return  # the same CameraInfo again (with every image): checked, and any problem said
             cam.checked_info = key
-            check_info(msg, cam.camera)
+            check_info(msg, cam.camera, rectified=cam.rig.rectified)
         except ValueError as exc:
             # A CameraInfo that disagrees means a wrong file or a re-calibrated camera: said once
             # per camera and problem, never acted on.

@@ -215,7 +215,7 @@ class RigIntrinsics:
             return
         rig_camera = self._rig.cameras[index]
         try:
-            self._cameras[index] = rig_camera.with_info(*info_to_intrinsics(msg))
+            self._cameras[index] = rig_camera.with_info(*info_to_intrinsics(msg, rig_camera.rectified))
         except ValueError as exc:
             problem = " ".join(str(exc).split())
             if (rig_camera.name, problem) not in self._problems:

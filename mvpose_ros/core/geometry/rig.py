@@ -13,6 +13,8 @@ A rig file lists, per camera, its name, topics, frame id and extrinsics; intrins
         position: [x, y, z]                     # optical centre in the world, metres
         orientation: [qx, qy, qz, qw]           # rotation world <- camera optical frame (REP-103
                                                 # optical: x right, y down, z forward), unit
+        rectified: false                        # true: `image` is image_proc's rectified image
+                                                # (image_rect): its intrinsics are CameraInfo's P
         # optional intrinsics, all of width, height, K or none of them:
         width: 1920                             # pixels
         height: 1080
@@ -52,7 +54,7 @@ NAME_PATTERN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 _TOP_KEYS = {'world_frame', 'up', 'cameras', 'calibration', 'width', 'height'}
 _TOPIC_KEYS = {'name', 'image', 'camera_info', 'frame_id'}
-_CAMERA_KEYS = _TOPIC_KEYS | {'position', 'orientation', 'width', 'height', 'K', 'distortion_model', 'D'}
+_CAMERA_KEYS = _TOPIC_KEYS | {'position', 'orientation', 'width', 'height', 'K', 'distortion_model', 'D', 'rectified'}
 
 
 def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
@@ -108,7 +110,9 @@ class RigCamera:
     """One camera of a rig: names, topics and extrinsics, and its Camera once intrinsics are known.
 
     R: (3, 3) world -> camera optical rotation; t: (3,) metres (x_cam = R @ X + t, as Camera);
-    camera: the calibrated Camera when the rig gives intrinsics, else None (see with_info).
+    camera: the calibrated Camera when the rig gives intrinsics, else None (see with_info);
+    rectified: its images are rectified (image_proc's image_rect), so CameraInfo's P, not K and D,
+    describes them.
     """
 
     name: str
@@ -118,6 +122,7 @@ class RigCamera:
     R: np.ndarray
     t: np.ndarray
     camera: Camera | None = None
+    rectified: bool = False
 
     @property
     def position(self) -> np.ndarray:
@@ -276,6 +281,12 @@ def _explicit_camera(path: Path, index: int, e: Any) -> RigCamera:
     R = quaternion_to_matrix(q / norm).T  # world -> camera
     t = -R @ position
     intrinsics = [k for k in ('width', 'height', 'K', 'distortion_model', 'D') if k in e]
+    rectified = e.get('rectified', False)
+    if not isinstance(rectified, bool):
+        raise ValueError(f'{where}: rectified: expected true or false, got {rectified!r}')
+    if rectified and intrinsics:
+        raise ValueError(f'{where}: rectified: only for intrinsics from CameraInfo (here give the rectified '
+                         f"image's K and no D instead)")
     camera = None
     if intrinsics:
         missing = [k for k in ('width', 'height', 'K') if k not in e]
@@ -285,7 +296,7 @@ def _explicit_camera(path: Path, index: int, e: Any) -> RigCamera:
         model = e.get('distortion_model', lens.DEFAULT_MODEL)
         camera = intrinsics_camera(where, name, R, t, e['K'], e.get('D', []), e['width'], e['height'],
                                    _string(where, 'distortion_model', model))
-    return RigCamera(name, image, info, frame_id, R, t, camera)
+    return RigCamera(name, image, info, frame_id, R, t, camera, rectified)
 
 
 def _names(where: str, e: dict, default_name: str | None) -> tuple[str, str, str, str]:
