@@ -1,5 +1,6 @@
 """CameraInfo for a calibrated camera (its lens model: plumb_bob, rational_polynomial or
-equidistant; no rectification) and its check against the rig a node loaded itself."""
+equidistant), the intrinsics of the images that come with one (raw or rectified, binned, a
+region of interest), and its check against the rig a node loaded itself."""
 from __future__ import annotations
 
 import dataclasses

@@ -36,9 +36,9 @@ Image type: sensor_msgs/Image or CompressedImage (jpeg, png), its publishers' wh
 start-up (get_publishers_info_by_topic), else by image_transport's naming: a topic ending in
 '/compressed' is CompressedImage, any other an Image. A topic decided by its name is looked up
 again every image_topics.TYPE_RECHECK_S s until a publisher shows; if that has the other type,
-the subscription is re-made (logged; nodes.image_topics.ImageTypes). A JPEG is decoded shrunk by as much as
-the detector allows (OnnxPoseDetector.reduced_decoding: with heatmaps 'multipose', down to
-MultiPose's input side), its people mapped back to the camera's pixels.
+the subscription is re-made (logged; nodes.image_topics.ImageTypes). A JPEG is decoded shrunk by
+as much as the detector allows (OnnxPoseDetector.reduced_decoding: with heatmaps 'multipose', down
+to MultiPose's input side), its people mapped back to the camera's pixels.
 
 QoS: images and CameraInfo are camera inputs (runtime.camera_subscription): best effort, keep
 last `queue_depth`, so best-effort (sensor data) and reliable publishers both connect; the
