@@ -166,12 +166,14 @@ class OverlayNode(Node):
         """Draw the set stamped `stamp` in every drawn camera that is due; ids None: a dropped set."""
         start = time.monotonic()
         self._counts['sets'] += 1
+        # most sets are due in no camera (max_rate): look their members up only for one that is
+        now_due = [c for c in self._drawn if due(start, self._last_drawn[c], self._period, ids is None)]
+        if not now_due:
+            return
         members = {m.camera: m for m in set_members(stamp, self._max_skew_ns, self._images, self._people)}
         cameras = self._intrinsics.known
         drawn = 0
-        for c in self._drawn:
-            if not due(start, self._last_drawn[c], self._period, ids is None):
-                continue
+        for c in now_due:
             member = members.get(c)
             if member is None or cameras[c] is None:
                 self._counts['no image held' if member is None else 'no intrinsics yet'] += 1
