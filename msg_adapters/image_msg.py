@@ -3,7 +3,9 @@
 Image encodings: bgr8, rgb8, mono8, bgra8, rgba8, the 16-bit bgr16, rgb16, mono16 (byte order
 from is_bigendian; the high byte is kept) and the packed 4:2:2 encodings drivers publish:
 'yuv422' and 'uyvy' (U Y0 V Y1), 'yuv422_yuy2' and 'yuyv' (Y0 U Y1 V), BT.601 as OpenCV converts
-them. Rows may be padded (step > width * bytes per pixel).
+them, and the Bayer mosaics machine-vision drivers publish as image_raw (bayer_rggb8, bayer_bggr8,
+bayer_gbrg8, bayer_grbg8 and their 16-bit forms; the letters are the top-left 2x2 cell, row by
+row), demosaiced as cv_bridge does. Rows may be padded (step > width * bytes per pixel).
 
 CompressedImage: jpeg and png, the format string as image_transport writes it ('jpeg', 'png',
 'bgr8; jpeg compressed bgr8', 'rgb8; png compressed rgb8', ...). The image size is read from the
@@ -39,15 +41,25 @@ _YUV422 = {  # encoding -> (decode, encode) cv2 conversions
     'yuv422_yuy2': (cv2.COLOR_YUV2BGR_YUY2, cv2.COLOR_BGR2YUV_YUY2),
     'yuyv': (cv2.COLOR_YUV2BGR_YUY2, cv2.COLOR_BGR2YUV_YUY2),
 }
-ENCODINGS = tuple(_PLAIN) + tuple(_YUV422)
+# pattern -> cv2 demosaicing; OpenCV names a mosaic by its second row's second and third pixels
+_DEMOSAIC = {'rggb': cv2.COLOR_BayerBG2BGR, 'bggr': cv2.COLOR_BayerRG2BGR,
+             'gbrg': cv2.COLOR_BayerGR2BGR, 'grbg': cv2.COLOR_BayerGB2BGR}
+_BAYER = {f'bayer_{pattern}{bits}': (pattern, bits // 8) for pattern in _DEMOSAIC for bits in (8, 16)}
+ENCODINGS = tuple(_PLAIN) + tuple(_YUV422) + tuple(_BAYER)
 COMPRESSED_FORMATS = ('jpeg', 'png')
 
 
 def _bytes_per_pixel(encoding: str) -> int:
     if encoding in _YUV422:
         return 2
+    if encoding in _BAYER:
+        return _BAYER[encoding][1]
     channels, depth, _ = _PLAIN[encoding]
     return channels * depth
+
+
+def _sixteen_bit(encoding: str) -> bool:
+    return encoding.endswith('16')
 
 
 def _check_bgr(bgr: np.ndarray) -> np.ndarray:
@@ -61,9 +73,9 @@ def _check_bgr(bgr: np.ndarray) -> np.ndarray:
 
 def image_to_msg(bgr: np.ndarray, header: Header, encoding: str = 'bgr8', padding: int = 0,
                  bigendian: bool = False) -> Image:
-    """An Image of bgr (H, W, 3) uint8 in `encoding` (any of ENCODINGS; mono keeps the luma, 16-bit
-    ones scale by 257, 4:2:2 ones need an even width), each row followed by `padding` bytes;
-    bigendian: the byte order of 16-bit encodings."""
+    """An Image of bgr (H, W, 3) uint8 in `encoding` (any of ENCODINGS; mono keeps the luma, a
+    Bayer mosaic each pixel's colour of its pattern, 16-bit ones scale by 257, 4:2:2 ones need an
+    even width), each row followed by `padding` bytes; bigendian: the byte order of 16-bit encodings."""
     bgr = _check_bgr(bgr)
     if encoding not in ENCODINGS:
         raise ValueError(f'Image encoding: expected one of {list(ENCODINGS)}, got {encoding!r}')
@@ -72,17 +84,16 @@ def image_to_msg(bgr: np.ndarray, header: Header, encoding: str = 'bgr8', paddin
         if w % 2:
             raise ValueError(f'Image width: {encoding} packs pixel pairs, so the width must be even, got {w}')
         pixels = cv2.cvtColor(bgr, _YUV422[encoding][1])  # (H, W, 2)
+    elif encoding in _BAYER:
+        pixels = _mosaic(bgr, _BAYER[encoding][0])
+    elif _PLAIN[encoding][0] == 1:
+        pixels = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
     else:
-        channels, depth, _ = _PLAIN[encoding]
-        if channels == 1:
-            pixels = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)[..., None]
-        else:
-            order = [2, 1, 0] if encoding.startswith('rgb') else [0, 1, 2]
-            pixels = bgr[..., order]
-            if channels == 4:
-                pixels = np.concatenate([pixels, np.full((h, w, 1), 255, np.uint8)], axis=2)
-        if depth == 2:
-            pixels = (pixels.astype(np.uint16) * 257).astype('>u2' if bigendian else '<u2')
+        pixels = bgr[..., [2, 1, 0]] if encoding.startswith('rgb') else bgr
+        if _PLAIN[encoding][0] == 4:
+            pixels = np.concatenate([pixels, np.full((h, w, 1), 255, np.uint8)], axis=2)
+    if _sixteen_bit(encoding):
+        pixels = (pixels.astype(np.uint16) * 257).astype('>u2' if bigendian else '<u2')
     row = pixels.reshape(h, -1).view(np.uint8)
     rows = np.zeros((h, row.shape[1] + padding), np.uint8)
     rows[:, :row.shape[1]] = row
@@ -126,10 +137,21 @@ def msg_to_image(msg: Image, expected: tuple[int, int] | None = None) -> np.ndar
     rows = np.ascontiguousarray(np.frombuffer(msg.data, dtype=np.uint8).reshape(h, step)[:, :packed])
     if encoding in _YUV422:
         return cv2.cvtColor(rows.reshape(h, w, 2), _YUV422[encoding][0])
-    channels, depth, order = _PLAIN[encoding]
-    if depth == 2:
+    if _sixteen_bit(encoding):
         rows = (rows.view('>u2' if msg.is_bigendian else '<u2') >> 8).astype(np.uint8)
+    if encoding in _BAYER:
+        return cv2.cvtColor(rows, _DEMOSAIC[_BAYER[encoding][0]])
+    channels, _, order = _PLAIN[encoding]
     return np.ascontiguousarray(rows.reshape(h, w, channels)[..., order])
+
+
+def _mosaic(bgr: np.ndarray, pattern: str) -> np.ndarray:
+    """(H, W) uint8: each pixel of bgr (H, W, 3) keeps the channel its place in the 2x2 `pattern`
+    (e.g. 'rggb': R at even rows and columns) names."""
+    out = np.empty(bgr.shape[:2], np.uint8)
+    for k, colour in enumerate(pattern):
+        out[k // 2::2, k % 2::2] = bgr[k // 2::2, k % 2::2, 'bgr'.index(colour)]
+    return out
 
 
 def image_to_compressed_msg(bgr: np.ndarray, header: Header, fmt: str = 'jpeg', quality: int = 95) -> CompressedImage:

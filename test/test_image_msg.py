@@ -1,5 +1,6 @@
 """Image and CompressedImage decoding: every encoding round-trips (exactly where lossless), the
-4:2:2 encodings decode to the BT.601 colours, row padding and byte order are honoured, and bad
+4:2:2 encodings decode to the BT.601 colours, each Bayer pattern to its colours, row padding and
+byte order are honoured, and bad
 data (unknown encodings, short rows, truncated or corrupt files, headers declaring huge images)
 is refused with a one-line ValueError, the oversize ones before anything is decoded."""
 from __future__ import annotations
@@ -24,6 +25,7 @@ HEADER = Header(frame_id='left_optical')
 LOSSLESS = ('bgr8', 'rgb8', 'bgra8', 'rgba8', 'bgr16', 'rgb16')
 MONO = ('mono8', 'mono16')
 YUV422 = ('yuv422', 'uyvy', 'yuv422_yuy2', 'yuyv')
+BAYER = tuple(f'bayer_{p}{bits}' for p in ('rggb', 'bggr', 'gbrg', 'grbg') for bits in (8, 16))
 
 
 def _random(h: int = 6, w: int = 8, seed: int = 0) -> np.ndarray:
@@ -41,7 +43,7 @@ def _through_the_wire(msg):
 
 
 def test_every_encoding_is_decodable():
-    assert set(ENCODINGS) == set(LOSSLESS + MONO + YUV422)
+    assert set(ENCODINGS) == set(LOSSLESS + MONO + YUV422 + BAYER)
 
 
 @pytest.mark.parametrize('encoding', LOSSLESS + MONO + YUV422)
@@ -64,6 +66,34 @@ def test_round_trip(encoding, padding, bigendian):
         assert np.abs(back.astype(int) - bgr).max() <= 2  # 8-bit YCbCr rounding
     else:
         np.testing.assert_array_equal(back, bgr)
+
+
+@pytest.mark.parametrize('encoding', BAYER)
+@pytest.mark.parametrize('padding', [0, 5])
+@pytest.mark.parametrize('bigendian', [False, True])
+def test_bayer_round_trip(encoding, padding, bigendian):
+    """A mosaic keeps one colour per pixel; demosaicing a linear ramp gives it back exactly away
+    from the border (the interpolation is bilinear there)."""
+    bgr = _smooth(24, 32)
+    msg = _through_the_wire(image_to_msg(bgr, HEADER, encoding, padding=padding, bigendian=bigendian))
+    depth = 2 if encoding.endswith('16') else 1
+    assert (msg.width, msg.height, msg.step) == (32, 24, depth * 32 + padding) and len(msg.data) == msg.step * 24
+    back = msg_to_image(msg)
+    assert back.shape == bgr.shape and back.dtype == np.uint8
+    ramp = bgr.astype(int)
+    assert np.abs(back[2:-2, 2:-2].astype(int) - ramp[2:-2, 2:-2]).max() <= 1
+
+
+@pytest.mark.parametrize('pattern', ['rggb', 'bggr', 'gbrg', 'grbg'])
+def test_bayer_patterns_decode_to_their_colours(pattern):
+    """A flat colour mosaiced by hand: the pattern's letters name the top-left 2x2 cell row by row,
+    so each pattern read as another one would swap red and blue or mix green into them."""
+    colour = {'b': 10, 'g': 50, 'r': 200}
+    cell = [colour[letter] for letter in pattern]
+    row0, row1 = bytes(cell[:2] * 4), bytes(cell[2:] * 4)
+    msg = Image(height=8, width=8, encoding=f'bayer_{pattern}8', step=8, data=(row0 + row1) * 4)
+    out = msg_to_image(msg)
+    assert out[2:-2, 2:-2].reshape(-1, 3).tolist() == [[10, 50, 200]] * 16
 
 
 def _yuv_pair(layout: str, y0: int, u: int, y1: int, v: int) -> bytes:
