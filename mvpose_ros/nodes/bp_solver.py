@@ -265,13 +265,17 @@ class BpSolverNode(Node):
             cause = {_NotReady: 'no intrinsics', Oversize: 'oversize'}.get(type(exc), 'malformed')
             self._answer_nobody(stamp, arrival, cause, exc)
             return
+        self._inputs[frame] = (bundles, arrival)
+        self._stamps[frame] = msg.header.stamp
+        due = [(result, self._stamps.pop(result.frame)) for result in results]
+        # the lagged frame first: its budget past the lag is the tighter one (README, the lag dial)
+        for result, stamp in due:
+            self._publish_skeletons(result, stamp)
         # with no lag the output is the causal estimate itself
         self._publish_live(results[0] if self._lag == 0 else self._inference.live(), msg.header.stamp)
         self._monitor.processed_totals(time.monotonic(), self._inference.timer.seconds)
-        self._inputs[frame] = (bundles, arrival)
-        self._stamps[frame] = msg.header.stamp
-        for result in results:
-            self._publish(result, self._stamps.pop(result.frame))
+        for result, stamp in due:
+            self._after_output(result, stamp)
 
     def _check_size(self, size: int, slack: int = 0, what: str = 'data bytes') -> None:
         """Oversize for more than `slack` bytes over the data the rig's views of
@@ -323,12 +327,21 @@ class BpSolverNode(Node):
         self._cameras_sent = True
 
     def _publish(self, result: FrameResult, stamp: Time) -> None:
+        self._publish_skeletons(result, stamp)
+        self._after_output(result, stamp)
+
+    def _publish_skeletons(self, result: FrameResult, stamp: Time) -> None:
         header = Header(stamp=stamp, frame_id=self._world_frame)
         ids = np.asarray(result.person_ids, dtype=np.int64)
         self._skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
+
+    def _after_output(self, result: FrameResult, stamp: Time) -> None:
+        """What follows an output frame, off the latency path: its markers (while anyone subscribes:
+        about 2 ms), diagnostics and counts."""
         if self._markers.get_subscription_count():
-            self._markers.publish(skeleton_markers(ids, result.joints, header, confidence=result.confidence,
-                                                   lifetime_s=self._marker_lifetime))
+            ids = np.asarray(result.person_ids, dtype=np.int64)
+            self._markers.publish(skeleton_markers(ids, result.joints, Header(stamp=stamp, frame_id=self._world_frame),
+                                                   confidence=result.confidence, lifetime_s=self._marker_lifetime))
         self._observe(result, stamp)
         self._frames_out += 1
         if self._frames_out % REPORT_EVERY == 0 and self._inference is not None:
