@@ -1,6 +1,6 @@
 """Lens models besides plumb_bob (core.geometry.lens): rational_polynomial and equidistant
 against OpenCV, on the real Shelf camera 1 given the lenses of other drivers, and their way
-through the rig file and CameraInfo."""
+through the rig file and CameraInfo; a calibration whose lens folds back inside its image is refused."""
 from __future__ import annotations
 
 import dataclasses
@@ -167,3 +167,50 @@ def test_a_fisheye_frustum_stays_near_its_camera(camera):
     corners = frustum(cam, 0.5)
     assert np.degrees(np.arccos(cam.directions(np.array([[0.0, 0.0]])) @ cam.R[2])) > 85
     assert np.linalg.norm(corners[1:] - cam.centre, axis=-1).max() <= 1.0 + 1e-9
+
+
+@pytest.mark.parametrize('model, dist, fold_at', [
+    # r (1 + k1 r^2) stops growing at r = 1 / sqrt(-3 k1), where it is 2/3 of r
+    ('plumb_bob', [-0.2, 0, 0, 0, 0], 2 / 3 / np.sqrt(0.6)),
+    ('rational_polynomial', [-0.2, 0, 0, 0, 0, 0, 0, 0], 2 / 3 / np.sqrt(0.6)),
+    # r / (1 + k4 r^2) at r = 1 / sqrt(k4), where it is r / 2
+    ('rational_polynomial', [0, 0, 0, 0, 0, 0.5, 0, 0], 0.5 / np.sqrt(0.5)),
+    # theta (1 + k1 theta^2) at theta = 1 / sqrt(-3 k1)
+    ('equidistant', [-0.5, 0, 0, 0], 2 / 3 / np.sqrt(1.5)),
+])
+def test_a_lens_folds_where_its_radial_map_turns(model, dist, fold_at):
+    dist = np.array(dist, dtype=float)
+    assert lens.fold(model, dist, fold_at * 1.01) == pytest.approx(fold_at, rel=1e-4)
+    assert lens.fold(model, dist, fold_at * 0.99) is None  # the image ends before it
+
+
+def test_sound_lenses_do_not_fold_and_a_fisheye_may_see_beyond_its_corners():
+    for model, dist in (('rational_polynomial', RATIONAL), ('equidistant', FISHEYE), ('plumb_bob', np.zeros(5))):
+        assert lens.fold(model, dist, 3.0) is None  # about 70 degrees off axis
+    # a circular fisheye: its image's corners lie beyond 90 degrees, outside its image circle
+    assert lens.fold('equidistant', FISHEYE, 2.5) is None
+    # a pinhole image cannot reach 90 degrees off axis: one reaching past what its lens maps there folds
+    assert lens.fold('plumb_bob', np.array([-1e-7, 0, 0, 0, 0]), 1000.0) == pytest.approx(900.0, rel=1e-3)
+
+
+def test_a_calibration_that_folds_inside_the_image_is_refused_in_one_line(tmp_path, camera):
+    """From the rig file and from a CameraInfo: a wide camera whose k3 turns the map back 544 px out,
+    with corners 734 px out, as a calibration without views near the corners can give."""
+    wide = dataclasses.replace(camera, K=np.array([[600.0, 0, 640], [0, 600, 360], [0, 0, 1]]), width=1280,
+                               height=720, dist=np.array([-0.3, 0.1, 0, 0, -0.02]))
+    problem = (r"camera 'wide': D: the plumb_bob lens folds back about 544 px from the principal point, inside the "
+               r"1280x720 image \(its corners reach 734 px\)")
+    entry = {'name': 'wide', 'position': wide.centre.tolist(), 'orientation': matrix_to_quaternion(wide.R.T).tolist(),
+             'width': wide.width, 'height': wide.height, 'K': wide.K.tolist(), 'D': wide.dist.tolist()}
+    path = tmp_path / 'rig.yaml'
+    path.write_text(yaml.safe_dump({'cameras': [entry]}))
+    with pytest.raises(ValueError, match=problem) as err:
+        load_rig_file(path)
+    assert '\n' not in str(err.value)
+    del entry['K'], entry['D'], entry['width'], entry['height']
+    path.write_text(yaml.safe_dump({'cameras': [entry]}))
+    from_info = load_rig_file(path).cameras[0]
+    with pytest.raises(ValueError, match=problem):
+        from_info.with_info(*info_to_intrinsics(camera_to_info(wide, Header())))
+    k3 = dataclasses.replace(wide, dist=np.array([-0.3, 0.1, 0, 0, 0.0]))  # the same without k3: sound
+    assert from_info.with_info(*info_to_intrinsics(camera_to_info(k3, Header()))).distortion_model == 'plumb_bob'

@@ -34,6 +34,7 @@ NONE, RADIAL_TANGENTIAL, FISHEYE = 0, 1, 2
 KERNEL_SLOTS = 8
 KERNEL_SIZE = KERNEL_SLOTS + 1
 _NEWTON_ITERATIONS = 10  # quadratic convergence: exact to float precision for a lens monotone over the image
+_FOLD_SAMPLES = 4096  # radii fold() looks at: 0.34% apart (a pinhole's), or 0.02 degrees (a fisheye's)
 
 
 def describe(model: str) -> str:
@@ -68,6 +69,40 @@ def coefficients(model: str, values: np.ndarray, what: str = 'D') -> np.ndarray:
 def distorts(model: str, dist: np.ndarray) -> bool:
     """Whether the lens moves any point: a fisheye always, the others with a non-zero coefficient."""
     return model == EQUIDISTANT or bool(np.any(dist != 0))
+
+
+def fold(model: str, dist: np.ndarray, reach: float) -> float | None:
+    """Where the lens's radial map stops growing, as a distorted normalised radius, when that is
+    within `reach` (the largest distorted normalised radius the image holds: its corners), else
+    None. Beyond such a fold two rays land on one pixel, and undistorting a pixel there has no one
+    answer: a calibration fitted with too few views near the corners does this. The tangential
+    terms are left out (they are small where a calibration is sound). A pinhole image whose
+    corners lie beyond every radius the lens reaches before 90 degrees off axis folds at the
+    largest; a fisheye's corners may lie outside its image circle (dark), so only its fold counts."""
+    if not distorts(model, dist):
+        return None
+    r, r_d = _radial_map(model, np.asarray(dist, dtype=np.float64))
+    reached = np.flatnonzero(r_d >= reach)
+    end = reached[0] if reached.size else len(r_d) - 1
+    stops = np.flatnonzero(np.diff(r_d[:end + 1]) <= 0)
+    if stops.size:
+        return float(r_d[stops[0]])
+    if not reached.size and model != EQUIDISTANT:
+        return float(r_d.max())
+    return None
+
+
+def _radial_map(model: str, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) normalised radii up to about 90 degrees off axis, densely sampled, and (N,) their
+    distorted radii."""
+    if model == EQUIDISTANT:
+        theta = np.linspace(0.0, np.pi / 2, _FOLD_SAMPLES)[1:-1]
+        r = np.tan(theta)
+        return r, r * _fisheye_scale(dist, r)
+    k1, k2, _, _, k3, k4, k5, k6 = np.pad(dist, (0, KERNEL_SLOTS - len(dist)))
+    r = np.geomspace(1e-3, 1e3, _FOLD_SAMPLES)  # up to 89.94 degrees
+    r2 = r * r
+    return r, r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
 
 
 def kernel_form(model: str, dist: np.ndarray) -> np.ndarray:

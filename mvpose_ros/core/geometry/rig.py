@@ -102,7 +102,22 @@ def intrinsics_camera(where: str, name: str, R: np.ndarray, t: np.ndarray, K: An
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f'{where}: {field}: expected a whole number of pixels >= 1, got {value!r}')
         size.append(int(value))
+    _no_fold(where, K, d, *size, distortion_model)
     return Camera(name, K, R, t, d, *size, distortion_model)
+
+
+def _no_fold(where: str, K: np.ndarray, d: np.ndarray, width: int, height: int, model: str) -> None:
+    """ValueError when the lens folds back inside the image (lens.fold), in pixels from the
+    principal point (at the geometric mean focal length)."""
+    corners = np.array([[0.0, 0.0], [width, 0.0], [0.0, height], [width, height]])
+    normalised = (corners - K[:2, 2]) / np.diag(K)[:2]
+    reach = float(np.sqrt((normalised ** 2).sum(axis=1)).max())
+    folded = lens.fold(model, d, reach)
+    if folded is not None:
+        f = float(np.sqrt(K[0, 0] * K[1, 1]))
+        raise ValueError(f'{where}: D: the {model} lens folds back about {folded * f:.0f} px from the principal '
+                         f'point, inside the {width}x{height} image (its corners reach {reach * f:.0f} px): beyond '
+                         f'that, two rays land on one pixel. Recalibrate with views near the corners')
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
