@@ -46,8 +46,7 @@ parameter file can override them (qos_overrides.<topic>.subscription.*).
 
 Intrinsics: from the rig file, else from the camera's first usable CameraInfo (images wait
 for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use is logged
-once per camera and problem and never acted on. A camera's CameraInfo is read until one is taken
-or agrees with the rig file, then no more.
+once per camera and problem and never acted on.
 
 Bounded input: every input is checked before it is queued or worked on (_admit, no decoding):
 the camera's frame_id; an image against its camera's size (the data at most what such an image
@@ -174,7 +173,6 @@ class _Camera:
     source: str = 'the rig file'  # where the intrinsics came from
     image: ImageInput | None = None  # onnx: its image topic's type (openpose: PointCloud2)
     subscription: Subscription | None = None
-    info_subscription: Subscription | None = None  # until a CameraInfo is taken or agrees
     info_problems: set[str] = field(default_factory=set)
     checked_info: tuple | None = None  # camera_info_msg.info_key of the last CameraInfo checked
     turns: int = 0  # onnx: quarter turns that stand its image up (upright.upright_turns)
@@ -302,8 +300,7 @@ class HeatmapDetectorNode(Node):
             self._start_sets(p, rig.world_frame)
         for cam in self._cameras:
             self._subscribe(cam)
-            cam.info_subscription = camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam),
-                                                        self._depth)
+            camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam), self._depth)
             typed = f'{cam.image.kind.__name__}, by {cam.image.typed_by}' if cam.image else 'PointCloud2'
             turned = f', turned {90 * cam.turns} degrees counterclockwise to stand people up' if cam.turns else ''
             self.get_logger().info(f'{cam.rig.name}: backend {self._backend}, {cam.input_topic} ({typed}{turned}) -> '
@@ -389,17 +386,12 @@ class HeatmapDetectorNode(Node):
                 if self._whole_rig:
                     with self._intrinsics_in:
                         self._intrinsics_in.notify_all()
-            else:
-                key = info_key(msg)
-                if key is not None and key == cam.checked_info:
-                    return  # the same CameraInfo again (with every image): checked, and its problem said
-                cam.checked_info = key
-                check_info(msg, cam.camera, rectified=cam.rig.rectified)
-            # A driver sends one with every image: each would wake this node as the frame's work starts
-            # (1.3 ms of the Shelf graph's median latency with five detectors on two cores).
-            if cam.info_subscription is not None:
-                self.destroy_subscription(cam.info_subscription)
-                cam.info_subscription = None
+                return
+            key = info_key(msg)
+            if key is not None and key == cam.checked_info:
+                return  # the same CameraInfo again (with every image): checked, and any problem said
+            cam.checked_info = key
+            check_info(msg, cam.camera, rectified=cam.rig.rectified)
         except ValueError as exc:
             # A CameraInfo that disagrees means a wrong file or a re-calibrated camera: said once
             # per camera and problem, never acted on.
