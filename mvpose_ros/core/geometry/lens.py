@@ -81,7 +81,7 @@ def fold(model: str, dist: np.ndarray, reach: float) -> float | None:
     largest; a fisheye's corners may lie outside its image circle (dark), so only its fold counts."""
     if not distorts(model, dist):
         return None
-    r, r_d = _radial_map(model, np.asarray(dist, dtype=np.float64))
+    r_d = _distorted_radii(model, np.asarray(dist, dtype=np.float64))
     reached = np.flatnonzero(r_d >= reach)
     end = reached[0] if reached.size else len(r_d) - 1
     stops = np.flatnonzero(np.diff(r_d[:end + 1]) <= 0)
@@ -92,17 +92,15 @@ def fold(model: str, dist: np.ndarray, reach: float) -> float | None:
     return None
 
 
-def _radial_map(model: str, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) normalised radii up to about 90 degrees off axis, densely sampled, and (N,) their
-    distorted radii."""
+def _distorted_radii(model: str, dist: np.ndarray) -> np.ndarray:
+    """(N,) the distorted radii of normalised radii growing densely up to about 90 degrees off axis."""
     if model == EQUIDISTANT:
-        theta = np.linspace(0.0, np.pi / 2, _FOLD_SAMPLES)[1:-1]
-        r = np.tan(theta)
-        return r, r * _fisheye_scale(dist, r)
+        r = np.tan(np.linspace(0.0, np.pi / 2, _FOLD_SAMPLES)[1:-1])
+        return r * _fisheye_scale(dist, r)
     k1, k2, _, _, k3, k4, k5, k6 = np.pad(dist, (0, KERNEL_SLOTS - len(dist)))
     r = np.geomspace(1e-3, 1e3, _FOLD_SAMPLES)  # up to 89.94 degrees
     r2 = r * r
-    return r, r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    return r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
 
 
 def kernel_form(model: str, dist: np.ndarray) -> np.ndarray:
