@@ -55,11 +55,12 @@ def test_onnx_detector_node_turns_images_into_people_and_logs_bad_frames(domain,
             pub.publish(unknown)
             pub.publish(image_to_msg(np.zeros_like(bgr), _header(576, 'cam1')))  # nobody: an empty message
             pub.publish(image_to_msg(bgr, _header(577, 'cam1')))
-            assert spin_until(executor, lambda: 577 in out, 30.0), log.read_text()
+            pub.publish(image_to_msg(bgr, _header(578, 'cam1'), 'bayer_rggb8'))  # a machine-vision camera's
+            assert spin_until(executor, lambda: 578 in out, 30.0), log.read_text()
             spin_until(executor, lambda: False, 0.5)
         finally:
             stop(proc)
-    assert sorted(out) == [572, 576, 577] and all(len(v) == 1 for v in out.values())
+    assert sorted(out) == [572, 576, 577, 578] and all(len(v) == 1 for v in out.values())
     assert msg_to_people(out[576][0]) == []
     rng = np.random.default_rng(0)
     # the node's settings (threads 1 as there: onnxruntime's sums depend on the thread split)
@@ -77,6 +78,12 @@ def test_onnx_detector_node_turns_images_into_people_and_logs_bad_frames(domain,
             last_cell = np.array(b.heatmap.maps.shape[:0:-1]) - 1
             uv = origin + b.heatmap.stride * rng.uniform(0, 1, (16, 200, 2)) * last_cell
             np.testing.assert_allclose(a.heatmap.lookup(uv), b.heatmap.lookup(uv), atol=1 / 255 + 1e-3)
+    # demosaiced, the same people within a few pixels (3.6 px at most here; read as another pattern,
+    # red and blue swapped, MultiPose orders them otherwise)
+    mosaic = msg_to_people(out[578][0])
+    assert len(mosaic) == len(expected)
+    for a, b in zip(mosaic, expected):
+        np.testing.assert_allclose(a.keypoints[:, :2], b.keypoints[:, :2], atol=5.0)
     text = log.read_text()
     assert "stamp 22920000000 ns dropped: frame_id 'cam7' is not this camera ('cam1')" in text
     assert 'stamp 22960000000 ns dropped: Image size: 320x240, expected 1032x776' in text
