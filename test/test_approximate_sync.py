@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from mvpose_ros.core.association.approximate_sync import ApproximateSync, Drop, SyncedSet
+from mvpose_ros.core.association.approximate_sync import ApproximateSync, Drop, SyncedSet, stamp_rate
 from mvpose_ros.core.association.stamp_sync import StampSync, SyncedFrame
 
 PERIOD_NS = 40_000_000
@@ -391,3 +391,13 @@ def test_an_absent_camera_coming_back_joins_within_the_grace_or_is_waited_for_af
             else:
                 released += sync.add(stamp, 4, 4, now)
         assert [s.missing for s in released] == [[], [4], set2_missing, []] and sync.absent == []
+
+
+def test_the_rate_of_cameras_from_their_stamps_ignores_drops_late_starts_and_order():
+    ms = 1_000_000
+    steady = [k * 66_667 * 1000 for k in range(30)]  # 15 Hz
+    dropped = [t + 3 * ms for k, t in enumerate(steady) if k % 7 != 3]  # offset, a frame dropped every 7
+    late = steady[12:][::-1]  # started late, stamps out of order
+    assert stamp_rate([steady, dropped, late]) == pytest.approx(15.0, rel=1e-3)
+    assert stamp_rate([[0, 40 * ms], [5 * ms]]) is None  # fewer than three stamps: no interval to trust
+    assert stamp_rate([]) is None

@@ -20,7 +20,8 @@ from mvpose_ros.cli.graph import main as graph_main
 from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,
                                      rig_graph_nodes, rig_played_connections, rig_sync, write_overrides)
-from mvpose_ros.graph.report import count_under_sets, rig_prediction_lines, rig_report, set_skews_ms
+from mvpose_ros.graph.report import (count_under_sets, frame_rate_note, rig_prediction_lines, rig_report,
+                                     set_skews_ms)
 from mvpose_ros.package_files import package_path
 
 S = 1_000_000_000
@@ -158,6 +159,9 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path, monkeypatch):
                            rate=None, qos=None, predictions=None, loops=2, overrides=[crowd])
     rig, run, settings, files, sets = rig_run_plan(args)
     assert files == [package_path(RIG_TEMPLATE), config.resolve(), crowd.resolve()]
+    # the template's frame_rate, and the bag's cameras' rate (40 ms apart), so nothing to say
+    assert run.frame_rate == 25.0 and run.bag_rate == pytest.approx(25.0)
+    assert frame_rate_note(run.bag_rate, run.frame_rate) is None
     assert run.rate == 2.0 and run.qos == 'sensor' and run.max_skew == 0.01 and not run.lockstep
     # two passes: the second moved on by the bag's log span plus a period, as the player moves it
     span = 2 * PERIOD + 5 * MS + PERIOD
@@ -279,3 +283,11 @@ def test_sets_are_scored_one_line_each_against_the_frame_they_show(tmp_path):
     assert text[0].startswith('set   0: ') and text[1].startswith('set   1 (without back, door): ')
     assert (f'Actor {first}: found in 2 sets, MPJPE mean 50.0 mm, min 0.0, max 100.0; in the 1 with every camera '
             f'mean 0.0, max 0.0; ids') in text[4]
+
+
+def test_a_bag_at_another_rate_than_frame_rate_is_said_with_the_rate_to_set():
+    assert frame_rate_note(None, 25.0) is None  # too few stamps to tell
+    assert frame_rate_note(26.0, 25.0) is None and frame_rate_note(23.0, 25.0) is None  # within 10 %
+    note = frame_rate_note(15.0, 25.0)
+    assert note.startswith("the bag's cameras run at 15.0 Hz, the parameters' frame_rate is 25 Hz") and '\n' not in note
+    assert 'set it to 15.0' in note and frame_rate_note(60.0, 25.0).startswith("the bag's cameras run at 60.0 Hz")

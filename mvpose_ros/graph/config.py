@@ -219,7 +219,9 @@ class RigRun:
     """A run of the graph on a recorded rig: the rig file (absolute), the bag, lockstep or `rate`,
     the player's QoS ('sensor' or 'reliable'), the set synchronisation (max_skew, sync_timeout,
     s, as the graph's association), and ack_timeout (lockstep: s after which a set the graph
-    dropped is given up); loops: passes over the bag (stamps moved on as the player does)."""
+    dropped is given up); loops: passes over the bag (stamps moved on as the player does);
+    frame_rate: the nodes' (Hz; max_skew's default and bp_solver's nominal step follow it);
+    bag_rate: the rate of the bag's cameras (Hz, approximate_sync.stamp_rate; None: too few stamps)."""
 
     rig: str
     bag: str
@@ -230,6 +232,8 @@ class RigRun:
     sync_timeout: float
     ack_timeout: float
     loops: int = 1
+    frame_rate: float = FRAME_RATE
+    bag_rate: float | None = None
 
 
 def runner_section(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> dict[str, object]:
@@ -243,13 +247,23 @@ def runner_section(params_list: Sequence[Mapping[str, Mapping[str, object]]]) ->
 def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> tuple[float, float]:
     """max_skew and sync_timeout (s) the association node gets from these parameter files (its
     defaults: max_skew 0 = half a frame period of frame_rate, 25 Hz; sync_timeout 0.5 s)."""
+    section = _association(params_list)
+    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(rig_frame_rate(params_list))
+    return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
+
+
+def rig_frame_rate(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> float:
+    """The frame_rate (Hz) the association node gets from these parameter files (default 25)."""
+    return float(_association(params_list).get('frame_rate', FRAME_RATE))
+
+
+def _association(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> dict[str, object]:
     section: dict[str, object] = {}
     for params in params_list:
         for node, values in params.items():
             if node in ('/**', 'association', '/association', '/**/association'):
                 section |= dict(values)
-    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(float(section.get('frame_rate', FRAME_RATE)))
-    return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
+    return section
 
 
 def rig_graph_nodes(run: RigRun, data_root: str | None = None, start_topic: str = '',

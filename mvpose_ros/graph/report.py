@@ -59,6 +59,20 @@ def frame_ranges(frames: Sequence[int]) -> str:
     return ', '.join(f'{a}' if a == b else f'{a}-{b}' for a, b in zip(starts, ends))
 
 
+RATE_TOLERANCE = 0.1  # relative: a bag's camera rate this far from the nodes' frame_rate is said
+
+
+def frame_rate_note(bag_hz: float | None, frame_rate: float) -> str | None:
+    """What to say of a bag whose cameras run at another rate than the nodes' frame_rate (None
+    within RATE_TOLERANCE, or when the bag has too few stamps to tell): max_skew's default, half
+    a period of frame_rate, may then be too short for the rig's offsets or longer than its period."""
+    if bag_hz is None or abs(bag_hz - frame_rate) <= RATE_TOLERANCE * frame_rate:
+        return None
+    return (f"the bag's cameras run at {bag_hz:.1f} Hz, the parameters' frame_rate is {frame_rate:g} Hz: max_skew's "
+            f'default (half its period) and bp_solver\'s nominal step follow frame_rate; set it to {bag_hz:.1f} in a '
+            f'--config file (README, Your own cameras, step 2)')
+
+
 def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.ndarray:
     """(N,) ms from a stamp's camera_info receipt to its skeletons receipt (ns; stamps with both)."""
     common = sorted(info_at.keys() & output_at.keys())

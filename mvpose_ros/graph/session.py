@@ -26,15 +26,17 @@ from rclpy.qos import qos_profile_sensor_data
 
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
+from mvpose_ros.core.association.approximate_sync import stamp_rate
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
                                      detector_backend, graph_nodes, graph_settings, load_params, output_topics,
-                                     rig_connections, rig_graph_nodes, rig_played_connections, rig_sync, runner_section,
-                                     unknown_nodes, write_overrides)
+                                     rig_connections, rig_frame_rate, rig_graph_nodes, rig_played_connections, rig_sync,
+                                     runner_section, unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
-from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, print_periods, print_restarts, report,
-                                     restart_effects, rig_prediction_lines, rig_report, score, score_sets)
+from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, frame_rate_note, print_periods,
+                                     print_restarts, report, restart_effects, rig_prediction_lines, rig_report, score,
+                                     score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
@@ -184,8 +186,9 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     rate = 0.0 if args.lockstep else float(section['rate'] if args.rate is None else args.rate)
     if not (rate > 0 or args.lockstep):
         raise ValueError(f'--rate must be > 0 (or use --lockstep), got {rate:g}')
+    bag_rate = stamp_rate([[s.members[c.image] for s in sets[:n] if c.image in s.members] for c in rig.cameras])
     run = RigRun(str(rig_path), str(bag), args.lockstep, rate, args.qos or str(section['qos']), max_skew,
-                 sync_timeout, float(section['ack_timeout']), args.loops)
+                 sync_timeout, float(section['ack_timeout']), args.loops, rig_frame_rate(params_list), bag_rate)
     settings = GraphSettings('rig', len(rig.cameras), str(bag), args.predictions or str(section['predictions']),
                              FRAME_RATE, rate, float(section['timeout']))
     return rig, run, settings, files, sets
@@ -227,6 +230,9 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC, overlay=args.overlay is not None)
     _warn_unknown(files[1:], nodes, err)
+    rate_note = frame_rate_note(run.bag_rate, run.frame_rate)
+    if rate_note:
+        print(f'{PROG}: warning: {rate_note}', file=err)
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
     stamps = [s.stamp_ns for s in sets]

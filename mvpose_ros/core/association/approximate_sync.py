@@ -46,6 +46,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from mvpose_ros.core.association.stamp_sync import SyncedFrame
 
 REASONS = ('late', 'duplicate', 'unmatched', 'overflow')
@@ -55,6 +57,14 @@ SYNC_TIMEOUT_S = 0.5  # the default wait for a camera missing from a set
 def default_max_skew(frame_rate: float) -> float:
     """The default max_skew, seconds: half a frame period of cameras running at frame_rate Hz."""
     return 0.5 / frame_rate
+
+
+def stamp_rate(stamps: list[list[int]]) -> float | None:
+    """Frames per second of cameras from each one's stamps (ns, any order): the median interval of
+    each camera with at least three, then the median over those cameras; None when none has.
+    Medians: a dropped frame or a late start does not move it."""
+    intervals = [np.median(np.diff(np.unique(s))) for s in stamps if len(np.unique(s)) >= 3]
+    return 1e9 / float(np.median(intervals)) if intervals else None
 
 
 @dataclass
