@@ -44,7 +44,7 @@ from __future__ import annotations
 import bisect
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -59,11 +59,11 @@ def default_max_skew(frame_rate: float) -> float:
     return 0.5 / frame_rate
 
 
-def stamp_rate(stamps: list[list[int]]) -> float | None:
+def stamp_rate(stamps: Sequence[Sequence[int]]) -> float | None:
     """Frames per second of cameras from each one's stamps (ns, any order): the median interval of
     each camera with at least three, then the median over those cameras; None when none has.
     Medians: a dropped frame or a late start does not move it."""
-    intervals = [np.median(np.diff(np.unique(s))) for s in stamps if len(np.unique(s)) >= 3]
+    intervals = [np.median(np.diff(u)) for u in map(np.unique, stamps) if u.size >= 3]
     return 1e9 / float(np.median(intervals)) if intervals else None
 
 
