@@ -14,7 +14,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from msg_adapters.skeleton_msg import check_skeletons
 from mvpose_ros.core.evaluation.overlay import person_colour
 from mvpose_ros.core.geometry.body import BONES
-from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.camera import Camera, image_corners
 
 JOINT_DIAMETER_M = 0.06
 BONE_WIDTH_M = 0.03
@@ -74,8 +74,7 @@ def frustum(camera: Camera, depth: float = FRUSTUM_DEPTH_M) -> np.ndarray:
     """(5, 3) world points: the camera's centre, then its image corners (top left, top right,
     bottom right, bottom left) at `depth` metres along the optical axis (a corner more than
     60 degrees out, as a fisheye has, at twice `depth` along its ray)."""
-    corners = np.array([[0, 0], [camera.width, 0], [camera.width, camera.height], [0, camera.height]], dtype=float)
-    rays = camera.directions(corners)  # (4, 3) unit
+    rays = camera.directions(image_corners(camera.width, camera.height))  # (4, 3) unit
     # cosine to the optical axis; a fisheye's corners can lie 90 degrees out: drawn as if at 60
     along_axis = np.maximum(rays @ camera.R[2], MIN_AXIS_COSINE)
     return np.concatenate([camera.centre[None], camera.centre + rays * (depth / along_axis)[:, None]])

@@ -116,6 +116,11 @@ class Camera:
         return d
 
 
+def image_corners(width: int, height: int) -> np.ndarray:
+    """(4, 2) pixels of an image's corners: top left, top right, bottom right, bottom left."""
+    return np.array([[0, 0], [width, 0], [width, height], [0, height]], dtype=float)
+
+
 def _image_size(path: Path, width: int | None, height: int | None) -> tuple[int, int]:
     """The image size (pixels) given by the caller: calibration files do not record it, and it
     is never guessed (from a file name or the principal point). ValueError naming the file when

@@ -45,7 +45,7 @@ import numpy as np
 import yaml
 
 from mvpose_ros.core.geometry import lens
-from mvpose_ros.core.geometry.camera import Camera, load_rig
+from mvpose_ros.core.geometry.camera import Camera, image_corners, load_rig
 
 UNIT_TOLERANCE = 1e-3  # |norm(q) - 1| above this: not a rotation (rather than a rounded one)
 DATA_ROOT_TOKEN = '{data_root}'
@@ -109,8 +109,7 @@ def intrinsics_camera(where: str, name: str, R: np.ndarray, t: np.ndarray, K: An
 def _no_fold(where: str, K: np.ndarray, d: np.ndarray, width: int, height: int, model: str) -> None:
     """ValueError when the lens folds back inside the image (lens.fold), in pixels from the
     principal point (at the geometric mean focal length)."""
-    corners = np.array([[0.0, 0.0], [width, 0.0], [0.0, height], [width, height]])
-    normalised = (corners - K[:2, 2]) / np.diag(K)[:2]
+    normalised = (image_corners(width, height) - K[:2, 2]) / np.diag(K)[:2]
     reach = float(np.sqrt((normalised ** 2).sum(axis=1)).max())
     folded = lens.fold(model, d, reach)
     if folded is not None:
