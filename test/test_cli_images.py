@@ -19,7 +19,7 @@ from mvpose_ros.cli import images
 from mvpose_ros.core.evaluation.datasets import calibration_file, dataset_dir, load_actors_gt, shelf_cameras
 from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR
 from mvpose_ros.core.geometry.body import JOINT_NAMES
-from mvpose_ros.graph.config import load_params
+from mvpose_ros.graph.config import load_params, node_section
 
 SHELF = dataset_dir('shelf')
 REPO = Path(__file__).resolve().parents[1]
@@ -269,9 +269,9 @@ def test_an_image_file_declaring_a_huge_size_is_refused_before_decoding(tmp_path
 def test_a_sequence_is_solved_as_the_rig_graph_solves_it_and_one_set_from_scratch():
     """--sets above 1 takes the rig template's bp_solver parameters (a set's cost bounded by its
     window, as in the graph); one set is the whole clip of one frame."""
-    template = load_params(REPO / 'config' / 'rig_template.yaml')['/**/bp_solver']
+    template = node_section([load_params(REPO / 'config' / 'rig_template.yaml')], 'bp_solver')
     sequence = images.stage_config(5, 'anatomical').solver.inference
-    assert (sequence.window, sequence.lag, sequence.slide_iterations) == \
-        (template['window'], template['lag'], template['slide_iterations'])
+    assert (sequence.window, sequence.lag, sequence.slide_iterations, sequence.frame_rate) == \
+        (template['window'], template['lag'], template['slide_iterations'], template['frame_rate'])
     assert images.stage_config(1, 'anatomical').solver.inference.window is None
     assert images.stage_config(5, 'direct').solver.head_model == 'direct'

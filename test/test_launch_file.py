@@ -177,6 +177,8 @@ def test_rig_template_sections_match_the_rig_graph_and_leave_command_line_values
     assert params['/**/heatmap_detector']['camera'] == 'all' and params['/**/heatmap_detector']['backend'] == 'onnx'
     # a '/**/<node>' section wins over -p: it must not set what rig:= / the runner set
     assert all('rig' not in section for section in params.values())
+    # the cameras' rate once, for every node that reads it (detector, association, bp_solver, overlay)
+    assert [node for node, section in params.items() if 'frame_rate' in section] == ['/**']
 
 
 class _Action:

@@ -160,7 +160,7 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path, monkeypatch):
     rig, run, settings, files, sets = rig_run_plan(args)
     assert files == [package_path(RIG_TEMPLATE), config.resolve(), crowd.resolve()]
     # the template's frame_rate, and the bag's cameras' rate (40 ms apart), so nothing to say
-    assert run.frame_rate == 25.0 and run.bag_rate == pytest.approx(25.0)
+    assert run.frame_rate == 25.0 and run.bag_rate == pytest.approx(25.0) and not run.rate_from_bag
     assert frame_rate_note(run.bag_rate, run.frame_rate) is None
     assert run.rate == 2.0 and run.qos == 'sensor' and run.max_skew == 0.01 and not run.lockstep
     # two passes: the second moved on by the bag's log span plus a period, as the player moves it
@@ -182,6 +182,48 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path, monkeypatch):
     template = load_params(package_path(RIG_TEMPLATE))['mvpose_graph']
     assert (settings.predictions, settings.timeout, run.ack_timeout) == (
         template['predictions'], template['timeout'], template['ack_timeout'])
+
+
+def _bag_at_15_hz(path: Path) -> None:
+    """Cameras a and b at 15 Hz, b 25 ms after a: one set each capture only with a 15 Hz max_skew
+    (half its period, 33 ms), not with 25 Hz's (20 ms)."""
+    from mvpose_ros.bags.io import write_bag
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import Header
+    items = []
+    for k in range(6):
+        for c, n in enumerate('ab'):
+            stamp = S + k * 200 * MS // 3 + c * 25 * MS
+            header = Header(frame_id=n)
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, S)
+            items.append((f'/rig/{n}/image', CompressedImage(header=header), stamp))
+    write_bag(path, items)
+
+
+@pytest.mark.parametrize('mine', [None, '/**:\n  ros__parameters:\n    frame_rate: 25.0\n',
+                                  '/**/bp_solver:\n  ros__parameters:\n    frame_rate: 25.0\n'])
+def test_rig_plan_takes_the_bags_frame_rate_unless_a_file_of_the_users_sets_one(mine, rig_file, tmp_path, monkeypatch):
+    monkeypatch.setenv('MVPOSE_DATA_ROOT', str(tmp_path / 'no-data'))
+    _bag_at_15_hz(tmp_path / 'bag')
+    config = None
+    if mine is not None:
+        config = tmp_path / 'mine.yaml'
+        config.write_text(mine)
+    args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=config, data_root=None, lockstep=True,
+                           rate=None, qos=None, predictions=None, loops=1, overrides=[])
+    rig, run, settings, files, sets = rig_run_plan(args)
+    assert run.bag_rate == pytest.approx(15.0)
+    detector, association, solver, player = (n.parameters for n in rig_graph_nodes(run))
+    if mine is None:  # the template's 25 Hz is 10 % off: the bag's rate, for every node
+        assert run.rate_from_bag and run.frame_rate == 15.0 and run.max_skew == pytest.approx(1 / 30)
+        assert detector['frame_rate'] == association['frame_rate'] == solver['frame_rate'] == 15.0
+        assert player['max_skew'] == pytest.approx(1 / 30) and frame_rate_note(run.bag_rate, run.frame_rate) is None
+        assert [sorted(s.members) for s in sets] == [['/rig/a/image', '/rig/b/image']] * 6
+    else:  # the user's 25 Hz is kept, and said to be off the bag's
+        assert not run.rate_from_bag and run.frame_rate == 25.0 and run.max_skew == 0.02
+        assert all('frame_rate' not in p for p in (detector, association, solver))
+        assert 'set it to 15.0' in frame_rate_note(run.bag_rate, run.frame_rate)
+        assert all(len(s.members) == 1 for s in sets)  # 25 ms apart: no set of two within 20 ms
 
 
 def test_rig_plan_names_a_runner_setting_the_template_lacks(rig_file, tmp_path, monkeypatch):

@@ -62,7 +62,7 @@ from mvpose_ros.core.evaluation.overlay import overlay, person_colour
 from mvpose_ros.core.stage import StageConfig, Stage3D
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.types import FrameResult
-from mvpose_ros.graph.config import RIG_TEMPLATE, load_params
+from mvpose_ros.graph.config import RIG_TEMPLATE, load_params, node_section
 from mvpose_ros.package_files import package_path
 
 PROG = 'mvpose-images'
@@ -191,7 +191,7 @@ def stage_config(sets: int, head_model: str) -> StageConfig:
     again at every set made a set's 3D stage grow from about 25 ms to 100-175 ms over 20 sets)."""
     if sets == 1:
         return StageConfig.from_params({'window': 0, 'head_model': head_model})
-    solver = load_params(package_path(RIG_TEMPLATE))['/**/bp_solver']
+    solver = node_section([load_params(package_path(RIG_TEMPLATE))], 'bp_solver')
     return StageConfig.from_params({**solver, 'head_model': head_model})
 
 

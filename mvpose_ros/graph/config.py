@@ -221,7 +221,9 @@ class RigRun:
     s, as the graph's association), and ack_timeout (lockstep: s after which a set the graph
     dropped is given up); loops: passes over the bag (stamps moved on as the player does);
     frame_rate: the nodes' (Hz; max_skew's default and bp_solver's nominal step follow it);
-    bag_rate: the rate of the bag's cameras (Hz, approximate_sync.stamp_rate; None: too few stamps)."""
+    bag_rate: the rate of the bag's cameras (Hz, approximate_sync.stamp_rate; None: too few stamps);
+    rate_from_bag: frame_rate is bag_rate, which the runner gives the nodes (no parameter file
+    of the user's sets frame_rate, and the template's is too far from the bag's)."""
 
     rig: str
     bag: str
@@ -234,6 +236,7 @@ class RigRun:
     loops: int = 1
     frame_rate: float = FRAME_RATE
     bag_rate: float | None = None
+    rate_from_bag: bool = False
 
 
 def runner_section(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> dict[str, object]:
@@ -244,24 +247,34 @@ def runner_section(params_list: Sequence[Mapping[str, Mapping[str, object]]]) ->
     return out
 
 
-def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> tuple[float, float]:
+def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]],
+             frame_rate: float | None = None) -> tuple[float, float]:
     """max_skew and sync_timeout (s) the association node gets from these parameter files (its
-    defaults: max_skew 0 = half a frame period of frame_rate, 25 Hz; sync_timeout 0.5 s)."""
-    section = _association(params_list)
-    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(rig_frame_rate(params_list))
+    defaults: max_skew 0 = half a frame period of frame_rate, theirs unless given, 25 Hz;
+    sync_timeout 0.5 s)."""
+    section = node_section(params_list, 'association')
+    rate = rig_frame_rate(params_list) if frame_rate is None else frame_rate
+    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(rate)
     return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
 
 
 def rig_frame_rate(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> float:
     """The frame_rate (Hz) the association node gets from these parameter files (default 25)."""
-    return float(_association(params_list).get('frame_rate', FRAME_RATE))
+    return float(node_section(params_list, 'association').get('frame_rate', FRAME_RATE))
 
 
-def _association(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> dict[str, object]:
+def sets_frame_rate(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> bool:
+    """Whether any node section of these parameter files sets frame_rate."""
+    return any('frame_rate' in values for params in params_list for node, values in params.items()
+               if node != RUNNER_SECTION)
+
+
+def node_section(params_list: Sequence[Mapping[str, Mapping[str, object]]], node: str) -> dict[str, object]:
+    """The parameters these files give the node `node` (in any namespace), a later section winning."""
     section: dict[str, object] = {}
     for params in params_list:
-        for node, values in params.items():
-            if node in ('/**', 'association', '/association', '/**/association'):
+        for key, values in params.items():
+            if key in ('/**', node, f'/{node}', f'/**/{node}'):
                 section |= dict(values)
     return section
 
@@ -269,11 +282,13 @@ def _association(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -> d
 def rig_graph_nodes(run: RigRun, data_root: str | None = None, start_topic: str = '',
                     overlay: bool = False) -> list[NodeSpec]:
     """The graph of a recorded rig in start order: ONE heatmap_detector for the whole rig (camera
-    'all'), association, bp_solver (each with the rig), with `overlay` the overlay node (in
+    'all'), association, bp_solver (each with the rig, and the bag's frame_rate when
+    run.rate_from_bag), with `overlay` the overlay node (in
     lockstep drawing every set), then bag_player (lockstep: sets, rate 0, one set in flight
     acknowledged on people/bundles; else `rate`, every message at its time)."""
     data = {'data_root': data_root} if data_root is not None else {}
-    rig: dict[str, bool | int | float | str] = {'rig': run.rig, **data}
+    rate = {'frame_rate': float(run.frame_rate)} if run.rate_from_bag else {}
+    rig: dict[str, bool | int | float | str] = {'rig': run.rig, **data, **rate}
     waiting = {'waiting_sets': LOCKSTEP_WAITING_SETS} if run.lockstep else {}
     player: dict[str, bool | int | float | str] = {
         'bag': run.bag, 'qos': run.qos, 'max_skew': float(run.max_skew), 'sync_timeout': float(run.sync_timeout),

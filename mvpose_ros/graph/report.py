@@ -59,18 +59,24 @@ def frame_ranges(frames: Sequence[int]) -> str:
     return ', '.join(f'{a}' if a == b else f'{a}-{b}' for a, b in zip(starts, ends))
 
 
-RATE_TOLERANCE = 0.1  # relative: a bag's camera rate this far from the nodes' frame_rate is said
+RATE_TOLERANCE = 0.1  # relative: a bag's camera rate this far from the nodes' frame_rate is another rate
+
+
+def rate_differs(bag_hz: float | None, frame_rate: float) -> bool:
+    """Whether the bag's cameras run more than RATE_TOLERANCE off frame_rate (False when the bag
+    has too few stamps to tell)."""
+    return bag_hz is not None and abs(bag_hz - frame_rate) > RATE_TOLERANCE * frame_rate
 
 
 def frame_rate_note(bag_hz: float | None, frame_rate: float) -> str | None:
-    """What to say of a bag whose cameras run at another rate than the nodes' frame_rate (None
-    within RATE_TOLERANCE, or when the bag has too few stamps to tell): max_skew's default, half
-    a period of frame_rate, may then be too short for the rig's offsets or longer than its period."""
-    if bag_hz is None or abs(bag_hz - frame_rate) <= RATE_TOLERANCE * frame_rate:
+    """What to say of a bag whose cameras run at another rate than the frame_rate a parameter file
+    of the user's sets (None when rate_differs is False): max_skew's default, half a period of
+    frame_rate, may then be too short for the rig's offsets or longer than its period."""
+    if not rate_differs(bag_hz, frame_rate):
         return None
     return (f"the bag's cameras run at {bag_hz:.1f} Hz, the parameters' frame_rate is {frame_rate:g} Hz: max_skew's "
-            f'default (half its period) and bp_solver\'s nominal step follow frame_rate; set it to {bag_hz:.1f} in a '
-            f'--config file (README, Your own cameras, step 2)')
+            f'default (half its period) and bp_solver\'s nominal step follow frame_rate; set it to {bag_hz:.1f} in '
+            f'your parameter file, or leave it out there to take the bag\'s (README, Your own cameras, step 2)')
 
 
 def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.ndarray:

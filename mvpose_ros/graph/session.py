@@ -32,11 +32,11 @@ from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
                                      detector_backend, graph_nodes, graph_settings, load_params, output_topics,
                                      rig_connections, rig_frame_rate, rig_graph_nodes, rig_played_connections, rig_sync,
-                                     runner_section, unknown_nodes, write_overrides)
+                                     runner_section, sets_frame_rate, unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
 from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, frame_rate_note, print_periods,
-                                     print_restarts, report, restart_effects, rig_prediction_lines, rig_report, score,
-                                     score_sets)
+                                     print_restarts, rate_differs, report, restart_effects, rig_prediction_lines,
+                                     rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
@@ -175,10 +175,17 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     if missing:
         raise ValueError(f'{bag}: no topic {", ".join(missing)} of the rig {args.rig} (the bag has '
                          f'{", ".join(topics)})')
-    grouped = group_sets(read_bag(bag, images), images, max_skew, sync_timeout, has_header)
-    sets = [_stamps_only(s) for s in grouped]
+    sets = _sets(bag, images, max_skew, sync_timeout)
     if not sets:
         raise ValueError(f'{bag}: no image messages on the rig\'s topics')
+    bag_rate = stamp_rate([[s.members[c.image] for s in sets if c.image in s.members] for c in rig.cameras])
+    frame_rate = rig_frame_rate(params_list)
+    # --rig alone is enough: without a frame_rate of the user's, the bag's cameras give it
+    from_bag = not sets_frame_rate(params_list[1:]) and rate_differs(bag_rate, frame_rate)
+    if from_bag:
+        frame_rate = round(bag_rate, 2)
+        max_skew, sync_timeout = rig_sync(params_list, frame_rate)
+        sets = _sets(bag, images, max_skew, sync_timeout)
     # later passes: stamps moved on as the player moves them (by its sets in lockstep, else by log time)
     first, last = (sets[0].stamp_ns, sets[-1].stamp_ns) if args.lockstep else (summary.first_ns, summary.last_ns)
     n = len(sets)
@@ -186,12 +193,16 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     rate = 0.0 if args.lockstep else float(section['rate'] if args.rate is None else args.rate)
     if not (rate > 0 or args.lockstep):
         raise ValueError(f'--rate must be > 0 (or use --lockstep), got {rate:g}')
-    bag_rate = stamp_rate([[s.members[c.image] for s in sets[:n] if c.image in s.members] for c in rig.cameras])
     run = RigRun(str(rig_path), str(bag), args.lockstep, rate, args.qos or str(section['qos']), max_skew,
-                 sync_timeout, float(section['ack_timeout']), args.loops, rig_frame_rate(params_list), bag_rate)
+                 sync_timeout, float(section['ack_timeout']), args.loops, frame_rate, bag_rate, from_bag)
     settings = GraphSettings('rig', len(rig.cameras), str(bag), args.predictions or str(section['predictions']),
                              FRAME_RATE, rate, float(section['timeout']))
     return rig, run, settings, files, sets
+
+
+def _sets(bag: Path, images: Sequence[str], max_skew: float, sync_timeout: float) -> list[SyncSet]:
+    """The bag's synchronised sets of the rig's image topics, stamps only."""
+    return [_stamps_only(s) for s in group_sets(read_bag(bag, images), images, max_skew, sync_timeout, has_header)]
 
 
 def _override_files(paths: Sequence[Path]) -> list[Path]:
@@ -245,8 +256,10 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     with _recording(timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
                     people_topics=people, watch_topics=_watched(watch), overlay_files=overlays) as (node, executor):
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
+        rate = (f", frame_rate {run.frame_rate:g} Hz from the bag's cameras (no parameter file of yours sets it)"
+                if run.rate_from_bag else '')
         print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
-              f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms, logs in {log_dir}', file=out)
+              f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms{rate}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
                             expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
                             quiet=RATE_QUIET_S, watch=watch)
