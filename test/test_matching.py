@@ -515,7 +515,7 @@ def test_each_actor_keeps_its_id_with_frames_dropped_upstream(shelf_people, drop
     drops sets: in every frame with one person within 0.5 m of an annotated actor, that person
     has the actor's one id (where a duplicate detection puts two people there, which of them is
     nearer is chance). Before a person seen twice shared its id and tracks were limited to a
-    person's pace, these thinned clips had 1-4 changes each (README, Method choices, Identities)."""
+    person's pace, these thinned clips had 1-4 changes each (docs/method.md, Identities)."""
     gt = load_actors_gt(SHELF / 'actorsGT.mat')
     associator = Associator(shelf_people.cameras, AssociationConfig())
     ids: dict[int, set[int]] = {0: set(), 1: set(), 2: set()}
