@@ -183,6 +183,12 @@ def _explicit(tmp_path, shelf, change) -> Path:
     (lambda d, e: e.update(K=[0, 1, 2, 3]), "camera 'cam1': K: focal lengths fx, fy must be > 0"),
     (lambda d, e: e.update(width=10.5), "camera 'cam1': width: expected a whole number of pixels >= 1"),
     (lambda d, e: e.update(name='cam0'), "camera 'cam0': name: duplicate camera name"),
+    (lambda d, e: e.update(image=d['cameras'][0]['image']),
+     "camera 'cam1': image: '/rig/cam0/image_raw/compressed' is also the image topic of camera 'cam0'"),
+    (lambda d, e: [c.pop(k) for c in d['cameras'] for k in ('width', 'height', 'K', 'distortion_model', 'D')]
+     and e.update(camera_info=d['cameras'][0]['camera_info']),
+     "camera 'cam1': camera_info: '/rig/cam0/camera_info' is also the camera_info topic of camera 'cam0', and "
+     "intrinsics come from it"),
     (lambda d, e: e.update(name='1st'), "camera '1st': name: '1st' is not a valid name"),
     (lambda d, e: e.update(orientaton=[0, 0, 0, 1]), "camera 'cam1': unknown field 'orientaton'"),
     (lambda d, e: e.update(image=''), "camera 'cam1': image: expected a non-empty string"),
@@ -201,6 +207,12 @@ def test_errors_are_one_line_naming_file_camera_and_field(tmp_path, shelf, chang
         load_rig_file(path)
     message = str(err.value)
     assert message.startswith(f'{path}: ') and problem in message and '\n' not in message, message
+
+
+def test_cameras_with_their_intrinsics_in_the_rig_file_may_share_a_camera_info_topic(tmp_path, shelf):
+    """Nothing reads it then."""
+    path = _explicit(tmp_path, shelf, lambda d, e: e.update(camera_info=d['cameras'][0]['camera_info']))
+    assert [c.camera_info for c in load_rig_file(path).cameras] == ['/rig/cam0/camera_info'] * 2
 
 
 def test_calibration_errors_name_the_rig_file_and_the_calibration(tmp_path):

@@ -329,11 +329,25 @@ def _names(where: str, e: dict, default_name: str | None) -> tuple[str, str, str
 
 
 def _no_duplicates(path: Path, cameras: list[RigCamera]) -> None:
-    seen: set[str] = set()
+    """One name per camera, and one image topic: two entries on one stream (a copied entry left
+    unedited) would put one camera's people at two poses. A camera_info topic too where either
+    camera reads its intrinsics from it."""
+    names: set[str] = set()
+    images: dict[str, str] = {}
+    infos: dict[str, RigCamera] = {}
     for cam in cameras:
-        if cam.name in seen:
+        if cam.name in names:
             raise ValueError(f'{path}: camera {cam.name!r}: name: duplicate camera name')
-        seen.add(cam.name)
+        names.add(cam.name)
+        if cam.image in images:
+            raise ValueError(f'{path}: camera {cam.name!r}: image: {cam.image!r} is also the image topic of camera '
+                             f'{images[cam.image]!r} (each camera needs its own)')
+        images[cam.image] = cam.name
+        other = infos.get(cam.camera_info)
+        if other is not None and (other.camera is None or cam.camera is None):
+            raise ValueError(f'{path}: camera {cam.name!r}: camera_info: {cam.camera_info!r} is also the camera_info '
+                             f'topic of camera {other.name!r}, and intrinsics come from it (each camera needs its own)')
+        infos.setdefault(cam.camera_info, cam)
 
 
 def _no_unknown(where: str, mapping: dict, allowed: set[str]) -> None:
