@@ -200,9 +200,10 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
         node.create_subscription(Header, '/rig/skeletons/dropped', dropped.append, DATA_QOS)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         info = node.create_publisher(CameraInfo, '/rig/right/camera_info', qos_profile_sensor_data)
+        # frame_rate 50 Hz, twice the cameras' (max_skew given, so the sets are as at 25 Hz): said once
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
                           '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', 'input_size:=256', '-p', f'rig:={rig}',
-                          '-p', 'sync_timeout:=5.0', *overrides)
+                          '-p', 'sync_timeout:=5.0', '-p', 'frame_rate:=50.0', '-p', 'max_skew:=0.02', *overrides)
         try:
             assert _stream_until(executor, lambda: info.publish(camera_to_info(shelf_cameras()[2],
                                                                                _header(0, 'right_optical'))),
@@ -250,6 +251,9 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
     assert summary, text
     assert [int(g) for g in summary.groups()] == [sets, len(detected[0]), sets - len(detected[0])]
     assert 'detection is slower than the cameras' in text
+    # 25 Hz give or take the jitter of 8 stamps
+    said = re.findall(r'the cameras run at (\d+\.\d) Hz \(their stamps\), the frame_rate parameter is 50 Hz', text)
+    assert len(said) == 1 and 24.0 <= float(said[0]) <= 26.0, text
     assert 'Traceback' not in text and 'dropped: ' not in text, text
 
 

@@ -12,7 +12,8 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, 
 from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES
 from mvpose_ros.core.geometry.bump import axis_rotation, bumped_camera, bumped_pixels
 from mvpose_ros.core.health.links import links_status, unmatched_links
-from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
+from mvpose_ros.core.association.approximate_sync import stamp_rate
+from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, frame_rate_status, input_statuses, node_status
 from mvpose_ros.core.health.residual import ResidualMonitor, frame_residuals, residual_levels
 from mvpose_ros.core.health.status import Level, Status
 from mvpose_ros.core.health.thresholds import HealthThresholds, health_parameters
@@ -69,6 +70,28 @@ def test_typical_interval_is_the_median_gap_of_the_window_and_ignores_bursts_and
     slow = _inputs([2.0], 10.0)[0]
     assert slow.typical_interval(10.0, 5.0) == pytest.approx(0.5)
     assert InputMonitor('cam0', 0.0).typical_interval(1.0, 5.0) is None
+
+
+def test_the_cameras_rate_is_taken_from_their_stamps_and_judged_against_frame_rate():
+    # a replay at twice real time: arrivals 20 ms apart, stamps 40 ms apart (25 Hz cameras)
+    monitors = [InputMonitor(f'cam{c}', 0.0) for c in range(3)]
+    for k in range(200):
+        for c, m in enumerate(monitors):
+            m.received(k * 0.02, 1_000_000_000 + k * 40_000_000 + c * 3_000_000)
+    now = 199 * 0.02
+    assert len(monitors[0].stamps(now, 1.0)) == 51  # the last second's, by arrival (both ends in)
+    rate = stamp_rate([m.stamps(now, T.window) for m in monitors])
+    assert rate == pytest.approx(25.0)
+    ok = frame_rate_status('rig/heatmap_detector', rate, 25.0)
+    assert ok.level == Level.OK and ok.name == 'rig/heatmap_detector: frame_rate'
+    assert frame_rate_status('n', rate, 27.0).level == Level.OK  # within 10 %
+    off = frame_rate_status('n', 15.0, 25.0)
+    assert off.level == Level.WARN and 'the cameras run at 15.0 Hz (their stamps), the frame_rate parameter is ' \
+        '25 Hz' in off.message and 'set it to 15.0' in off.message
+    assert off.values == {'camera rate from stamps (Hz)': '15.00', 'frame_rate parameter (Hz)': '25'}
+    unknown = frame_rate_status('n', None, 25.0)  # fewer than three stamps of any camera
+    assert unknown.level == Level.OK and 'not known yet' in unknown.message
+    assert stamp_rate([InputMonitor('cam0', 0.0).stamps(1.0, 5.0)]) is None
 
 
 def test_drops_above_the_thresholds_are_warn_then_error():

@@ -14,6 +14,7 @@ from typing import AbstractSet, Mapping, MutableMapping, Protocol, Sequence, Tex
 import numpy as np
 
 from msg_adapters.skeleton_msg import Skeletons
+from mvpose_ros.core.association.approximate_sync import rate_differs
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.identities import identity_report
@@ -57,15 +58,6 @@ def frame_ranges(frames: Sequence[int]) -> str:
     breaks = np.flatnonzero(np.diff(f) != 1)
     starts, ends = f[np.r_[0, breaks + 1]], f[np.r_[breaks, f.size - 1]]
     return ', '.join(f'{a}' if a == b else f'{a}-{b}' for a, b in zip(starts, ends))
-
-
-RATE_TOLERANCE = 0.1  # relative: a bag's camera rate this far from the nodes' frame_rate is another rate
-
-
-def rate_differs(bag_hz: float | None, frame_rate: float) -> bool:
-    """Whether the bag's cameras run more than RATE_TOLERANCE off frame_rate (False when the bag
-    has too few stamps to tell)."""
-    return bag_hz is not None and abs(bag_hz - frame_rate) > RATE_TOLERANCE * frame_rate
 
 
 def frame_rate_note(bag_hz: float | None, frame_rate: float) -> str | None:

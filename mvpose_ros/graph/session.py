@@ -26,7 +26,7 @@ from rclpy.qos import qos_profile_sensor_data
 
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
-from mvpose_ros.core.association.approximate_sync import stamp_rate
+from mvpose_ros.core.association.approximate_sync import rate_differs, stamp_rate
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
@@ -35,7 +35,7 @@ from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTI
                                      runner_section, sets_frame_rate, unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
 from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, frame_rate_note, print_periods,
-                                     print_restarts, rate_differs, report, restart_effects, rig_prediction_lines,
+                                     print_restarts, report, restart_effects, rig_prediction_lines,
                                      rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions

@@ -98,7 +98,7 @@ from msg_adapters.people_msg import people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
-                                                          default_max_skew)
+                                                          default_max_skew, stamp_rate)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
 from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
@@ -108,8 +108,9 @@ from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, RigCamera
-from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
-from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.monitor import (InputMonitor, NodeMonitor, frame_rate_status, input_statuses,
+                                            node_status)
+from mvpose_ros.core.health.status import Level, Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog, short_cause
@@ -327,6 +328,8 @@ class HeatmapDetectorNode(Node):
         # and bp_solver announce theirs, so that a subscriber waiting for every frame stops waiting
         self._dropped_sets = self.create_publisher(Header, SKELETONS_DROPPED, DATA_QOS)
         self._world_frame = world_frame
+        self._frame_rate = p['frame_rate']
+        self._rate_said = False  # whether the cameras' rate off frame_rate is logged (it is on /diagnostics)
         self._intrinsics_in = threading.Condition()  # notified when a camera's first CameraInfo is taken
         self._stopping = False
         self._processed = 0
@@ -510,8 +513,17 @@ class HeatmapDetectorNode(Node):
         waiting = (len(self._waiting) + self._sync.pending) if self._whole_rig else 0
         extra = ({'sets released': str(self._waiting.put_count), 'sets detected': str(self._processed),
                   'sets dropped whole while detecting': str(self._waiting.dropped)} if self._whole_rig else {})
-        return [*input_statuses(node, [i.stats(now, t.window) for i in self._inputs.values()], t),
-                node_status(node, self._monitor.stats(now, t.window), waiting, t, extra)]
+        statuses = [*input_statuses(node, [i.stats(now, t.window) for i in self._inputs.values()], t),
+                    node_status(node, self._monitor.stats(now, t.window), waiting, t, extra)]
+        if self._whole_rig:
+            camera_hz = stamp_rate([i.stamps(now, t.window) for i in self._inputs.values()])
+            rate = frame_rate_status(node, camera_hz, self._frame_rate)
+            if rate.level != Level.OK and not self._rate_said:
+                self.get_logger().warning(rate.message)
+            if camera_hz is not None:  # a window too short to tell says nothing either way
+                self._rate_said = rate.level != Level.OK
+            statuses.append(rate)
+        return statuses
 
     def _on_input(self, cam: _Camera, msg: Any) -> None:
         """One-camera mode: detect in the callback (a slower detector drops frames in the

@@ -67,6 +67,15 @@ def stamp_rate(stamps: Sequence[Sequence[int]]) -> float | None:
     return 1e9 / float(np.median(intervals)) if intervals else None
 
 
+RATE_TOLERANCE = 0.1  # relative: cameras this far off the nodes' frame_rate run at another rate
+
+
+def rate_differs(camera_hz: float | None, frame_rate: float) -> bool:
+    """Whether cameras at camera_hz (stamp_rate) run more than RATE_TOLERANCE off frame_rate, the
+    rate max_skew's default and bp_solver's nominal step assume (False when not known)."""
+    return camera_hz is not None and abs(camera_hz - frame_rate) > RATE_TOLERANCE * frame_rate
+
+
 @dataclass
 class SyncedSet(SyncedFrame):
     """A released set. stamp_ns: the earliest member stamp; items[c]: camera c's message or None

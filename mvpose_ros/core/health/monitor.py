@@ -10,6 +10,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from mvpose_ros.core.association.approximate_sync import rate_differs
 from mvpose_ros.core.health.status import Level, Status, judged
 from mvpose_ros.core.health.thresholds import HealthThresholds
 
@@ -67,9 +68,13 @@ class InputMonitor:
     def received(self, now: float, stamp_ns: int | None = None) -> None:
         """A message arrived (used or not)."""
         self._last = now
-        self._arrivals.add(now, None)
+        self._arrivals.add(now, stamp_ns)
         if stamp_ns is not None:
             self.newest_stamp = stamp_ns if self.newest_stamp is None else max(self.newest_stamp, stamp_ns)
+
+    def stamps(self, now: float, window: float) -> list[int]:
+        """The stamps (ns) of its messages of the last `window` s, as they came."""
+        return [s for t, s in self._arrivals.items if t >= now - window and s is not None]
 
     def typical_interval(self, now: float, window: float) -> float | None:
         """Median time (s) between its arrivals of the last `window` s; None with fewer than two."""
@@ -135,6 +140,24 @@ def input_statuses(node: str, inputs: Sequence[InputStats], t: HealthThresholds)
         }
         statuses.append(Status(f'{node}: input {s.name}', level, message, values, s.name))
     return statuses
+
+
+def frame_rate_status(node: str, camera_hz: float | None, frame_rate: float) -> Status:
+    """WARN when the cameras (stamp_rate of their stamps: the capture rate, whatever the pace of
+    a replay) run at another rate than the frame_rate parameter: max_skew's default, half its
+    period, may then group frames of different captures or split one capture, and bp_solver's
+    nominal step is off."""
+    values = {'camera rate from stamps (Hz)': '' if camera_hz is None else f'{camera_hz:.2f}',
+              'frame_rate parameter (Hz)': f'{frame_rate:g}'}
+    name = f'{node}: frame_rate'
+    if camera_hz is None:
+        return Status(name, Level.OK, f'frame_rate {frame_rate:g} Hz; camera rate not known yet', values)
+    if not rate_differs(camera_hz, frame_rate):
+        return Status(name, Level.OK, f'cameras at {camera_hz:.1f} Hz, frame_rate {frame_rate:g} Hz', values)
+    return Status(name, Level.WARN,
+                  f'the cameras run at {camera_hz:.1f} Hz (their stamps), the frame_rate parameter is {frame_rate:g} '
+                  f"Hz: max_skew's default (half its period) and bp_solver's nominal step follow frame_rate; set it "
+                  f"to {camera_hz:.1f} (the parameter file's /** section)", values)
 
 
 @dataclass
