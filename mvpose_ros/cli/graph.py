@@ -29,14 +29,15 @@ With --rig (any recorded rig: the bag's own topics, sqlite3 or mcap), the graph 
 heatmap_detector for the whole rig (camera 'all', onnx backend), association and bp_solver, with
 the package's config/rig_template.yaml and then --config (a parameter file overriding it), the rig
 file given to every node; frame_rate is the bag's cameras' rate when that is more than 10 % off
-the template's and no file of the user's sets it. The player publishes as a camera driver (--qos sensor: best effort) at
---rate R x recorded speed (default 1: sets the graph cannot keep up with are dropped), or with
---lockstep one synchronised set at a time, the next once the previous set's bundle is out (every
-set processed). The bag's sets are the image messages grouped by approximate synchronisation of
-their stamps, with the graph's max_skew (association's; default half a period of frame_rate); a set's
-stamp is its earliest member stamp, the stamp its skeletons carry. It prints sets in / processed /
-dropped, the skew and the latency (first camera_info of a set -> skeletons), and writes one
-predictions line per processed set: {"frame": <set index from 0>, "stamp": <ns>, "people": [...]}.
+the template's and no file of the user's sets it. The player publishes as a camera driver (--qos
+sensor: best effort) at --rate R x recorded speed (default 1: sets the graph cannot keep up with
+are dropped), or with --lockstep one synchronised set at a time, the next once the previous set's
+bundle is out (every set processed). The bag's sets are the image messages grouped by approximate
+synchronisation of their stamps, with the graph's max_skew (association's; default half a period
+of frame_rate); a set's stamp is its earliest member stamp, the stamp its skeletons carry. It
+prints sets in / processed / dropped, the skew and the latency (first camera_info of a set ->
+skeletons), and writes one predictions line per processed set: {"frame": <set index from 0>,
+"stamp": <ns>, "people": [...]}.
 With --ground-truth shelf --frame N (a bag repeating Shelf frame N, as shelf_rig), every set is
 scored against that frame.
 
