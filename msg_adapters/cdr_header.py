@@ -23,10 +23,11 @@ class Oversize(ValueError):
 _BYTE_ORDER = {b'\x00\x00': '>', b'\x00\x01': '<'}
 _ENCAPSULATION = 4  # bytes before the payload; a leading std_msgs/Header puts its stamp right after
 _FRAME_ID = _ENCAPSULATION + 8  # the frame_id string (uint32 length with its NUL, then the bytes)
+STAMP_END = _FRAME_ID  # a message's first bytes up to here are all header_stamp_ns reads
 
 
 def _byte_order(cdr: bytes) -> str:
-    if len(cdr) < _ENCAPSULATION + 8 or cdr[:2] not in _BYTE_ORDER:
+    if len(cdr) < STAMP_END or cdr[:2] not in _BYTE_ORDER:
         raise ValueError(f'not a plain CDR message with a header stamp (first bytes {cdr[:4].hex()}, '
                          f'{len(cdr)} bytes)')
     return _BYTE_ORDER[cdr[:2]]

@@ -13,6 +13,7 @@ import pytest
 import yaml
 
 from msg_adapters.skeleton_msg import Skeletons
+from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_stamps
 from msg_adapters.cdr_header import header_stamp_ns
 from mvpose_ros.bags.replay import InFlight, group_sets
@@ -211,7 +212,11 @@ def test_rig_plan_takes_the_bags_frame_rate_unless_a_file_of_the_users_sets_one(
         config.write_text(mine)
     args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=config, data_root=None, lockstep=True,
                            rate=None, qos=None, predictions=None, loops=1, overrides=[])
+    import mvpose_ros.graph.session as session
+    reads = []
+    monkeypatch.setattr(session, 'read_bag', lambda *a: reads.append(a) or read_bag(*a))
     rig, run, settings, files, sets = rig_run_plan(args)
+    assert len(reads) == 1  # grouped again with the bag's max_skew from the stamps read once
     assert run.bag_rate == pytest.approx(15.0)
     detector, association, solver, player = (n.parameters for n in rig_graph_nodes(run))
     if mine is None:  # the template's 25 Hz is 10 % off: the bag's rate, for every node

@@ -24,6 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from rclpy.qos import qos_profile_sensor_data
 
+from msg_adapters.cdr_header import STAMP_END
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.association.approximate_sync import rate_differs, stamp_rate
@@ -175,7 +176,8 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     if missing:
         raise ValueError(f'{bag}: no topic {", ".join(missing)} of the rig {args.rig} (the bag has '
                          f'{", ".join(topics)})')
-    sets = _sets(bag, images, max_skew, sync_timeout)
+    stamps = _image_stamps(bag, images)
+    sets = _sets(stamps, images, max_skew, sync_timeout)
     if not sets:
         raise ValueError(f'{bag}: no image messages on the rig\'s topics')
     bag_rate = stamp_rate([[s.members[c.image] for s in sets if c.image in s.members] for c in rig.cameras])
@@ -185,7 +187,7 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     if from_bag:
         frame_rate = round(bag_rate, 2)
         max_skew, sync_timeout = rig_sync(params_list, frame_rate)
-        sets = _sets(bag, images, max_skew, sync_timeout)
+        sets = _sets(stamps, images, max_skew, sync_timeout)
     # later passes: stamps moved on as the player moves them (by its sets in lockstep, else by log time)
     first, last = (sets[0].stamp_ns, sets[-1].stamp_ns) if args.lockstep else (summary.first_ns, summary.last_ns)
     n = len(sets)
@@ -200,9 +202,17 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     return rig, run, settings, files, sets
 
 
-def _sets(bag: Path, images: Sequence[str], max_skew: float, sync_timeout: float) -> list[SyncSet]:
-    """The bag's synchronised sets of the rig's image topics, stamps only."""
-    return [_stamps_only(s) for s in group_sets(read_bag(bag, images), images, max_skew, sync_timeout, has_header)]
+def _image_stamps(bag: Path, images: Sequence[str]) -> list[tuple[str, str, int, bytes]]:
+    """The bag's messages on the rig's image topics, each cut to the bytes of its header stamp (all
+    the grouping reads of an image): the bag is read once, however often its sets are grouped, and
+    no image is held meanwhile."""
+    return [(topic, msgtype, log_ns, cdr[:STAMP_END]) for topic, msgtype, log_ns, cdr in read_bag(bag, images)]
+
+
+def _sets(messages: Sequence[tuple[str, str, int, bytes]], images: Sequence[str], max_skew: float,
+          sync_timeout: float) -> list[SyncSet]:
+    """The synchronised sets of the rig's image messages (_image_stamps), stamps only."""
+    return [_stamps_only(s) for s in group_sets(messages, images, max_skew, sync_timeout, has_header)]
 
 
 def _override_files(paths: Sequence[Path]) -> list[Path]:
