@@ -14,7 +14,7 @@ from typing import AbstractSet, Mapping, MutableMapping, Protocol, Sequence, Tex
 import numpy as np
 
 from msg_adapters.skeleton_msg import Skeletons
-from mvpose_ros.core.association.approximate_sync import rate_differs
+from mvpose_ros.core.association.approximate_sync import FRAME_RATE_EFFECT, rate_differs
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.identities import identity_report
@@ -66,9 +66,9 @@ def frame_rate_note(bag_hz: float | None, frame_rate: float) -> str | None:
     frame_rate, may then be too short for the rig's offsets or longer than its period."""
     if not rate_differs(bag_hz, frame_rate):
         return None
-    return (f"the bag's cameras run at {bag_hz:.1f} Hz, the parameters' frame_rate is {frame_rate:g} Hz: max_skew's "
-            f'default (half its period) and bp_solver\'s nominal step follow frame_rate; set it to {bag_hz:.1f} in '
-            f'your parameter file, or leave it out there to take the bag\'s (README, Your own cameras, step 2)')
+    return (f"the bag's cameras run at {bag_hz:.1f} Hz, the parameters' frame_rate is {frame_rate:g} Hz: "
+            f'{FRAME_RATE_EFFECT}; set it to {bag_hz:.1f} in your parameter file, or leave it out there to take the '
+            f"bag's (README, Your own cameras, step 2)")
 
 
 def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.ndarray:

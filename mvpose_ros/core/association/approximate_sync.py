@@ -68,6 +68,8 @@ def stamp_rate(stamps: Sequence[Sequence[int]]) -> float | None:
 
 
 RATE_TOLERANCE = 0.1  # relative: cameras this far off the nodes' frame_rate run at another rate
+# what a frame_rate off the cameras' rate puts wrong, as the bag check and the live check say it
+FRAME_RATE_EFFECT = "max_skew's default (half its period) and bp_solver's nominal step follow frame_rate"
 
 
 def rate_differs(camera_hz: float | None, frame_rate: float) -> bool:

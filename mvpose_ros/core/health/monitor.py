@@ -10,7 +10,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from mvpose_ros.core.association.approximate_sync import rate_differs
+from mvpose_ros.core.association.approximate_sync import FRAME_RATE_EFFECT, rate_differs
 from mvpose_ros.core.health.status import Level, Status, judged
 from mvpose_ros.core.health.thresholds import HealthThresholds
 
@@ -156,8 +156,7 @@ def frame_rate_status(node: str, camera_hz: float | None, frame_rate: float) -> 
         return Status(name, Level.OK, f'cameras at {camera_hz:.1f} Hz, frame_rate {frame_rate:g} Hz', values)
     return Status(name, Level.WARN,
                   f'the cameras run at {camera_hz:.1f} Hz (their stamps), the frame_rate parameter is {frame_rate:g} '
-                  f"Hz: max_skew's default (half its period) and bp_solver's nominal step follow frame_rate; set it "
-                  f"to {camera_hz:.1f} (the parameter file's /** section)", values)
+                  f"Hz: {FRAME_RATE_EFFECT}; set it to {camera_hz:.1f} (the parameter file's /** section)", values)
 
 
 @dataclass
