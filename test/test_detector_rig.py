@@ -220,6 +220,8 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
             last = [stamps[c][-1] for c in range(3)]
             assert spin_until(executor, lambda: all(s in o for s, o in zip(last, out)), 60.0), log.read_text()
             assert spin_until(executor, lambda: len(out[0]) + len(dropped) >= sets, 10.0), log.read_text()
+            # the rate is judged at the node's next diagnostics period with the stamps in its window
+            assert spin_until(executor, lambda: 'the cameras run at' in log.read_text(), 10.0), log.read_text()
             spin_until(executor, lambda: False, 0.5)
         finally:
             stop(proc)
