@@ -23,18 +23,6 @@ def camera_to_info(camera: Camera, header: Header) -> CameraInfo:
                       p=np.column_stack([camera.K, np.zeros(3)]).ravel())
 
 
-def info_key(msg: CameraInfo) -> tuple | None:
-    """What info_to_intrinsics and check_info read of a CameraInfo, as a hashable value: a driver
-    sends the same CameraInfo with every image, so a node checks it once per content. None when d
-    holds more values than any model has (such a message is refused anyway, and is not copied)."""
-    if len(msg.d) > lens.OPENCV_FULL:
-        return None
-    roi = msg.roi
-    return (msg.distortion_model, int(msg.width), int(msg.height), tuple(msg.k), tuple(msg.d), tuple(msg.r),
-            tuple(msg.p), int(msg.binning_x), int(msg.binning_y), int(roi.x_offset), int(roi.y_offset),
-            int(roi.width), int(roi.height))
-
-
 def info_to_intrinsics(msg: CameraInfo, rectified: bool = False) -> tuple[np.ndarray, np.ndarray, int, int, str]:
     """K (3, 3) pixels, dist (the model's coefficients), width, height (pixels) and distortion
     model of the images that come with a CameraInfo, as RigCamera.with_info takes them. An empty d

@@ -1,10 +1,11 @@
 """The std_msgs/Header at the front of a serialised (CDR) message, read and rewritten in the
 bytes without deserialising the message: the player moves stamps on for later loops, the
-recorder times raw messages, and a node checks an input's stamp, frame and size before paying
-for its message objects (then deserialise_cloud)."""
+recorder times raw messages, and a node checks an input's stamp, frame and size (or whether it
+differs from the last but for its stamp) before paying for its message objects (then deserialise)."""
 from __future__ import annotations
 
 import struct
+from typing import Any
 
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
@@ -66,10 +67,23 @@ def with_header_stamp(cdr: bytes, stamp_ns: int) -> bytes:
     return bytes(out)
 
 
-def deserialise_cloud(cdr: bytes) -> PointCloud2:
-    """The PointCloud2 of serialised bytes; ValueError of one line for bytes that do not
-    deserialise (rclpy raises RuntimeError with the C error)."""
+def after_stamp(cdr: bytes) -> bytes:
+    """Every byte of a serialised message whose first field is a std_msgs/Header but its
+    encapsulation and stamp: equal for two messages that differ in their stamps alone (a driver's
+    CameraInfo with each image), so a node can check such a message once per content."""
+    _byte_order(cdr)
+    return cdr[STAMP_END:]
+
+
+def deserialise(cdr: bytes, msg_type: type) -> Any:
+    """The message of type msg_type of serialised bytes; ValueError of one line for bytes that do
+    not deserialise (rclpy raises RuntimeError with the C error)."""
     try:
-        return deserialize_message(cdr, PointCloud2)
+        return deserialize_message(cdr, msg_type)
     except RuntimeError as exc:
-        raise ValueError(f'{" ".join(str(exc).split())} ({len(cdr)} bytes as a PointCloud2)') from None
+        raise ValueError(f'{" ".join(str(exc).split())} ({len(cdr)} bytes as a {msg_type.__name__})') from None
+
+
+def deserialise_cloud(cdr: bytes) -> PointCloud2:
+    """The PointCloud2 of serialised bytes (deserialise)."""
+    return deserialise(cdr, PointCloud2)

@@ -6,8 +6,8 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from msg_adapters.cdr_header import (CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns,
-                                     with_header_stamp)
+from msg_adapters.cdr_header import (CLOUD_OVERHEAD, after_stamp, deserialise, deserialise_cloud, header_frame_id,
+                                     header_stamp_ns, with_header_stamp)
 
 S = 1_000_000_000
 
@@ -64,3 +64,30 @@ def test_a_cloud_deserialises_or_is_a_one_line_value_error():
     with pytest.raises(ValueError, match=rf'^failed to deserialize .* \({half} bytes as a PointCloud2\)$') as err:
         deserialise_cloud(cdr[:half])
     assert '\n' not in str(err.value)
+
+
+def test_after_stamp_tells_messages_apart_by_all_but_their_stamps():
+    """A driver's CameraInfo comes with every image, the same but for its stamp: equal bytes after
+    the stamp; any field the checks read, or the frame_id, changes them."""
+    def info(sec: int, **fields) -> bytes:
+        msg = CameraInfo(width=1032, height=776, distortion_model='plumb_bob', d=[0.1, -0.2, 0.0, 0.0, 0.03],
+                         k=[1000.0, 0, 516, 0, 1000.0, 388, 0, 0, 1])
+        msg.header.stamp.sec, msg.header.frame_id = sec, 'cam1'
+        for name, value in fields.items():
+            target = msg.header if name == 'frame_id' else msg
+            setattr(target, name, value)
+        return serialize_message(msg)
+
+    assert after_stamp(info(12)) == after_stamp(info(13)) != after_stamp(info(12, width=1030))
+    for change in ({'height': 770}, {'d': [0.1, -0.2, 0.0, 0.0, 0.031]}, {'distortion_model': 'equidistant'},
+                   {'k': [1000.5, 0, 516, 0, 1000.0, 388, 0, 0, 1]}, {'frame_id': 'cam2'}, {'binning_x': 2}):
+        assert after_stamp(info(12, **change)) != after_stamp(info(12)), change
+    with pytest.raises(ValueError, match='CDR'):
+        after_stamp(b'\x07\x07' + info(12)[2:])
+
+
+def test_deserialise_names_the_type_it_wanted_in_one_line():
+    cdr = serialize_message(CameraInfo(width=3))
+    assert deserialise(cdr, CameraInfo).width == 3
+    with pytest.raises(ValueError, match=r'^failed to deserialize .* \(20 bytes as a CameraInfo\)$'):
+        deserialise(cdr[:20], CameraInfo)

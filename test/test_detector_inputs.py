@@ -1,28 +1,38 @@
 """The heatmap detector's input handling without processes: every image encoding and both
 compressed formats decoded with the node's checks (decode_image: the calibrated size, a compressed
 header checked before decoding), the image type from the graph or by image_transport's naming,
-rig topics resolved in the rig's namespace, the `camera` parameter, and unusable inputs logged
-once per camera and cause."""
+rig topics resolved in the rig's namespace, the `camera` parameter, unusable inputs logged
+once per camera and cause, and a driver's CameraInfo read once per content."""
 from __future__ import annotations
 
+import dataclasses
 import struct
 from types import SimpleNamespace
 
 import cv2
 import numpy as np
 import pytest
+import rclpy
+from builtin_interfaces.msg import Time
 from rclpy.qos import HistoryPolicy, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
+from msg_adapters.camera_info_msg import camera_to_info
+from msg_adapters.cdr_header import deserialise
 from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compressed_msg, image_to_msg
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.heatmap_detector import _camera_indices, decode_image, in_namespace, rig_namespace
+from mvpose_ros.nodes import heatmap_detector
+from mvpose_ros.nodes.heatmap_detector import (HeatmapDetectorNode, _camera_indices, decode_image, in_namespace,
+                                               rig_namespace)
 from mvpose_ros.nodes.image_topics import TYPE_RECHECK_S, ImageTypes, image_type, image_type_by_name
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
+from ros_harness import ros_domain
 
 HEADER = Header(frame_id='cam1')
 
@@ -192,3 +202,38 @@ def test_admission_checks_every_input_before_it_is_queued_and_decodes_nothing(sh
     small = image_to_compressed_msg(bgr[:100, :100], HEADER, 'png')
     with pytest.raises(ValueError, match='declares 100x100, expected 1032x776'):
         check_camera_image(small, size)
+
+
+def test_a_camera_info_is_read_once_per_content_and_what_is_wrong_said_once(monkeypatch, capfd):
+    """A driver sends its CameraInfo with every image: the detector deserialises one only when
+    more than its stamp differs from the last it read; one that contradicts the rig, or cannot be
+    read, is still said (once)."""
+    with ros_domain(monkeypatch):
+        rclpy.init(args=['prog', '--ros-args', '-r', '__ns:=/cam1', '-p', 'camera:=1'],
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        try:
+            node = HeatmapDetectorNode()
+            [cam] = node._cameras
+            reads = []
+            monkeypatch.setattr(heatmap_detector, 'deserialise',
+                                lambda cdr, t: reads.append(cdr) or deserialise(cdr, t))
+
+            def sent(sec: int, camera) -> bytes:
+                return serialize_message(camera_to_info(camera, Header(stamp=Time(sec=sec), frame_id='cam1')))
+
+            wrong = dataclasses.replace(cam.camera, K=cam.camera.K * [[1.1], [1], [1]])
+            for sec, camera, total in ((12, cam.camera, 1), (13, cam.camera, 1), (14, cam.camera, 1),
+                                       (15, wrong, 2), (16, wrong, 2), (17, cam.camera, 3)):
+                node._on_info_cdr(cam, sent(sec, camera))
+                assert len(reads) == total, sec
+            junk = b'\x00\x01\x00\x00' + bytes(8) + b'\xff' * 8
+            node._on_info_cdr(cam, junk)
+            node._on_info_cdr(cam, junk)
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+    err = capfd.readouterr().err
+    assert err.count('contradicts the calibration parameter: CameraInfo fx') == 1, err
+    assert err.count(f'cam1: camera_info of {len(junk)} bytes unreadable') == 1, err

@@ -46,7 +46,8 @@ parameter file can override them (qos_overrides.<topic>.subscription.*).
 
 Intrinsics: from the rig file, else from the camera's first usable CameraInfo (images wait
 for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use is logged
-once per camera and problem and never acted on.
+once per camera and problem and never acted on; one that differs from the last by its stamp alone
+is not even deserialised.
 
 Bounded input: every input is checked before it is queued or worked on (_admit, no decoding):
 the camera's frame_id; an image against its camera's size (the data at most what such an image
@@ -90,8 +91,9 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.camera_info_msg import check_info, info_key, info_to_intrinsics
-from msg_adapters.cdr_header import CLOUD_OVERHEAD, deserialise_cloud, header_frame_id, header_stamp_ns
+from msg_adapters.camera_info_msg import check_info, info_to_intrinsics
+from msg_adapters.cdr_header import (CLOUD_OVERHEAD, after_stamp, deserialise, deserialise_cloud,
+                                     header_frame_id, header_stamp_ns)
 from msg_adapters.image_msg import check_camera_image, to_bgr
 from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
@@ -175,7 +177,7 @@ class _Camera:
     image: ImageInput | None = None  # onnx: its image topic's type (openpose: PointCloud2)
     subscription: Subscription | None = None
     info_problems: set[str] = field(default_factory=set)
-    checked_info: tuple | None = None  # camera_info_msg.info_key of the last CameraInfo checked
+    info_content: bytes | None = None  # cdr_header.after_stamp of the last CameraInfo taken in
     turns: int = 0  # onnx: quarter turns that stand its image up (upright.upright_turns)
 
 
@@ -301,7 +303,8 @@ class HeatmapDetectorNode(Node):
             self._start_sets(p, rig.world_frame)
         for cam in self._cameras:
             self._subscribe(cam)
-            camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info, cam), self._depth)
+            camera_subscription(self, CameraInfo, cam.info_topic, partial(self._on_info_cdr, cam), self._depth,
+                                raw=True)
             typed = f'{cam.image.kind.__name__}, by {cam.image.typed_by}' if cam.image else 'PointCloud2'
             turned = f', turned {90 * cam.turns} degrees counterclockwise to stand people up' if cam.turns else ''
             self.get_logger().info(f'{cam.rig.name}: backend {self._backend}, {cam.input_topic} ({typed}{turned}) -> '
@@ -377,6 +380,23 @@ class HeatmapDetectorNode(Node):
 
     # --- CameraInfo ---------------------------------------------------------------------------
 
+    def _on_info_cdr(self, cam: _Camera, cdr: bytes) -> None:
+        """A CameraInfo as bytes, taken in (_on_info) only when more than its stamp differs from the
+        last one taken in: a driver sends the same CameraInfo with every image, and each one taken
+        in as a message cost about 0.2 ms of CPU (a bare node's 0.62 against 0.44 ms a frame)."""
+        try:
+            content = after_stamp(cdr)
+            if content == cam.info_content:
+                return
+            msg = deserialise(cdr, CameraInfo)
+        except ValueError as exc:
+            self._log.log((cam.rig.name, 'camera_info unreadable'),
+                          f'{cam.rig.name}: camera_info of {len(cdr)} bytes unreadable: {short_cause(str(exc))}',
+                          'error')
+            return
+        self._on_info(cam, msg)
+        cam.info_content = content
+
     def _on_info(self, cam: _Camera, msg: CameraInfo) -> None:
         try:
             if msg.header.frame_id != cam.rig.frame_id:
@@ -390,10 +410,6 @@ class HeatmapDetectorNode(Node):
                     with self._intrinsics_in:
                         self._intrinsics_in.notify_all()
                 return
-            key = info_key(msg)
-            if key is not None and key == cam.checked_info:
-                return  # the same CameraInfo again (with every image): checked, and any problem said
-            cam.checked_info = key
             check_info(msg, cam.camera, rectified=cam.rig.rectified)
         except ValueError as exc:
             # A CameraInfo that disagrees means a wrong file or a re-calibrated camera: said once

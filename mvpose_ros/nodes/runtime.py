@@ -62,8 +62,9 @@ def camera_qos(depth: int = CAMERA_QUEUE_DEPTH) -> QoSProfile:
 
 
 def camera_subscription(node: Node, msg_type: type, topic: str, callback: Callable[[Any], None],
-                        depth: int = CAMERA_QUEUE_DEPTH) -> Subscription:
-    """A camera-input subscription (camera_qos(depth)) whose history, depth and reliability the
+                        depth: int = CAMERA_QUEUE_DEPTH, raw: bool = False) -> Subscription:
+    """A camera-input subscription (camera_qos(depth); raw: the callback takes the serialised
+    bytes) whose history, depth and reliability the
     parameter file can override, as rclpy's QoS overriding options read them: parameters
     `qos_overrides.<resolved topic>.subscription.{history,depth,reliability}`, e.g.::
 
@@ -75,7 +76,7 @@ def camera_subscription(node: Node, msg_type: type, topic: str, callback: Callab
 
     A bad override is a StartupError."""
     try:
-        return node.create_subscription(msg_type, topic, callback, camera_qos(depth),
+        return node.create_subscription(msg_type, topic, callback, camera_qos(depth), raw=raw,
                                         qos_overriding_options=QoSOverridingOptions.with_default_policies())
     except (InvalidQosOverridesError, RuntimeError, ParameterException, ValueError) as exc:
         raise StartupError(f'QoS of {node.resolve_topic_name(topic)}: {" ".join(str(exc).split())}') from None
