@@ -1,6 +1,7 @@
 """The overlay node as a process: a probe plays a two-camera rig's images (one CompressedImage, one
 raw Image, stamped 6 ms apart), their 2D people and a set's skeletons, and reads back each camera's
-overlay: the skeleton drawn where it projects, in its person's colour, on the image of the set."""
+overlay: the skeleton drawn where it projects, in its person's colour, on the image of the set;
+bytes that are no image named in the log."""
 from __future__ import annotations
 
 import cv2
@@ -100,6 +101,9 @@ def test_each_camera_gets_its_image_of_the_set_with_the_skeletons_drawn(domain, 
             next_set = Header(frame_id='world', stamp=stamp_of_ns(set_stamp + 40_000_000))
             assert _until_drawn(executor, lambda: send_set(lambda: dropped.publish(next_set)), got,
                                 set_stamp + 40_000_000), log.read_text()
+            # bytes that are no message at all: held as bytes, so named when their stamp is read
+            assert spin_until(executor, lambda: images['a'].publish(b'\x07\x07' + bytes(30)) or
+                              'a: image not held' in log.read_text()), log.read_text()
         finally:
             stop(proc)
     for k, (n, cam) in enumerate(zip('ab', cameras)):
@@ -114,7 +118,7 @@ def test_each_camera_gets_its_image_of_the_set_with_the_skeletons_drawn(domain, 
         second = next(m for m in got[n] if stamp_ns(m.header.stamp) == set_stamp + 40_000_000 + 6_000_000 * k)
         bare = cv2.imdecode(np.frombuffer(bytes(second.data), np.uint8), cv2.IMREAD_COLOR)
         assert not any(_colour_near(bare, uv, colour) for uv in cam.project(person))
-    assert 'problems: none' in log.read_text()
+    assert 'problems: a: ' in log.read_text() and ' x image unreadable\n' in log.read_text(), log.read_text()
 
 
 def _until_drawn(executor, send, got: dict[str, list], set_stamp: int, tries: int = 50) -> bool:

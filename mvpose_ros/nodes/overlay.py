@@ -15,7 +15,9 @@ Which image goes with a set: its 2D people's stamp, in [set stamp, set stamp + m
 set, is not drawn (counted in the diagnostics). At most `max_rate` images per second per camera
 are drawn, each decoded at 1/`reduce` of its size; a dropped set only when a camera has had no
 image for a second (core.overlay_sets.due: under overload most sets are dropped). It still
-receives every image: at 5 cameras x 25 Hz about 15% of a core (README, "Your own cameras").
+receives every image, held serialised and deserialised only when drawn: at 5 cameras x 25 Hz
+about 15% of a core with the drawing (README, "Your own cameras"). Bytes whose header stamp
+cannot be read are not held (logged once per camera).
 Every input is best effort, so this node never slows the graph's reliable publishers down, and a
 lost message only costs a picture. An image topic's type (Image or CompressedImage) is the
 detector's rule (nodes.image_topics.ImageTypes): its publishers', or the name's until a publisher
@@ -39,6 +41,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, PointCloud2
 from std_msgs.msg import Header
 
+from msg_adapters.cdr_header import deserialise, header_stamp_ns
 from msg_adapters.image_msg import image_to_compressed_msg, to_bgr
 from msg_adapters.people_msg import msg_to_people
 from msg_adapters.skeleton_msg import msg_to_skeletons
@@ -132,10 +135,17 @@ class OverlayNode(Node):
             self.destroy_subscription(self._image_subscriptions[camera])
         image = self._image_types.inputs[camera]
         self._image_subscriptions[camera] = camera_subscription(self, image.kind, image.topic,
-                                                                partial(self._on_image, camera))
+                                                                partial(self._on_image, camera, image.kind), raw=True)
 
-    def _on_image(self, camera: int, msg: Any) -> None:
-        self._images[camera].add(stamp_ns(msg.header.stamp), msg, len(msg.data))
+    def _on_image(self, camera: int, kind: type, cdr: bytes) -> None:
+        # kept serialised, with its type: most are never drawn, and deserialising each cost about
+        # as much as the rest of receiving it for raw images (README, "Your own cameras")
+        try:
+            stamp = header_stamp_ns(cdr)
+        except ValueError as exc:
+            self._log.log((self._names[camera], 'image unreadable'), f'{self._names[camera]}: image not held: {exc}')
+            return
+        self._images[camera].add(stamp, (kind, cdr), len(cdr))
 
     def _on_people(self, camera: int, msg: PointCloud2) -> None:
         # kept as it came: most are never drawn, and decoding each cost 0.13 ms (Shelf)
@@ -193,8 +203,10 @@ class OverlayNode(Node):
 
     def _draw(self, member: Member, camera: Camera, stamp: int, ids: np.ndarray | None,
               joints: np.ndarray) -> CompressedImage:
-        """The overlay of one camera's member of a set (ValueError: its image does not decode)."""
-        bgr = to_bgr(member.image, (camera.width, camera.height), self._reduce)
+        """The overlay of one camera's member of a set (ValueError: its image does not deserialise or
+        decode)."""
+        image = deserialise(member.image[1], member.image[0])
+        bgr = to_bgr(image, (camera.width, camera.height), self._reduce)
         size = (round(camera.width / self._reduce), round(camera.height / self._reduce))
         if bgr.shape[1] > size[0]:  # raw images come whole
             bgr = cv2.resize(bgr, size, interpolation=cv2.INTER_AREA)
@@ -204,7 +216,7 @@ class OverlayNode(Node):
                       scale=bgr.shape[1] / camera.width, labels=[f'id {i}' for i in people])
         draw_caption(out, f'{self._names[member.camera]}  set {stamp / 1e9:.3f} s  '
                      + ('no skeletons: set dropped' if ids is None else f'{len(people)} people'))
-        return image_to_compressed_msg(out, member.image.header, 'jpeg', self._quality)
+        return image_to_compressed_msg(out, image.header, 'jpeg', self._quality)
 
     def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
         counts = {k: str(v) for k, v in sorted(self._counts.items())}
