@@ -78,8 +78,8 @@ class RecentByStamp(Generic[T]):
 @dataclass(frozen=True)
 class Member:
     """A camera's part of a skeleton set: its image's stamp, the image, and the 2D people detected
-    in it as they are held (the overlay node holds the people2d message; None when it is no longer,
-    or not yet, held)."""
+    in it as they are held (the overlay node holds the image's type and serialised bytes, and the
+    people2d message; people None when it is no longer, or not yet, held)."""
 
     camera: int
     stamp_ns: int

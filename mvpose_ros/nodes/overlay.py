@@ -205,7 +205,8 @@ class OverlayNode(Node):
               joints: np.ndarray) -> CompressedImage:
         """The overlay of one camera's member of a set (ValueError: its image does not deserialise or
         decode)."""
-        image = deserialise(member.image[1], member.image[0])
+        kind, cdr = member.image
+        image = deserialise(cdr, kind)
         bgr = to_bgr(image, (camera.width, camera.height), self._reduce)
         size = (round(camera.width / self._reduce), round(camera.height / self._reduce))
         if bgr.shape[1] > size[0]:  # raw images come whole
