@@ -13,7 +13,7 @@ from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, _tree_depth, camera_subsets,
-                                                  own_bone_lengths, sample_people, split_draws)
+                                                  own_bone_lengths, sample_people, split_draws, subset_count)
 
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
@@ -80,6 +80,16 @@ def test_camera_subsets():
     assert len(camera_subsets(range(5), min_size=3)) == 16
     assert camera_subsets([2, 7]) == [(2, 7)]
     assert camera_subsets([3]) == []
+
+
+def test_camera_subsets_up_to_a_limit_are_the_first_of_all():
+    every = camera_subsets(range(9))
+    assert [subset_count(n) for n in range(1, 10)] == [len(camera_subsets(range(n))) for n in range(1, 10)]
+    assert camera_subsets(range(9), limit=40) == every[:40] and camera_subsets(range(9), limit=600) == every
+    # a studio of 40 cameras has 2^40 subsets: only those asked for are listed
+    largest = camera_subsets(range(40), limit=42)
+    assert largest[0] == tuple(range(40)) and all(len(s) == 39 for s in largest[1:41]) and len(largest[41]) == 38
+    assert subset_count(40) == 2 ** 40 - 41
 
 
 @pytest.mark.parametrize('total, n', [(38, 26), (64, 26), (5, 26), (0, 3), (9, 3)])
