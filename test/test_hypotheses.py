@@ -12,6 +12,7 @@ from mvpose_ros.core.geometry.body import HANGING, INFERENCE_MIRROR, INFERENCE_P
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
+from mvpose_ros.core.evaluation.video import look_at
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, _tree_depth, camera_subsets,
                                                   own_bone_lengths, sample_people, split_draws, subset_count)
 
@@ -92,6 +93,29 @@ def test_camera_subsets_up_to_a_limit_are_the_first_of_all():
     assert subset_count(40) == 2 ** 40 - 41
 
 
+@pytest.mark.parametrize('n_cams', [7, 9, 32])
+def test_a_plan_with_more_subsets_than_hypotheses_keeps_the_largest_subsets_peaks(n_cams):
+    """Past 6 cameras (M 64) the subsets' peaks do not all fit: the first half of M are the peak
+    triangulations of the largest subsets, the all-camera one first, then a draw of each of them."""
+    m = 64
+    cam_of, draw, used = _plan(n_cams, m, True, n_cams)
+    subsets = camera_subsets(range(n_cams), limit=m // 2)
+    for i, subset in enumerate(subsets + subsets):
+        k = len(subset)
+        assert tuple(cam_of[i, :k]) == subset and np.all(draw[i, k:] == -1)
+        if i < m // 2:
+            assert np.all(draw[i, :k] == m)  # the peaks' ray
+        else:
+            assert np.all((draw[i, :k] >= 0) & (draw[i, :k] < m))
+    # each camera's draws used once
+    for c in range(n_cams):
+        rows, cols = np.nonzero((cam_of == c) & (draw >= 0) & (draw < m))
+        assert sorted(draw[rows, cols]) == list(range(used[c]))
+    # no more subsets than hypotheses: every subset's peak
+    _, draw5, _ = _plan(5, m, True, 5)
+    assert np.count_nonzero((draw5 == m).any(axis=1)) == subset_count(5) == 26
+
+
 @pytest.mark.parametrize('total, n', [(38, 26), (64, 26), (5, 26), (0, 3), (9, 3)])
 def test_split_draws(total, n):
     counts = split_draws(total, n)
@@ -141,6 +165,24 @@ def test_m_hypotheses_per_joint(views, truth, m, peaks):
     hyp = sample_hypotheses(views, np.random.default_rng(0), SamplingConfig(m, peaks))
     assert hyp.shape == (16, m, 3) and np.isfinite(hyp).all()
     assert np.linalg.norm(hyp - truth[:, None], axis=-1).max() < 0.15
+
+
+def test_eight_cameras_anchor_on_the_peak_triangulation_of_all(truth):
+    """A ring of eight cameras: more camera subsets (247) than hypotheses, yet each joint's first
+    hypothesis is still the triangulation of every camera's peak (whatever the draws), which
+    anchors the joints seen once."""
+    centre = truth.mean(axis=0)
+    rig = [look_at(centre + [5 * np.cos(a), 5 * np.sin(a), 1.0], centre, UP, 1000, 800, name=str(i))
+           for i, a in enumerate(np.linspace(0, 2 * np.pi, 8, endpoint=False))]
+    views = _render(rig, truth)
+    config = SamplingConfig(hypotheses=64)
+    a = sample_hypotheses(views, np.random.default_rng(1), config)
+    b = sample_hypotheses(views, np.random.default_rng(2), config)
+    assert a.shape == (16, 64, 3) and np.isfinite(a).all()
+    np.testing.assert_array_equal(a[:, :32], b[:, :32])  # peaks, not draws
+    assert not np.allclose(a[:, 32:], b[:, 32:])
+    assert np.linalg.norm(a[:, 0] - truth, axis=-1).max() < 0.005
+    np.testing.assert_array_equal(_anchors(a[None], config)[0], a[:, 0])
 
 
 def test_deterministic_for_a_seed(views):

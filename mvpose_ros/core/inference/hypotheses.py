@@ -28,7 +28,8 @@ SINGLE_VIEW_DEPTHS = ('centre', 'limb', 'own_limb')
 
 @dataclass(frozen=True)
 class SamplingConfig:
-    """hypotheses: M per joint; peak_hypotheses: add one peak triangulation per camera subset;
+    """hypotheses: M per joint; peak_hypotheses: add one peak triangulation per camera subset
+    (with more subsets than M, of the largest ones, filling half of M);
     single_view_depth: where on its rays a joint seen by one camera is put, 'centre' (the depth
     nearest the person's centre), 'limb' (where the ray meets the sphere of the bone's typical
     adult length around the parent joint: around its best point when it is seen twice, around its
@@ -323,7 +324,7 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
 def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
     """(P, J, 3) best single point of each joint seen by >= 2 cameras (NaN for the others) of
     hypotheses (P, J, M, 3): with peaks, its first hypothesis (the peak triangulation of all its
-    cameras when the peaks fit in M), else the median of its hypotheses."""
+    cameras), else the median of its hypotheses."""
     if config.peak_hypotheses:
         return hyp[:, :, 0].copy()
     out = np.full(hyp.shape[:2] + (3,), np.nan)
@@ -337,12 +338,15 @@ def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray
     """Which rays make each of the m hypotheses of a joint seen by cameras 0..n_cams-1: camera
     (m, K) and draw (m, K) indices (draw m is the peak's ray; -1 where a subset smaller than
     K = width (>= n_cams) is padded), and how many draws of each camera are used (n_cams,):
-    draws 0 .. used - 1. First one peak triangulation per subset (when they fit in m), then the
-    m - peaks draws shared evenly over the subsets, each camera's draws used once."""
+    draws 0 .. used - 1. Subsets largest first: one peak triangulation per subset (when more
+    subsets than m, of the first half of m), then the m - peaks draws shared evenly over the
+    subsets, each camera's draws used once."""
     # at most m subsets get a peak or a draw: listing all 2^n took 12 s and 0.8 GB at 22 cameras,
     # four times more with every two more
     subsets = camera_subsets(range(n_cams), limit=m)
-    n_peaks = len(subsets) if with_peaks and subset_count(n_cams) <= m else 0
+    # past 6 cameras (M 64) not every subset's peak fits: the largest subsets' come first, so the
+    # all-camera triangulation is always one (the anchor of joints seen once), and draws fill half
+    n_peaks = (len(subsets) if subset_count(n_cams) <= m else (m + 1) // 2) if with_peaks else 0
     rows = [(s, [m] * len(s)) for s in subsets[:n_peaks]]
     used = [0] * n_cams
     for subset, n in zip(subsets, split_draws(m - n_peaks, len(subsets))):
