@@ -16,8 +16,9 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 
 from mvpose_ros.bags.io import write_bag
-from mvpose_ros.graph.config import (RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections, graph_nodes,
-                                     graph_settings, load_params, node_command, played_connections, unknown_nodes)
+from mvpose_ros.graph.config import (ALL_NODES, RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections,
+                                     graph_nodes, graph_settings, load_params, node_command, played_connections,
+                                     unknown_nodes)
 from mvpose_ros.graph.report import frame_ranges, latency_ms, print_latency, report
 from ros_harness import ros_domain
 
@@ -32,8 +33,25 @@ RUNNER_DEFAULTS = GraphSettings(dataset='shelf', cameras=5, bag='bags/shelf', pr
 
 
 def test_sections_and_runner_settings():
-    assert set(load_params(CONFIG)) == {*SECTIONS.values(), RUNNER_SECTION}
+    assert set(load_params(CONFIG)) == {ALL_NODES, *SECTIONS.values(), RUNNER_SECTION}
     assert graph_settings(CONFIG) == RUNNER_DEFAULTS
+
+
+@pytest.mark.parametrize('name', ['shelf.yaml', 'shelf_images.yaml'])
+def test_the_frame_rate_is_given_once_for_every_node_and_the_runner(name):
+    params = load_params(CONFIG.with_name(name))
+    assert [node for node, section in params.items() if 'frame_rate' in section] == [ALL_NODES]
+    assert graph_settings(CONFIG.with_name(name)).frame_rate == params[ALL_NODES]['frame_rate'] == 25.0
+
+
+def test_the_runners_own_frame_rate_wins_and_one_is_needed(tmp_path):
+    assert graph_settings(_edited(tmp_path, frame_rate=30.0)).frame_rate == 30.0
+    doc = yaml.safe_load(CONFIG.read_text())
+    del doc[ALL_NODES]
+    path = tmp_path / 'none.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ValueError, match=rf'^{path}: {RUNNER_SECTION}\.frame_rate: missing \(here or in /\*\*\)$'):
+        graph_settings(path)
 
 
 def test_real_nodes_take_every_value_of_the_file(tmp_path, monkeypatch):
@@ -64,7 +82,8 @@ def _check_nodes(nodes, params):
             declared = set(node.list_parameters([], 0).names)
             section = params[SECTIONS[spec.executable]]
             assert set(section) <= declared, f'{spec.name}: not parameters of the node: {set(section) - declared}'
-            expected = {**section, **spec.parameters}
+            every = {k: v for k, v in params[ALL_NODES].items() if k in declared}  # e.g. frame_rate
+            expected = {**every, **section, **spec.parameters}
             got = {name: node.get_parameter(name).value for name in expected}
             fqn = node.get_fully_qualified_name()
         finally:

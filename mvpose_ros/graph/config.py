@@ -21,6 +21,9 @@ from mvpose_ros.core.geometry.rig import Rig
 from mvpose_ros.topics import BUNDLES, OPENPOSE, PEOPLE2D, SKELETONS, camera_namespace, camera_topic
 
 RUNNER_SECTION = 'mvpose_graph'
+ALL_NODES = '/**'
+# The runner's settings every node shares: taken from the '/**' section unless its own sets them.
+SHARED_SETTINGS = ('frame_rate',)
 PARAMS_KEY = 'ros__parameters'
 NODE_PACKAGE = 'mvpose_ros.nodes'
 
@@ -92,19 +95,22 @@ def _typed(path: str | Path, key: str, value: object, kind: type) -> object:
 
 
 def graph_settings(path: str | Path) -> GraphSettings:
-    """The runner's settings from the parameter file; ValueError naming the file and key when one
-    is missing, unknown, of the wrong type or out of range."""
+    """The runner's settings from the parameter file (SHARED_SETTINGS from its '/**' section unless
+    the runner's sets them); ValueError naming the file and key when one is missing, unknown, of the
+    wrong type or out of range."""
     params = load_params(path)
     if RUNNER_SECTION not in params:
         raise ValueError(f'{path}: no {RUNNER_SECTION} section')
-    section = params[RUNNER_SECTION]
+    shared = {k: v for k, v in params.get(ALL_NODES, {}).items() if k in SHARED_SETTINGS}
+    section = shared | params[RUNNER_SECTION]
     kinds = get_type_hints(GraphSettings)
     unknown = sorted(set(section) - set(kinds))
     if unknown:
         raise ValueError(f'{path}: {RUNNER_SECTION}.{unknown[0]}: unknown setting (known: {", ".join(kinds)})')
     missing = [k for k in kinds if k not in section]
     if missing:
-        raise ValueError(f'{path}: {RUNNER_SECTION}.{missing[0]}: missing')
+        where = f' (here or in {ALL_NODES})' if missing[0] in SHARED_SETTINGS else ''
+        raise ValueError(f'{path}: {RUNNER_SECTION}.{missing[0]}: missing{where}')
     values = {k: _typed(path, k, section[k], kind) for k, kind in kinds.items()}
     try:
         return GraphSettings(**values)
@@ -198,7 +204,7 @@ def played_connections(cameras: int, input_topic: str = OPENPOSE) -> dict[str, S
 
 def unknown_nodes(params: Mapping[str, object], nodes: Sequence[NodeSpec]) -> list[str]:
     """Sections of the parameter file that match none of `nodes` (typos) besides the runner's."""
-    known = {RUNNER_SECTION, '/**'}
+    known = {RUNNER_SECTION, ALL_NODES}
     for spec in nodes:
         known |= {spec.executable, f'/{spec.name}', f'/**/{spec.executable}'}
     return sorted(set(params) - known)
@@ -274,7 +280,7 @@ def node_section(params_list: Sequence[Mapping[str, Mapping[str, object]]], node
     section: dict[str, object] = {}
     for params in params_list:
         for key, values in params.items():
-            if key in ('/**', node, f'/{node}', f'/**/{node}'):
+            if key in (ALL_NODES, node, f'/{node}', f'/**/{node}'):
                 section |= dict(values)
     return section
 
