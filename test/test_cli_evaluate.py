@@ -1,16 +1,18 @@
-"""End to end: `mvpose-eval` on the real Shelf detections and on the Campus subset."""
+"""End to end: `mvpose-eval` on the real Shelf detections, on the Campus subset and on a synthetic ring."""
 from __future__ import annotations
 
 import io
 import json
 import re
 
+import numpy as np
 import pytest
 
 from mvpose_ros.cli.evaluate import build_parser, main, run
 from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import evaluate
 from mvpose_ros.core.evaluation.predictions import read_predictions
+from mvpose_ros.core.evaluation.ring import RingConfig, ring_cameras
 
 
 @pytest.fixture(scope='module')
@@ -50,6 +52,28 @@ def test_campus_subset_oracle_is_nearly_perfect(capsys):
     assert main(['campus', '--no-ablation']) == 0
     out = capsys.readouterr().out
     assert 'oracle' in out and 'lenient 100.00' in out
+
+
+def test_a_ring_of_eight_cameras_scores_the_oracle_within_a_few_centimetres(capsys):
+    assert main(['ring', '--ring-cameras', '8', '--no-ablation']) == 0
+    out = capsys.readouterr().out
+    assert out.startswith('ring: 8 synthetic cameras') and '8 cameras' in out
+    summary = re.search(r'strict +([\d.]+) frame-weighted .* MPJPE +([\d.]+) mm', out)
+    assert float(summary[1]) > 99.0 and float(summary[2]) < 20.0
+
+
+def test_ring_cameras_look_at_the_actors_from_around_them():
+    centre = np.array([1.0, 2.0, 1.0])
+    config = RingConfig(cameras=7)
+    cameras = ring_cameras(centre, config)
+    assert len(cameras) == 7 and len({c.name for c in cameras}) == 7
+    for camera in cameras:
+        np.testing.assert_allclose(camera.project(centre[None])[0], [config.width / 2, config.height / 2], atol=1e-6)
+        assert np.linalg.norm((camera.centre - centre)[:2]) == pytest.approx(config.radius)
+    # evenly around: the directions to the cameras sum to nothing horizontally
+    assert np.linalg.norm(np.sum([(c.centre - centre)[:2] for c in cameras], axis=0)) < 1e-9
+    with pytest.raises(ValueError, match='at least 2 cameras'):
+        RingConfig(cameras=1)
 
 
 def test_bad_input_is_a_clear_error(tmp_path, capsys):

@@ -8,6 +8,7 @@
     mvpose-eval shelf --confidence-report out/confidence [--score FILE]   # confidence against error
     mvpose-eval shelf --error-sources [--score FILE]   # do the 2D detections back the wrong joints?
     mvpose-eval campus [--campus-dir CampusSeq1]
+    mvpose-eval ring [--ring-cameras N] [--ring-noise PX]   # N synthetic cameras around Shelf's actors
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_fr
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table, match_actors
 from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
 from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
+from mvpose_ros.core.evaluation.ring import RingConfig, ring_sequence
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS
 from mvpose_ros.core.inference.window import TERMS
@@ -56,7 +58,7 @@ def _terms(text: str) -> tuple[str, ...]:
 def build_parser() -> argparse.ArgumentParser:
     d = StageConfig().to_params()
     p = argparse.ArgumentParser(prog='mvpose-eval', description=__doc__.split('\n')[0])
-    p.add_argument('dataset', choices=('shelf', 'campus'))
+    p.add_argument('dataset', choices=('shelf', 'campus', 'ring'))
     p.add_argument('--data-root', help='folder holding data/ and models/ (default: $MVPOSE_DATA_ROOT or ../shared)')
     p.add_argument('--terms', type=_terms, default=tuple(d['terms']),
                    help=f'CRF terms, comma separated from {",".join(TERMS)} (default: {",".join(d["terms"])})')
@@ -104,6 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help='for each wrong limb end, whether the 2D detections back the estimate or the annotation; '
                         'where the annotated heads sit against ours (shelf)')
     p.add_argument('--campus-dir', type=Path, help='a full CampusSeq1 folder (campus only)')
+    p.add_argument('--ring-cameras', type=int, default=RingConfig.cameras,
+                   help='ring: cameras on the circle around the actors (core.evaluation.ring)')
+    p.add_argument('--ring-noise', type=float, default=RingConfig.noise_px,
+                   help="ring: std of every projected keypoint's noise, px")
     return p
 
 
@@ -137,12 +143,21 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     if args.dataset == 'shelf':
         detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
         seq = shelf_openpose(args.data_root, detector)
-    else:
+    elif args.dataset == 'campus':
         seq, gt, head_model = campus_sequence(args.data_root, args.campus_dir)
         actors, reference = CAMPUS_ACTORS, None
         if args.campus_dir is None:
             print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
+        config = replace(config, solver=replace(config.solver, head_model=head_model))
+    else:
+        ring = RingConfig(cameras=args.ring_cameras, noise_px=args.ring_noise)
+        seq, gt, head_model = ring_sequence(args.data_root, ring)
+        actors, reference = SHELF_ACTORS, None
+        print(f'ring: {ring.cameras} synthetic cameras around the actors of the Shelf test frames, the annotated '
+              f'joints projected with {ring.noise_px:g} px of noise and one of them {ring.outlier_px:g} px off in '
+              f'{100 * ring.outlier_share:g} % of the views (an oracle: checks how the 3D stage scales with '
+              f'cameras, not detection)', file=out)
         config = replace(config, solver=replace(config.solver, head_model=head_model))
     if drop:
         n_all = len(seq.frames)
