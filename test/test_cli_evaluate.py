@@ -74,6 +74,9 @@ def test_ring_cameras_look_at_the_actors_from_around_them():
     assert np.linalg.norm(np.sum([(c.centre - centre)[:2] for c in cameras], axis=0)) < 1e-9
     with pytest.raises(ValueError, match='at least 2 cameras'):
         RingConfig(cameras=1)
+    assert build_parser().parse_args(['ring', '--ring-heights=-0.6,0.3']).ring_heights == (-0.6, 0.3)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(['ring', '--ring-heights', 'low,high'])
 
 
 def test_bad_input_is_a_clear_error(tmp_path, capsys):

@@ -55,6 +55,13 @@ def _terms(text: str) -> tuple[str, ...]:
     return terms
 
 
+def _heights(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(h) for h in text.split(','))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected metres, comma separated, got {text!r}') from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     d = StageConfig().to_params()
     p = argparse.ArgumentParser(prog='mvpose-eval', description=__doc__.split('\n')[0])
@@ -110,6 +117,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help='ring: cameras on the circle around the actors (core.evaluation.ring)')
     p.add_argument('--ring-noise', type=float, default=RingConfig.noise_px,
                    help="ring: std of every projected keypoint's noise, px")
+    p.add_argument('--ring-radius', type=float, default=RingConfig.radius,
+                   help="ring: the cameras' distance from the actors' centre, horizontally, m")
+    p.add_argument('--ring-heights', type=_heights, default=RingConfig.heights,
+                   help="ring: the cameras' heights above the actors' centre, m, comma separated, camera after "
+                        "camera in turn (negative: below; give it as --ring-heights=-0.6,-0.3)")
+    p.add_argument('--ring-fov', type=float, default=RingConfig.fov_deg,
+                   help="ring: every camera's horizontal field of view, degrees")
     return p
 
 
@@ -151,10 +165,13 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
         config = replace(config, solver=replace(config.solver, head_model=head_model))
     else:
-        ring = RingConfig(cameras=args.ring_cameras, noise_px=args.ring_noise)
+        ring = RingConfig(cameras=args.ring_cameras, radius=args.ring_radius, heights=args.ring_heights,
+                          fov_deg=args.ring_fov, noise_px=args.ring_noise)
         seq, gt, head_model = ring_sequence(args.data_root, ring)
         actors, reference = SHELF_ACTORS, None
-        print(f'ring: {ring.cameras} synthetic cameras around the actors of the Shelf test frames, the annotated '
+        heights = ', '.join(f'{h:g}' for h in ring.heights)
+        print(f'ring: {ring.cameras} synthetic cameras {ring.radius:g} m around the actors of the Shelf test frames '
+              f'({heights} m above their centre, {ring.fov_deg:g} degrees), the annotated '
               f'joints projected with {ring.noise_px:g} px of noise and one of them {ring.outlier_px:g} px off in '
               f'{100 * ring.outlier_share:g} % of the views (an oracle: checks how the 3D stage scales with '
               f'cameras, not detection)', file=out)
