@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
-from mvpose_ros.core.geometry.body import HANGING, INFERENCE_MIRROR, INFERENCE_PARENT, PRIOR_BONE_LENGTH, UP
+from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_NAMES, INFERENCE_PARENT,
+                                           PRIOR_BONE_LENGTH, UP)
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
@@ -183,6 +184,24 @@ def test_eight_cameras_anchor_on_the_peak_triangulation_of_all(truth):
     assert not np.allclose(a[:, 32:], b[:, 32:])
     assert np.linalg.norm(a[:, 0] - truth, axis=-1).max() < 0.005
     np.testing.assert_array_equal(_anchors(a[None], config)[0], a[:, 0])
+
+
+def test_a_leg_no_camera_sees_hangs_below_its_parent(views, truth):
+    """Feet out of every picture: actor 2's right knee and ankle seen by no camera hang their
+    bones' lengths (his own, from the left leg) straight down, the knee from each hip hypothesis
+    and the ankle from the knee's; he walks upright, so they land within 0.25 m. Without hanging_legs
+    both take the person's centre, a metre off."""
+    knee, ankle, hip = (INFERENCE_NAMES.index(n) for n in ('r_knee', 'r_ankle', 'r_hip'))
+    sub = _without(views, [knee, ankle], set(range(5)))
+    config = SamplingConfig(hypotheses=32)
+    hyp = sample_hypotheses(sub, np.random.default_rng(0), config)
+    lengths = own_bone_lengths(_anchors(hyp[None], config))[0]
+    np.testing.assert_allclose(hyp[knee], hyp[hip] - lengths[knee] * UP, atol=1e-12)
+    np.testing.assert_allclose(hyp[ankle], hyp[knee] - lengths[ankle] * UP, atol=1e-12)
+    assert np.linalg.norm(hyp[[knee, ankle]] - truth[[knee, ankle], None], axis=-1).max() < 0.25  # 0.14, 0.21
+    centred = sample_hypotheses(sub, np.random.default_rng(0), replace(config, hanging_legs=False))
+    np.testing.assert_array_equal(centred[knee], centred[ankle])  # both the centre
+    assert np.linalg.norm(centred[ankle] - truth[ankle], axis=-1).min() > 0.5
 
 
 def test_deterministic_for_a_seed(views):

@@ -44,7 +44,8 @@ SOLVER_PARAMETERS = {
                          'nearest the person\'s centre, or at the bone\'s typical adult length from the parent '
                          'joint, or at the person\'s own (measured in the same frame)',
     'hanging_legs': 'a knee or ankle seen by one camera where its ray meets the sphere of its bone around the '
-                    'parent joint lower along up (legs hang from hips and knees), not nearer the person\'s centre',
+                    'parent joint lower along up (legs hang from hips and knees), not nearer the person\'s centre; '
+                    'one seen by none straight below its parent, not at the centre',
     'terms': f'CRF terms, from {", ".join(TERMS)}',
     'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
     'seed': 'seed of the hypothesis sampling',

@@ -36,7 +36,9 @@ class SamplingConfig:
     hypothesis of the same index when it is seen once; else as 'centre') or
     'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths). Of the sphere's two
     crossings the one nearer the person's centre is taken, but with hanging_legs the lower one
-    (along up) for a knee or ankle (body.HANGING)."""
+    (along up) for a knee or ankle (body.HANGING); with hanging_legs and a single_view_depth
+    other than 'centre', a knee or ankle no camera sees (feet out of every picture) hangs its
+    bone's length straight down from its parent instead of taking the person's centre."""
 
     hypotheses: int = 64
     peak_hypotheses: bool = True
@@ -83,7 +85,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
     closest to the person's centre (so it stays near the body instead of being dropped) or, with
     single_view_depth 'limb' / 'own_limb', at its bone's length from its parent; a joint seen by
-    none gets the centre itself.
+    none gets the centre itself, but a knee or ankle hangs from its parent (SamplingConfig).
     """
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
@@ -264,7 +266,8 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
     # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
     # anchor, or around the parent's k-th point when the parent is seen once (order: parents first)
     # (the nearer of the two to the centre's depth, the lower along up for a hanging joint; a ray
-    # missing it: its point nearest the parent); a joint seen by none, the centre.
+    # missing it: its point nearest the parent); a joint seen by none, the centre, but with limb a
+    # hanging joint its bone's length straight down (-up) from its parent's point of the same k.
     n_joints, m = out.shape[1], out.shape[2]
     for p in range(out.shape[0]):
         total = np.zeros(3)
@@ -284,8 +287,15 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
         centre = total / count
         for j in order:
             if n_seen[p, j] == 0:
+                # a leg out of every picture hangs (its parent is placed before it); other joints
+                # have no direction to go, so they take the centre
+                hang = limb and hanging[j] and parents[j] >= 0 and not np.isnan(lengths[p, j])
                 for k in range(m):
-                    out[p, j, k] = centre
+                    if hang and not np.isnan(out[p, parents[j], k, 0]):
+                        for c in range(3):
+                            out[p, j, k, c] = out[p, parents[j], k, c] - lengths[p, j] * up[c]
+                    else:
+                        out[p, j, k] = centre
             if n_seen[p, j] != 1:
                 continue
             v = seeing[p, 0, j]
