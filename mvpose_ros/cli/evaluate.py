@@ -163,7 +163,6 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         if args.campus_dir is None:
             print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
-        config = replace(config, solver=replace(config.solver, head_model=head_model))
     else:
         ring = RingConfig(cameras=args.ring_cameras, radius=args.ring_radius, heights=args.ring_heights,
                           fov_deg=args.ring_fov, noise_px=args.ring_noise)
@@ -175,6 +174,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
               f'joints projected with {ring.noise_px:g} px of noise and one of them {ring.outlier_px:g} px off in '
               f'{100 * ring.outlier_share:g} % of the views (an oracle: checks how the 3D stage scales with '
               f'cameras, not detection)', file=out)
+    if args.dataset != 'shelf':  # their 2D people come with the head model they need
         config = replace(config, solver=replace(config.solver, head_model=head_model))
     if drop:
         n_all = len(seq.frames)
