@@ -64,8 +64,8 @@ def camera_qos(depth: int = CAMERA_QUEUE_DEPTH) -> QoSProfile:
 def camera_subscription(node: Node, msg_type: type, topic: str, callback: Callable[[Any], None],
                         depth: int = CAMERA_QUEUE_DEPTH, raw: bool = False) -> Subscription:
     """A camera-input subscription (camera_qos(depth); raw: the callback takes the serialised
-    bytes) whose history, depth and reliability the
-    parameter file can override, as rclpy's QoS overriding options read them: parameters
+    bytes) whose history, depth and reliability the parameter file can override, as rclpy's QoS
+    overriding options read them: parameters
     `qos_overrides.<resolved topic>.subscription.{history,depth,reliability}`, e.g.::
 
         /**/heatmap_detector:
