@@ -9,13 +9,15 @@ import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_NAMES, INFERENCE_PARENT,
-                                           PRIOR_BONE_LENGTH, UP)
+                                           PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_RISE, UP)
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
 from mvpose_ros.core.evaluation.video import look_at
-from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, _tree_depth, camera_subsets,
-                                                  own_bone_lengths, sample_people, split_draws, subset_count)
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, _tree_depth, _unseen_depth,
+                                                  camera_subsets,
+                                                  bone_scales, own_bone_lengths, sample_people, split_draws,
+                                                  subset_count)
 
 SIGMA, STRIDE = 1.5, 1.0
 # a sample lies in the 3-sigma cut square around the true pixel, jittered within its cell
@@ -189,8 +191,8 @@ def test_eight_cameras_anchor_on_the_peak_triangulation_of_all(truth):
 def test_a_leg_no_camera_sees_hangs_below_its_parent(views, truth):
     """Feet out of every picture: actor 2's right knee and ankle seen by no camera hang their
     bones' lengths (his own, from the left leg) straight down, the knee from each hip hypothesis
-    and the ankle from the knee's; he walks upright, so they land within 0.25 m. Without hanging_legs
-    both take the person's centre, a metre off."""
+    and the ankle from the knee's; he walks upright, so they land within 0.25 m. With unseen_joints
+    'centre' both take the person's centre, a metre off."""
     knee, ankle, hip = (INFERENCE_NAMES.index(n) for n in ('r_knee', 'r_ankle', 'r_hip'))
     sub = _without(views, [knee, ankle], set(range(5)))
     config = SamplingConfig(hypotheses=32)
@@ -199,9 +201,56 @@ def test_a_leg_no_camera_sees_hangs_below_its_parent(views, truth):
     np.testing.assert_allclose(hyp[knee], hyp[hip] - lengths[knee] * UP, atol=1e-12)
     np.testing.assert_allclose(hyp[ankle], hyp[knee] - lengths[ankle] * UP, atol=1e-12)
     assert np.linalg.norm(hyp[[knee, ankle]] - truth[[knee, ankle], None], axis=-1).max() < 0.25  # 0.14, 0.21
-    centred = sample_hypotheses(sub, np.random.default_rng(0), replace(config, hanging_legs=False))
+    centred = sample_hypotheses(sub, np.random.default_rng(0), replace(config, unseen_joints='centre'))
     np.testing.assert_array_equal(centred[knee], centred[ankle])  # both the centre
     assert np.linalg.norm(centred[ankle] - truth[ankle], axis=-1).min() > 0.5
+
+
+# joints no camera sees -> (joint, its two sources, metres along up times the person's scale, and
+# how far from actor 2's true joint it may land; he stands upright, arms down)
+UNSEEN_CASES = {
+    'arm': [('r_elbow', 'r_shoulder', 'r_shoulder', -0.33, 0.15), ('r_wrist', 'r_elbow', 'r_elbow', -0.26, 0.25)],
+    'head': [('head', 'neck', 'neck', 0.20, 0.10), ('r_ear', 'neck', 'neck', 0.20, 0.13)],
+    'neck and head': [('neck', 'r_shoulder', 'l_shoulder', 0.0, 0.15), ('head', 'neck', 'neck', 0.20, 0.15)],
+    'hip': [('l_hip', 'l_shoulder', 'l_shoulder', -0.50, 0.15)],
+}
+
+
+@pytest.mark.parametrize('case', sorted(UNSEEN_CASES))
+def test_a_joint_no_camera_sees_is_put_on_the_body(views, truth, case):
+    """unseen_joints 'body': an arm hangs from the shoulder, the head stands above the neck, the neck
+    sits between the shoulders, a hip under its shoulder, each hypothesis from its sources'
+    hypotheses of the same index (sources placed first), by a typical length times his scale; all
+    land near his true joints, nearer than the person's centre."""
+    joints = [INFERENCE_NAMES.index(j) for j, *_ in UNSEEN_CASES[case]]
+    sub = _without(views, joints, set(range(5)))
+    config = SamplingConfig(hypotheses=32)
+    hyp = sample_hypotheses(sub, np.random.default_rng(0), config)
+    anchors = _anchors(hyp[None], config)
+    anchors[:, joints] = np.nan  # as the sampler saw them: not seen
+    scale = bone_scales(anchors)[0]
+    centred = sample_hypotheses(sub, np.random.default_rng(0), replace(config, unseen_joints='centre'))
+    for name, a, b, rise, near in UNSEEN_CASES[case]:
+        j, a, b = (INFERENCE_NAMES.index(n) for n in (name, a, b))
+        assert UNSEEN_FROM[j].tolist() == [a, b] and UNSEEN_RISE[j] == rise
+        np.testing.assert_allclose(hyp[j], 0.5 * (hyp[a] + hyp[b]) + rise * scale[j] * UP, atol=1e-12)
+        assert np.linalg.norm(hyp[j] - truth[j], axis=-1).max() < near
+    # (his right forearm is not straight down: its wrist alone is nearer the centre, 0.21 against 0.23 m)
+    errors = [np.linalg.norm(h[joints] - truth[joints, None], axis=-1).mean() for h in (hyp, centred)]
+    assert errors[0] < errors[1] - 0.05
+
+
+def test_an_unseen_joint_hangs_from_an_unseen_source_at_the_centre(views):
+    """A shoulder no camera sees has no place on the body: it takes the person's centre, and its
+    unseen elbow hangs from there (as a leg from a hip at the centre)."""
+    shoulder, elbow = INFERENCE_NAMES.index('r_shoulder'), INFERENCE_NAMES.index('r_elbow')
+    config = SamplingConfig(hypotheses=32)
+    hyp = sample_hypotheses(_without(views, [shoulder, elbow], set(range(5))), np.random.default_rng(0), config)
+    centre = np.delete(hyp, [shoulder, elbow], axis=0).mean(axis=(0, 1))  # of the joints seen
+    np.testing.assert_allclose(hyp[shoulder], np.broadcast_to(centre, (32, 3)), atol=1e-9)
+    anchors = _anchors(hyp[None], config)
+    anchors[:, [shoulder, elbow]] = np.nan
+    np.testing.assert_allclose(hyp[elbow], hyp[shoulder] - 0.33 * bone_scales(anchors)[0, elbow] * UP, atol=1e-12)
 
 
 def test_deterministic_for_a_seed(views):
@@ -217,7 +266,8 @@ def test_joint_seen_by_one_camera_lies_on_its_rays(views, truth):
     single, unseen = 6, 11  # r_wrist seen by camera 2 only, l_wrist by none
     sub = _without(views, [single], {0, 1, 3, 4})
     sub = _without(sub, [unseen], set(range(5)))
-    hyp = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='centre'))
+    hyp = sample_hypotheses(sub, np.random.default_rng(0), SamplingConfig(hypotheses=32, single_view_depth='centre',
+                                                                          unseen_joints='centre'))
     assert hyp.shape == (16, 32, 3) and np.isfinite(hyp).all()
     others = np.setdiff1d(np.arange(16), [single, unseen])
     centre = hyp[others].reshape(-1, 3).mean(axis=0)
@@ -476,12 +526,12 @@ def _numpy_sample_people(people, stack, rngs, config):
     origin = centres[single_view]
     direction = dirs[first_draw[single_view, single_j][:, None] + np.arange(m)]
     depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
+    anchors = _anchors(out, config)
+    scales = bone_scales(anchors) if config.single_view_depth == 'own_limb' else np.ones((n_people, n_joints))
     if config.single_view_depth == 'centre':
         out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
     else:
-        anchors = _anchors(out, config)
-        lengths = (own_bone_lengths(anchors) if config.single_view_depth == 'own_limb'
-                   else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
+        lengths = PRIOR_BONE_LENGTH * scales
         level = np.array([_tree_depth(j) for j in single_j], dtype=int)
         for lv in np.unique(level):  # parents first: a parent seen once is the anchor of each hypothesis
             s = level == lv
@@ -502,6 +552,11 @@ def _numpy_sample_people(people, stack, rngs, config):
             out[sp, sj] = origin[s][:, None] + np.where(on_limb[:, None], limb, depth[s])[..., None] * direction[s]
     unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
     out[unseen_p, unseen_j] = centre[unseen_p, None]
+    if config.unseen_joints == 'body':
+        for j in sorted(range(n_joints), key=_unseen_depth):  # sources first
+            (a, b), rise = UNSEEN_FROM[j], UNSEEN_RISE[j] * scales[:, j]
+            put = located & (n_seen[:, j] == 0) & (a >= 0) & ~np.isnan(rise)
+            out[put, j] = 0.5 * (out[put, a] + out[put, b]) + rise[put, None, None] * UP
     return [out[p] if located[p] else None for p in range(n_people)]
 
 

@@ -44,11 +44,12 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
                                        'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored',
                                        'max_gap': 0.5, 'frame_rate': 30.0, 'max_view_residual': 0.25,
-                                       'hanging_legs': False})
+                                       'hanging_legs': False, 'unseen_joints': 'centre'})
     assert changed.solver.inference.window is None and changed.solver.inference.bp_hypotheses is None
     assert changed.solver.inference.slide_iterations is None and changed.solver.sampling.hypotheses == 32
     assert changed.solver.inference.terms == ('data', 'temp') and changed.association.matching.max_distance == 0.2
     assert changed.association.max_view_residual == 0.25 and not changed.solver.sampling.hanging_legs
+    assert changed.solver.sampling.unseen_joints == 'centre'
     assert (changed.solver.inference.max_gap, changed.solver.inference.frame_rate) == (0.5, 30.0)
     assert StageConfig.from_params(changed.to_params()) == changed
 
@@ -66,6 +67,7 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     ({'frame_rate': -25.0}, 'frame_rate'),
     ({'max_view_residual': -0.1}, 'max_view_residual'),
     ({'hanging_legs': 'false'}, 'hanging_legs'),
+    ({'unseen_joints': 'nowhere'}, 'unseen_joints'),
 ])
 def test_invalid_parameters_name_the_problem(params, problem):
     with pytest.raises(ValueError, match=problem):
@@ -205,9 +207,10 @@ def test_a_childs_joints_seen_by_one_camera_keep_his_own_bone_lengths():
 
 
 def test_legs_seen_by_one_camera_hang_along_the_rigs_up():
-    """The world turned so that y is up, as above, and the actors' ankles each seen by one camera
-    (Shelf's annotated poses projected): the skeletons are those of the z-up world turned, so a
-    knee or ankle seen once hangs along the rig's up (hanging_legs), not along z."""
+    """The world turned so that y is up, as above, the actors' ankles each seen by one camera and
+    their wrists by none (Shelf's annotated poses projected): the skeletons are those of the z-up
+    world turned, so a knee or ankle seen once (hanging_legs) and a wrist seen by none
+    (unseen_joints) hang along the rig's up, not along z."""
     from mvpose_ros.core.evaluation.campus import oracle_people
     from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt, shelf_cameras
     from mvpose_ros.core.types import Person2D
@@ -229,6 +232,9 @@ def test_legs_seen_by_one_camera_hang_along_the_rigs_up():
                 for kp in seeing[1:]:
                     kp[j, 2] = 0.0
                 seen_once += len(seeing) > 0
+            for view in found:
+                for p in view:
+                    p.keypoints[[6, 11], 2] = 0.0  # wrists: seen by none
             for view, more in zip(views, found):
                 view += [Person2D.from_keypoints(p.keypoints, 4.0, 6.0) for p in more]
         for stage, out in zip(stages, results):

@@ -34,7 +34,7 @@ from mvpose_ros.core.evaluation.confidence import confidence_samples, format_con
 from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
 from mvpose_ros.core.evaluation.ring import RingConfig, ring_sequence
 from mvpose_ros.core.geometry.body import HEAD_MODELS
-from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS
+from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, UNSEEN_JOINTS
 from mvpose_ros.core.inference.window import TERMS
 from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, SOLVER_PARAMETERS, StageConfig
 from mvpose_ros.core.timing import StageTimer
@@ -81,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=SOLVER_PARAMETERS['single_view_depth'])
     p.add_argument('--hanging-legs', action=argparse.BooleanOptionalAction, default=d['hanging_legs'],
                    help=SOLVER_PARAMETERS['hanging_legs'])
+    p.add_argument('--unseen-joints', choices=UNSEEN_JOINTS, default=d['unseen_joints'],
+                   help=SOLVER_PARAMETERS['unseen_joints'])
     p.add_argument('--head-model', choices=HEAD_MODELS, default=d['head_model'])
     p.add_argument('--heatmap-stride', type=float, default=OpenPoseDetectorConfig.stride,
                    help='heatmap cell size in pixels (the ROS graph config uses 8)')
@@ -124,6 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "camera in turn (negative: below; give it as --ring-heights=-0.6,-0.3)")
     p.add_argument('--ring-fov', type=float, default=RingConfig.fov_deg,
                    help="ring: every camera's horizontal field of view, degrees")
+    p.add_argument('--ring-miss', type=float, default=RingConfig.miss_share,
+                   help='ring: the share of keypoints each view misses, each on its own (0 to below 1)')
     return p
 
 
@@ -165,15 +169,15 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
     else:
         ring = RingConfig(cameras=args.ring_cameras, radius=args.ring_radius, heights=args.ring_heights,
-                          fov_deg=args.ring_fov, noise_px=args.ring_noise)
+                          fov_deg=args.ring_fov, noise_px=args.ring_noise, miss_share=args.ring_miss)
         seq, gt, head_model = ring_sequence(args.data_root, ring)
         actors, reference = SHELF_ACTORS, None
         heights = ', '.join(f'{h:g}' for h in ring.heights)
         print(f'ring: {ring.cameras} synthetic cameras {ring.radius:g} m around the actors of the Shelf test frames '
               f'({heights} m above their centre, {ring.fov_deg:g} degrees), the annotated '
               f'joints projected with {ring.noise_px:g} px of noise and one of them {ring.outlier_px:g} px off in '
-              f'{100 * ring.outlier_share:g} % of the views (an oracle: checks how the 3D stage scales with '
-              f'cameras, not detection)', file=out)
+              f'{100 * ring.outlier_share:g} % of the views, {100 * ring.miss_share:g} % of the keypoints missed '
+              f'(an oracle: checks how the 3D stage scales with cameras, not detection)', file=out)
     if args.dataset != 'shelf':  # their 2D people come with the head model they need
         config = replace(config, solver=replace(config.solver, head_model=head_model))
     if drop:

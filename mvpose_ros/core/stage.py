@@ -24,7 +24,7 @@ from mvpose_ros.core.association.matching import MatchingConfig
 from mvpose_ros.core.geometry.body import HEAD_MODELS, UP
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.factors import FactorConfig
-from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, SamplingConfig
+from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, UNSEEN_JOINTS, SamplingConfig
 from mvpose_ros.core.inference.solver import Inference3D, SolverConfig
 from mvpose_ros.core.inference.window import TERMS, InferenceConfig
 from mvpose_ros.core.parameters import Param
@@ -44,8 +44,10 @@ SOLVER_PARAMETERS = {
                          'nearest the person\'s centre, or at the bone\'s typical adult length from the parent '
                          'joint, or at the person\'s own (measured in the same frame)',
     'hanging_legs': 'a knee or ankle seen by one camera where its ray meets the sphere of its bone around the '
-                    'parent joint lower along up (legs hang from hips and knees), not nearer the person\'s centre; '
-                    'one seen by none straight below its parent, not at the centre',
+                    'parent joint lower along up (legs hang from hips and knees), not nearer the person\'s centre',
+    'unseen_joints': f'where a joint no camera sees is put, from {", ".join(UNSEEN_JOINTS)}: the person\'s centre, '
+                     'or on the body (legs and arms hang from their parents, the neck between the shoulders, the '
+                     'head above the neck)',
     'terms': f'CRF terms, from {", ".join(TERMS)}',
     'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
     'seed': 'seed of the hypothesis sampling',
@@ -101,7 +103,8 @@ class StageConfig:
                                     frame_rate=float(d['frame_rate']), max_gap=float(d['max_gap']),
                                     threads=int(d['threads']))
         sampling = replace(SamplingConfig(), hypotheses=int(d['hypotheses']),
-                           single_view_depth=str(d['single_view_depth']), hanging_legs=bool(d['hanging_legs']))
+                           single_view_depth=str(d['single_view_depth']), hanging_legs=bool(d['hanging_legs']),
+                           unseen_joints=str(d['unseen_joints']))
         solver = SolverConfig(sampling=sampling,
                               inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
         association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
@@ -116,7 +119,7 @@ class StageConfig:
             'window': inference.window or 0, 'lag': inference.lag, 'iterations': inference.iterations,
             'slide_iterations': inference.slide_iterations or 0, 'hypotheses': solver.sampling.hypotheses,
             'bp_hypotheses': inference.bp_hypotheses or 0, 'single_view_depth': solver.sampling.single_view_depth,
-            'hanging_legs': solver.sampling.hanging_legs,
+            'hanging_legs': solver.sampling.hanging_legs, 'unseen_joints': solver.sampling.unseen_joints,
             'terms': list(inference.terms),
             'head_model': solver.head_model, 'seed': solver.seed,
             'collision_centre': inference.factors.collision_centre,

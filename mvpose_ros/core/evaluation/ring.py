@@ -31,7 +31,8 @@ class RingConfig:
     above it, camera after camera in turn; width, height, fov_deg: every camera's image and
     horizontal field of view; noise_px: std of every keypoint's pixel noise; outlier_share: the
     share of views in which one joint, picked at random, is moved by outlier_px (std, per axis);
-    seed: of the noise."""
+    miss_share: the share of keypoints a view misses, each on its own (a detector's misses, so that
+    with few cameras some joints are seen by one camera or none); seed: of the noise."""
 
     cameras: int = 8
     radius: float = 5.0
@@ -42,13 +43,16 @@ class RingConfig:
     noise_px: float = 3.0
     outlier_share: float = 0.2
     outlier_px: float = 60.0
+    miss_share: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
         if self.cameras < 2:
             raise ValueError(f'a ring needs at least 2 cameras, got {self.cameras}')
-        if not (self.radius > 0 and self.heights and self.noise_px >= 0 and 0 <= self.outlier_share <= 1):
-            raise ValueError('radius must be > 0, heights not empty, noise_px >= 0 and outlier_share in [0, 1]')
+        if not (self.radius > 0 and self.heights and self.noise_px >= 0 and 0 <= self.outlier_share <= 1
+                and 0 <= self.miss_share < 1):
+            raise ValueError('radius must be > 0, heights not empty, noise_px >= 0, outlier_share in [0, 1] and '
+                             'miss_share in [0, 1)')
 
 
 def ring_cameras(centre: np.ndarray, config: RingConfig) -> list[Camera]:
@@ -81,6 +85,8 @@ def _seen(camera: Camera, poses: np.ndarray, config: RingConfig, rng: np.random.
         if rng.random() < config.outlier_share:
             uv[rng.integers(NUM_JOINTS)] += rng.normal(0.0, config.outlier_px, 2)
         inside = (uv >= 0).all(axis=1) & (uv[:, 0] < camera.width) & (uv[:, 1] < camera.height)
+        if config.miss_share:
+            inside &= rng.random(NUM_JOINTS) >= config.miss_share
         if inside.sum() < 4:
             continue
         keypoints = np.zeros((NUM_INFERENCE_JOINTS, 3))

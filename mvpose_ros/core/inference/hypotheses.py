@@ -18,12 +18,13 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_PARENT, PLAUSIBLE_BONE_SCALE,
-                                           PRIOR_BONE_LENGTH, UP)
+                                           PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_RISE, UP)
 from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
 SINGLE_VIEW_DEPTHS = ('centre', 'limb', 'own_limb')
+UNSEEN_JOINTS = ('centre', 'body')
 
 
 @dataclass(frozen=True)
@@ -36,20 +37,27 @@ class SamplingConfig:
     hypothesis of the same index when it is seen once; else as 'centre') or
     'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths). Of the sphere's two
     crossings the one nearer the person's centre is taken, but with hanging_legs the lower one
-    (along up) for a knee or ankle (body.HANGING); with hanging_legs and a single_view_depth
-    other than 'centre', a knee or ankle no camera sees (feet out of every picture) hangs its
-    bone's length straight down from its parent instead of taking the person's centre."""
+    (along up) for a knee or ankle (body.HANGING);
+    unseen_joints: where a joint no camera sees (out of every picture, or hidden in every view) is
+    put, 'centre' (the person's centre) or 'body' (body.UNSEEN_RISE: a leg or arm joint hangs its
+    bone's length straight down from its parent, the neck is the shoulders' midpoint, the nose or
+    head top and the ears a head's height above the neck; lengths scaled to the person as for
+    'own_limb'; each of its hypotheses from its sources' hypotheses of the same index, wherever
+    they are: a joint without sources, an unseen shoulder, takes the centre)."""
 
     hypotheses: int = 64
     peak_hypotheses: bool = True
     single_view_depth: str = 'own_limb'
     hanging_legs: bool = True
+    unseen_joints: str = 'body'
 
     def __post_init__(self) -> None:
         if self.hypotheses < 1:
             raise ValueError(f'hypotheses must be >= 1, got {self.hypotheses}')
         if self.single_view_depth not in SINGLE_VIEW_DEPTHS:
             raise ValueError(f'single_view_depth must be one of {SINGLE_VIEW_DEPTHS}, got {self.single_view_depth!r}')
+        if self.unseen_joints not in UNSEEN_JOINTS:
+            raise ValueError(f'unseen_joints must be one of {UNSEEN_JOINTS}, got {self.unseen_joints!r}')
 
 
 def camera_subsets(cameras: Sequence[int], min_size: int = 2, limit: int | None = None) -> list[tuple[int, ...]]:
@@ -85,7 +93,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
     closest to the person's centre (so it stays near the body instead of being dropped) or, with
     single_view_depth 'limb' / 'own_limb', at its bone's length from its parent; a joint seen by
-    none gets the centre itself, but a knee or ankle hangs from its parent (SamplingConfig).
+    none gets the centre itself, or with unseen_joints 'body' a place on the body (SamplingConfig).
     """
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
@@ -137,11 +145,13 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     # the anchors of the joints seen twice
     located = np.empty(n_people, dtype=np.bool_)
     anchors = _anchors(out, config)
-    lengths = (own_bone_lengths(anchors) if config.single_view_depth == 'own_limb'
-               else np.tile(PRIOR_BONE_LENGTH, (n_people, 1)))
+    scales = bone_scales(anchors) if config.single_view_depth == 'own_limb' else np.ones((n_people, n_joints))
     _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, config.single_view_depth != 'centre',
-              _PARENT, kernel_array(lengths, np.float64), HANGING & config.hanging_legs, kernel_array(up, np.float64),
-              _PARENTS_FIRST, located)
+              _PARENT, kernel_array(PRIOR_BONE_LENGTH * scales, np.float64), HANGING & config.hanging_legs,
+              kernel_array(up, np.float64), _PARENTS_FIRST, located)
+    if config.unseen_joints == 'body':
+        _place_unseen(out, n_seen, located, _UNSEEN_FROM, kernel_array(UNSEEN_RISE * scales, np.float64),
+                      kernel_array(up, np.float64), _UNSEEN_ORDER)
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
@@ -154,19 +164,35 @@ def _tree_depth(j: int) -> int:
 
 # joints parents first, so that a joint seen once can hang from a parent seen once
 _PARENTS_FIRST = np.array(sorted(range(len(INFERENCE_PARENT)), key=_tree_depth), dtype=np.int64)
+_UNSEEN_FROM = UNSEEN_FROM.astype(np.int64)
+
+
+def _unseen_depth(j: int) -> int:
+    return 0 if UNSEEN_FROM[j, 0] < 0 else 1 + max(_unseen_depth(int(s)) for s in UNSEEN_FROM[j])
+
+
+# joints after the joints they are placed from when no camera sees them
+_UNSEEN_ORDER = np.array(sorted(range(len(UNSEEN_FROM)), key=_unseen_depth), dtype=np.int64)
 
 
 def own_bone_lengths(anchors: np.ndarray) -> np.ndarray:
     """(P, J) metres: each person's length of the bone from each limb joint to its parent (NaN for
-    the joints without one), as far as this frame shows it. anchors: (P, J, 3) best point of each
-    joint seen by two or more cameras (NaN for the others).
+    the joints without one), as far as this frame shows it: the typical length times bone_scales.
+    anchors: (P, J, 3) best point of each joint seen by two or more cameras (NaN for the others)."""
+    return PRIOR_BONE_LENGTH * bone_scales(anchors)
 
-    A bone whose two ends are anchored is measured. A joint seen once is not, so its bone takes
-    the length of its left/right counterpart where that is measured, else the typical adult length
-    times the person's scale: the median ratio of their measured bones to the typical lengths,
-    with at least two measured (else 1). A measured bone beyond PLAUSIBLE_BONE_SCALE times its
-    typical length (a wrong anchor) is not used. Children and tall people thus keep their own
-    proportions, which the typical length alone misplaces by up to the bone's length along a ray.
+
+def bone_scales(anchors: np.ndarray) -> np.ndarray:
+    """(P, J) each person's size against the typical adult's, per joint, as far as this frame shows
+    it. anchors: (P, J, 3) best point of each joint seen by two or more cameras (NaN for the others).
+
+    A limb bone whose two ends are anchored is measured. A joint seen once is not, so its bone takes
+    the ratio of its left/right counterpart where that is measured, else the person's scale: the
+    median ratio of their measured bones to the typical lengths, with at least two measured (else
+    1); the joints without a bone take the person's scale. A measured bone beyond
+    PLAUSIBLE_BONE_SCALE times its typical length (a wrong anchor) is not used. Children and tall
+    people thus keep their own proportions, which the typical length alone misplaces by up to the
+    bone's length along a ray.
     """
     has_parent = INFERENCE_PARENT >= 0
     ratio = np.full(anchors.shape[:2], np.nan)  # (P, J) measured / typical length
@@ -180,7 +206,7 @@ def own_bone_lengths(anchors: np.ndarray) -> np.ndarray:
     median = 0.5 * (ordered[rows, np.maximum(n - 1, 0) // 2] + ordered[rows, n // 2])
     scale = np.where(n >= 2, median, 1.0)
     counterpart = ratio[:, INFERENCE_MIRROR]
-    return PRIOR_BONE_LENGTH * np.where(np.isnan(counterpart), scale[:, None], counterpart)
+    return np.where(np.isnan(counterpart), scale[:, None], counterpart)
 
 
 @kernel('void(float64[:, :, ::1], int64[::1], int64[:, ::1], int64[:, :, ::1])')
@@ -266,8 +292,7 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
     # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
     # anchor, or around the parent's k-th point when the parent is seen once (order: parents first)
     # (the nearer of the two to the centre's depth, the lower along up for a hanging joint; a ray
-    # missing it: its point nearest the parent); a joint seen by none, the centre, but with limb a
-    # hanging joint its bone's length straight down (-up) from its parent's point of the same k.
+    # missing it: its point nearest the parent); a joint seen by none, the centre.
     n_joints, m = out.shape[1], out.shape[2]
     for p in range(out.shape[0]):
         total = np.zeros(3)
@@ -287,15 +312,8 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
         centre = total / count
         for j in order:
             if n_seen[p, j] == 0:
-                # a leg out of every picture hangs (its parent is placed before it); other joints
-                # have no direction to go, so they take the centre
-                hang = limb and hanging[j] and parents[j] >= 0 and not np.isnan(lengths[p, j])
                 for k in range(m):
-                    if hang and not np.isnan(out[p, parents[j], k, 0]):
-                        for c in range(3):
-                            out[p, j, k, c] = out[p, parents[j], k, c] - lengths[p, j] * up[c]
-                    else:
-                        out[p, j, k] = centre
+                    out[p, j, k] = centre
             if n_seen[p, j] != 1:
                 continue
             v = seeing[p, 0, j]
@@ -329,6 +347,25 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
                         depth = near if np.abs(near - depth) <= np.abs(far - depth) else far
                 for c in range(3):
                     out[p, j, k, c] = o[c] + depth * d[c]
+
+
+@kernel('void(float64[:, :, :, ::1], int64[:, ::1], boolean[::1], int64[:, ::1], float64[:, ::1], float64[::1], '
+        'int64[::1])')
+def _place_unseen(out, n_seen, located, sources, rise, up, order):
+    # out (P, J, m, 3) completed: each joint no view sees that has sources (the same joint twice
+    # for one; placed before it, by order) goes rise (P, J) metres along up from their midpoint,
+    # hypothesis by hypothesis, wherever they are (seen, placed so, or at the centre)
+    m = out.shape[2]
+    for p in range(out.shape[0]):
+        if not located[p]:
+            continue
+        for j in order:
+            a, b = sources[j, 0], sources[j, 1]
+            if n_seen[p, j] > 0 or a < 0 or np.isnan(rise[p, j]):
+                continue
+            for k in range(m):
+                for c in range(3):
+                    out[p, j, k, c] = 0.5 * (out[p, a, k, c] + out[p, b, k, c]) + rise[p, j] * up[c]
 
 
 def _anchors(hyp: np.ndarray, config: SamplingConfig) -> np.ndarray:
