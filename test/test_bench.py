@@ -27,6 +27,7 @@ from mvpose_ros.core.types import Person2D
 from mvpose_ros.core.stage import Stage3D, StageConfig
 from mvpose_ros.bench import runs as bench_runs
 from mvpose_ros.bench import report as bench_report
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 
 REPO = Path(__file__).resolve().parents[1]
 N_JOINTS = 16
@@ -131,7 +132,7 @@ def test_copies_do_not_merge_in_association(rig):
     for k in range(1, len(offsets) + 1):
         scene = multiply_scene(rig, range(len(frames)), frames, 0, offsets=offsets[:k])
         associator = Associator(rig, AssociationConfig())
-        found = [len(associator.update(f, people)) for f, people in enumerate(scene.people)]
+        found = [len(associator.update(f / FRAME_RATE, people)) for f, people in enumerate(scene.people)]
         counts.append(found)
         assert all(len(per_camera) == 2 * k for per_camera in scene.people[0])
     assert counts == [[2 * k] * len(frames) for k in range(1, len(offsets) + 1)]  # linear in copies

@@ -91,6 +91,24 @@ def test_a_ring_misses_its_share_of_keypoints():
         RingConfig(miss_share=1.0)
 
 
+def test_a_walking_ring_moves_its_scene_at_its_speed():
+    """walk_speed: the scene goes round a 1 m circle at that speed, annotation and keypoints alike."""
+    from mvpose_ros.core.evaluation.ring import WALK_RADIUS, ring_sequence, walked
+    frames = np.arange(300, 326)
+    path = walked(frames, 1.4)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(path, axis=0), axis=1), 1.4 / 25, rtol=1e-3)
+    np.testing.assert_allclose(path[0], 0.0)
+    assert np.linalg.norm(path + [WALK_RADIUS, 0, 0], axis=1) == pytest.approx(WALK_RADIUS)
+    still, still_gt, _ = ring_sequence(None, RingConfig(cameras=3))
+    moving, moving_gt, _ = ring_sequence(None, RingConfig(cameras=3, walk_speed=1.4))
+    shift = moving_gt.poses - still_gt.poses  # NaN where an actor is not annotated
+    expected = np.broadcast_to(walked(still_gt.frames, 1.4)[:, None, None], shift.shape)
+    present = np.isfinite(shift)
+    np.testing.assert_allclose(shift[present], expected[present], atol=1e-12)
+    assert moving.people[0][0][0].keypoints[0, 0] == pytest.approx(still.people[0][0][0].keypoints[0, 0])
+    assert moving.people[100][0][0].keypoints[0, 0] != pytest.approx(still.people[100][0][0].keypoints[0, 0], abs=5)
+
+
 def test_ring_cameras_look_at_the_actors_from_around_them():
     centre = np.array([1.0, 2.0, 1.0])
     config = RingConfig(cameras=7)

@@ -11,6 +11,7 @@ from mvpose_ros.core.evaluation.crowd_openpose import (ANCHORS, candidate_displa
                                                        crowd_openpose, with_copies)
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.body import BODY25_NAMES, INFERENCE_NAMES
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 
 DETECTOR = OpenPoseDetectorConfig()
 
@@ -98,7 +99,7 @@ def test_the_crowd_brings_the_scene_near_the_target_and_keeps_the_originals(shel
             for a, b in zip(f.candidates, g.candidates):
                 np.testing.assert_array_equal(b[:len(a)], a)
     associator = Associator(cameras, AssociationConfig())
-    found = [len(associator.update(t, [detect_people(f, DETECTOR) for f in per_camera]))
+    found = [len(associator.update(t / FRAME_RATE, [detect_people(f, DETECTOR) for f in per_camera]))
              for t, per_camera in enumerate(crowd.frames)]
     assert abs(np.mean(found) - crowd.expected) <= 0.2 * crowd.expected
     assert np.mean(found) >= 2 * crowd.original

@@ -24,6 +24,7 @@ from mvpose_ros.core.evaluation.datasets import dataset_dir
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.nodes.runtime import DATA_QOS
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from ros_harness import probe, spin_until, start_node, stop
 
 FIRST = 300  # first frame of the OpenPose files
@@ -40,7 +41,7 @@ def bundles(shelf_openpose) -> dict[int, PointCloud2]:
     out = {}
     for k in range(N_FRAMES):
         people = [detect_people(raw[c][k], OpenPoseDetectorConfig(stride=8.0)) for c in range(len(cameras))]
-        obs = associator.update(FIRST + k, people)
+        obs = associator.update((FIRST + k) / FRAME_RATE, people)
         out[FIRST + k] = bundles_to_msg([(o.person_id, o.views) for o in obs],
                                         Header(stamp=stamp_of_frame(FIRST + k), frame_id='world'))
     return out

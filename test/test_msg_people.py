@@ -21,6 +21,7 @@ from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 
 TOL = 0.5 / 255 + 1e-7  # quantisation to 1/255 steps, plus float32 rounding
 
@@ -244,7 +245,7 @@ def test_wire_bundles_give_the_3d_stage_the_same_skeletons(shelf_openpose):
         results = []
         for frame, per_camera in zip(seq.frames, seq.people):
             people = [decode(people_to_msg(ps, _header(f'cam{c}'))) for c, ps in enumerate(per_camera)]
-            bundles = [(o.person_id, o.views) for o in associator.update(frame, people)]
+            bundles = [(o.person_id, o.views) for o in associator.update(frame / FRAME_RATE, people)]
             results += solver.push(frame, msg_to_bundles(encode(bundles, _header('world'))))
         outputs.append(results + solver.flush())
     before, after = outputs

@@ -28,6 +28,7 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, 
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.stage import StageConfig
 from mvpose_ros.nodes.runtime import DATA_QOS
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from ros_harness import NodeLinks, matched, node_env, probe, spin_until, start_node, stop
 
 FIRST = 300  # first frame of the OpenPose files
@@ -181,15 +182,16 @@ def test_association_syncs_offset_jittered_cameras_into_one_bundle_per_set(domai
         finally:
             stop(proc)
     assert sorted(out) == list(frames) and all(len(v) == 1 for v in out.values())
-    # the same association as the core given the same (quantised) people, frames numbered by set
+    # the same association as the core given the same (quantised) people at the sets' stamps
     associator = Associator(cameras, AssociationConfig())
-    for index, f in enumerate(frames):
+    for f in frames:
         msg = out[f][0]
         assert stamp_ns(msg.header.stamp) == min(stamps[f, c] for c in range(5) if (f, c) in sent)
         assert msg.header.frame_id == 'world'
         decoded = [msg_to_people(people_to_msg(people[f][c], header(f, c))) if (f, c) in sent else None
                    for c in range(5)]
-        expected = sorted((o.person_id, sorted(o.views)) for o in associator.update(index, decoded))
+        observed = associator.update(stamp_ns(msg.header.stamp) / 1e9, decoded)
+        expected = sorted((o.person_id, sorted(o.views)) for o in observed)
         got = [(pid, sorted(views)) for pid, views in msg_to_bundles(msg)]
         assert got == expected and len(got) >= 2
     assert all(3 not in views for _, views in msg_to_bundles(out[302][0]))
@@ -258,7 +260,7 @@ def test_bp_solver_numbers_frames_by_arrival_and_bridges_uneven_gaps_like_the_co
     wire = {}
     for f in frames:
         people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
-        bundles = [(o.person_id, o.views) for o in associator.update(f, people)]
+        bundles = [(o.person_id, o.views) for o in associator.update(f / FRAME_RATE, people)]
         wire[f] = bundles_to_msg(bundles, _header(f, 'world'))
     core = Inference3D(cameras, StageConfig.from_params({'window': 6, 'lag': 2}).solver)
     first = stamp_ns(wire[frames[0]].header.stamp)
@@ -327,7 +329,7 @@ def _bundles_wire(cameras, raw, frames: list[int]) -> list[PointCloud2]:
     wire = []
     for f in frames:
         people = [detect_people(raw[c][f - FIRST], OpenPoseDetectorConfig()) for c in range(5)]
-        wire.append(bundles_to_msg([(o.person_id, o.views) for o in associator.update(f, people)],
+        wire.append(bundles_to_msg([(o.person_id, o.views) for o in associator.update(f / FRAME_RATE, people)],
                                    _header(f, 'world')))
     return wire
 

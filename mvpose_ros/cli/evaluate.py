@@ -128,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ring: every camera's horizontal field of view, degrees")
     p.add_argument('--ring-miss', type=float, default=RingConfig.miss_share,
                    help='ring: the share of keypoints each view misses, each on its own (0 to below 1)')
+    p.add_argument('--ring-walk', type=float, default=RingConfig.walk_speed,
+                   help='ring: m/s at which the whole scene walks round a circle of 1 m (people crossing the views)')
     return p
 
 
@@ -169,14 +171,16 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
     else:
         ring = RingConfig(cameras=args.ring_cameras, radius=args.ring_radius, heights=args.ring_heights,
-                          fov_deg=args.ring_fov, noise_px=args.ring_noise, miss_share=args.ring_miss)
+                          fov_deg=args.ring_fov, noise_px=args.ring_noise, miss_share=args.ring_miss,
+                          walk_speed=args.ring_walk)
         seq, gt, head_model = ring_sequence(args.data_root, ring)
         actors, reference = SHELF_ACTORS, None
         heights = ', '.join(f'{h:g}' for h in ring.heights)
         print(f'ring: {ring.cameras} synthetic cameras {ring.radius:g} m around the actors of the Shelf test frames '
               f'({heights} m above their centre, {ring.fov_deg:g} degrees), the annotated '
               f'joints projected with {ring.noise_px:g} px of noise and one of them {ring.outlier_px:g} px off in '
-              f'{100 * ring.outlier_share:g} % of the views, {100 * ring.miss_share:g} % of the keypoints missed '
+              f'{100 * ring.outlier_share:g} % of the views, {100 * ring.miss_share:g} % of the keypoints missed, '
+              f'walking at {ring.walk_speed:g} m/s '
               f'(an oracle: checks how the 3D stage scales with cameras, not detection)', file=out)
     if args.dataset != 'shelf':  # their 2D people come with the head model they need
         config = replace(config, solver=replace(config.solver, head_model=head_model))

@@ -154,11 +154,13 @@ class Stage3D:
         self.solver = Inference3D(self.cameras, config.solver, up)
         self.timer: StageTimer = self.solver.timer
 
-    def associate(self, frame: int, people: Sequence[Sequence[Person2D] | None]) -> list[Bundle]:
+    def associate(self, frame: int, people: Sequence[Sequence[Person2D] | None],
+                  time_s: float | None = None) -> list[Bundle]:
         """The people seen by >= 2 cameras, each with its id and views; people[c] is camera c's 2D
-        people (None: no data from it)."""
+        people (None: no data from it), taken at time_s seconds (None: frame / the nominal frame rate)."""
         t0 = time.perf_counter()
-        bundles = [(o.person_id, o.views) for o in self.associator.update(frame, people)]
+        time_s = frame / self.config.solver.inference.frame_rate if time_s is None else time_s
+        bundles = [(o.person_id, o.views) for o in self.associator.update(time_s, people)]
         self.timer.add('association', t0)
         return bundles
 
@@ -166,7 +168,7 @@ class Stage3D:
              time_s: float | None = None) -> list[FrameResult]:
         """Associate and solve one frame, taken at time_s seconds (None: frame / the nominal frame
         rate); returns the frames whose output is due."""
-        return self.solver.push(frame, self.associate(frame, people), time_s)
+        return self.solver.push(frame, self.associate(frame, people, time_s), time_s)
 
     def flush(self) -> list[FrameResult]:
         """Every frame not yet output (end of stream)."""

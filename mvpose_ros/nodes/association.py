@@ -155,7 +155,7 @@ class AssociationNode(Node):
             age = time.time() - float(state['saved_at'])
             if age > max_age:
                 state = {**state, 'people': []}
-            self._associator.identities.restore(state, self._sync.sets)
+            self._associator.identities.restore(state)
         except FileNotFoundError:
             self.get_logger().info(f'no identity state in {self._state}: ids from 0')
             return
@@ -261,7 +261,7 @@ class AssociationNode(Node):
             self._log.log((names, 'missing from sets'), f'set {synced.index} stamp {synced.stamp_ns} ns: no data from '
                                                         f'{names}; going on without')
         t0 = time.perf_counter()
-        observations = self._associator.update(synced.index, synced.items)
+        observations = self._associator.update(synced.stamp_ns / 1e9, synced.items)
         bundles = [(obs.person_id, obs.views) for obs in observations]
         self._publisher.publish(wire_bundles_to_msg(bundles, Header(stamp=stamp, frame_id=self._rig.world_frame)))
         self._observe(synced, time.perf_counter() - t0)

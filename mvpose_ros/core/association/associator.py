@@ -22,22 +22,24 @@ from mvpose_ros.core.association.view_consistency import consistent_views
 
 @dataclass(frozen=True)
 class AssociationConfig:
-    """track_iou: the paper's 0.7; max_jump / max_age: how an id is recovered after occlusion, and
-    max_jump how far a person's tracks carry its id a frame (identity);
+    """track_iou: the paper's 0.7; max_jump (m), max_speed (m/s), id_memory (s): how far from where
+    it was last seen a person keeps its id, and for how long an id unseen is kept (identity);
     max_view_residual: a matched view the others contradict by more than this share of its size is
     left out (view_consistency; 0: every matched view kept)."""
 
     track_iou: float = 0.7
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     max_jump: float = 0.5
-    max_age: int = 25
+    max_speed: float = 2.5
+    id_memory: float = 1.0
     max_view_residual: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0 < self.track_iou <= 1:
             raise ValueError(f'track_iou must be in (0, 1], got {self.track_iou}')
-        if not (self.max_jump > 0 and self.max_age >= 0):
-            raise ValueError(f'max_jump must be > 0 and max_age >= 0, got {self.max_jump}, {self.max_age}')
+        if not (self.max_jump > 0 and self.max_speed >= 0 and self.id_memory >= 0):
+            raise ValueError(f'max_jump must be > 0, max_speed and id_memory >= 0, got {self.max_jump}, '
+                             f'{self.max_speed}, {self.id_memory}')
         if not self.max_view_residual >= 0:
             raise ValueError(f'max_view_residual must be >= 0, got {self.max_view_residual}')
 
@@ -119,7 +121,7 @@ class Associator:
         self.cameras = list(cameras)
         self.config = config
         self._trackers = [IouTracker(config.track_iou) for _ in self.cameras]
-        self._ids = IdentityKeeper(config.max_jump, config.max_age)
+        self._ids = IdentityKeeper(config.max_jump, config.max_speed, config.id_memory)
 
     def retune(self, config: AssociationConfig) -> None:
         """New thresholds for the frames after this; the tracks and identities so far are kept."""
@@ -127,8 +129,9 @@ class Associator:
         for tracker in self._trackers:
             tracker.min_iou = config.track_iou
 
-    def update(self, frame: int, people: Sequence[Sequence[P] | None]) -> list[PersonObservation[P]]:
-        """people[c]: camera c's skeletons at this instant, or None when that camera is missing."""
+    def update(self, time_s: float, people: Sequence[Sequence[P] | None]) -> list[PersonObservation[P]]:
+        """people[c]: camera c's skeletons at this instant, time_s seconds (non-decreasing), or None
+        when that camera is missing."""
         present = [list(p) if p is not None else [] for p in people]
         for tracker, skeletons, raw in zip(self._trackers, present, people):
             if raw is not None:
@@ -145,7 +148,7 @@ class Associator:
         keep = np.flatnonzero(np.isfinite(centres).all(axis=1)).tolist()
         rows, centres = [rows[i] for i in keep], centres[keep].reshape(-1, 3)
         members = [{(owner[r], skeleton[r].track_id) for r in rs} for rs in rows]
-        ids = self._ids.assign(frame, members, centres)
+        ids = self._ids.assign(time_s, members, centres)
         if len(set(ids)) < len(ids):
             rows, centres, ids = self._merge_seen_twice(dist, rays, rows, ids)
         return [PersonObservation(i, {owner[r]: skeleton[r] for r in rs}, c) for i, rs, c in zip(ids, rows, centres)]

@@ -2,13 +2,20 @@
 
 A person keeps its id while the per-camera tracks that make it up continue: each shared
 (camera, track) pair votes for the old id with the number of frames it has been part of that id
-(up to `max_age`), so a person split for a few frames into two clusters (a duplicate detection in
+(up to MAX_VOTES), so a person split for a few frames into two clusters (a duplicate detection in
 one camera) goes back to the id its tracks have long made up rather than to the newcomer's.
-Tracks carry an id only as far as a person can move in the frames since it was seen (`max_jump`
-a frame): a stray two-view cluster holding one of a person's tracks must not take that person's
-id from across the room. When the tracks all changed (a new box in every camera after an
-occlusion), the id is recovered from the 3D position if the person is within `max_jump` metres
-of where a recently seen person was.
+An id goes only as far as a person can move: `max_jump` metres (how far rough centres of one
+person differ) plus `max_speed` m/s times a time. A person's tracks carry its id within the reach
+of the time since it was seen, so a stray two-view cluster holding one of a person's tracks
+cannot take that person's id from across the room. When the tracks all changed (a new box in
+every camera after an occlusion, or people crossing a view between two sets of a slow detector),
+the id is recovered from the 3D position alone within the reach of the time since the frame
+before: the motion of one step of the stream, not of the person's whole absence, so a newcomer
+does not take the id of someone lost a second ago a metre or two away. Only a person none of
+whose tracks has a history is placed so: one whose tracks vote for an id is that id's (or, below,
+its duplicate), not whoever was last seen nearby. Times
+are the frames' own (seconds): sets 0.4 s apart keep walking people's ids as frames 40 ms apart
+do. An id not seen for `memory` seconds is forgotten.
 
 A person the detector found twice in a camera splits into two clusters, each with one of that
 camera's two views. The part that gets no id of its own, but whose tracks vote for the id the
@@ -21,7 +28,7 @@ Telling a duplicate from someone close by is what the tracks are for: ray distan
 
 The keeper's state that outlives a restart is small: the next id and where each recent person
 was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
-person found within `max_jump` of where it was last seen gets its old id back (its camera tracks
+person found within reach of where it was last seen gets its old id back (its camera tracks
 are new after a restart, so only the position can match).
 """
 from __future__ import annotations
@@ -33,30 +40,40 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 
+MAX_VOTES = 25  # frames a (camera, track) pair's vote for its id counts at most
+
+
 @dataclass
 class _Known:
     members: dict[tuple[int, int], int]  # (camera, track) -> frames it has been part of this id
     centre: np.ndarray
-    last_frame: int
+    last_time: float | None  # None: restored, seen at the next frame's time
 
 
 @dataclass
 class IdentityKeeper:
-    """Assigns ids to each frame's multi-view clusters."""
+    """Assigns ids to each frame's multi-view clusters. max_jump (m) and max_speed (m/s): how far
+    from where it was last seen an id may be taken, max_jump + max_speed x the seconds since it was
+    seen (by its tracks) or since the frame before (by position alone); memory (s): how long an id
+    unseen is kept."""
 
     max_jump: float = 0.5
-    max_age: int = 25
+    max_speed: float = 2.5
+    memory: float = 1.0
     _known: dict[int, _Known] = field(default_factory=dict)
     _next_id: int = 0
+    _last_time: float | None = None  # of the frame before
 
-    def assign(self, frame: int, members: Sequence[set[tuple[int, int]]], centres: np.ndarray) -> list[int]:
-        """Ids for this frame's people.
+    def assign(self, time_s: float, members: Sequence[set[tuple[int, int]]], centres: np.ndarray) -> list[int]:
+        """Ids for the people of the frame taken at time_s seconds (non-decreasing from call to call).
 
         members: per person the (camera, track id) pairs it was built from; centres: (P, 3)
         rough 3D centres in metres. Returns one id per person; people sharing an id are one
         person seen twice (module doc).
         """
-        self._known = {k: v for k, v in self._known.items() if frame - v.last_frame <= self.max_age}
+        for known in self._known.values():
+            known.last_time = time_s if known.last_time is None else known.last_time
+        self._known = {k: v for k, v in self._known.items() if time_s - v.last_time <= self.memory}
         known_ids = list(self._known)
         ids = [-1] * len(members)
         twice: set[int] = set()  # the people that are another one seen twice
@@ -73,13 +90,17 @@ class IdentityKeeper:
                         shared[row, col] += frames
             jump = np.linalg.norm(centres[:, None] - np.array([self._known[k].centre for k in known_ids])[None],
                                   axis=-1)
-            elapsed = np.maximum(frame - np.array([self._known[k].last_frame for k in known_ids]), 1)
-            allowed = ((shared > 0) & (jump <= self.max_jump * elapsed[None])) | (jump <= self.max_jump)
+            elapsed = np.maximum(time_s - np.array([self._known[k].last_time for k in known_ids]), 0.0)
+            gap = max(time_s - self._last_time, 0.0) if self._last_time is not None else 0.0
+            # by position alone only a person none of whose tracks has a history (module doc)
+            new_tracks = (shared == 0).all(axis=1, keepdims=True)
+            allowed = np.where(shared > 0, jump <= self.max_jump + self.max_speed * elapsed[None],
+                               new_tracks & (jump <= self.max_jump + self.max_speed * gap))
             # Shared track history dominates; distance breaks ties and decides when no track survives.
             # A new id costs more than any allowed match but far less than a forbidden one, so a
             # person nobody matches takes one instead of pushing another person off its id.
-            cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6),
-                              np.full((len(members), len(members)), self.max_jump + 1.0)])
+            new_id = self.max_jump + self.max_speed * self.memory + 1.0  # above any allowed jump
+            cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6), np.full((len(members),) * 2, new_id)])
             rows, cols = linear_sum_assignment(cost)
             for r, c in zip(rows.tolist(), cols.tolist()):
                 if c < len(known_ids) and allowed[r, c]:
@@ -94,10 +115,11 @@ class IdentityKeeper:
             tracks_of.setdefault(ids[i], set()).update(tracks)
             if i not in twice:
                 centre_of[ids[i]] = centres[i]
-        most = max(self.max_age, 1)
         for pid, tracks in tracks_of.items():
             before = self._known[pid].members if pid in self._known else {}
-            self._known[pid] = _Known({t: min(before.get(t, 0) + 1, most) for t in tracks}, centre_of[pid], frame)
+            self._known[pid] = _Known({t: min(before.get(t, 0) + 1, MAX_VOTES) for t in tracks}, centre_of[pid],
+                                      time_s)
+        self._last_time = time_s
         return ids
 
     def _join_duplicates(self, ids: list[int], shared: np.ndarray, known_ids: list[int],
@@ -123,9 +145,9 @@ class IdentityKeeper:
         return {'next_id': self._next_id,
                 'people': [{'id': k, 'centre': [float(x) for x in v.centre]} for k, v in sorted(self._known.items())]}
 
-    def restore(self, state: Mapping[str, Any], frame: int) -> None:
-        """Take over a `state` (of a keeper that stopped) as if its people had been seen at `frame`;
-        ValueError naming what is malformed."""
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Take over a `state` (of a keeper that stopped) as if its people had been seen at the time
+        of the next frame; ValueError naming what is malformed."""
         try:
             next_id = state['next_id']
             people = [(p['id'], np.asarray(p['centre'], dtype=float)) for p in state['people']]
@@ -140,4 +162,4 @@ class IdentityKeeper:
                 raise ValueError(f'identity state: person {pid}: centre must be 3 finite numbers')
         self._next_id = max(self._next_id, next_id)
         for pid, centre in people:
-            self._known[pid] = _Known({}, centre, frame)
+            self._known[pid] = _Known({}, centre, None)

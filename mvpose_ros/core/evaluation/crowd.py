@@ -27,6 +27,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.types import Person2D
@@ -92,7 +93,7 @@ def scene_people(cameras: Sequence[Camera], frames: Sequence[int], people: Seque
     out = []
     for frame, per_camera in zip(frames, people):
         own = [None if ps is None else [dataclasses.replace(p) for p in ps] for ps in per_camera]
-        observations = associator.update(frame, own)
+        observations = associator.update(frame / FRAME_RATE, own)
         # map the associated copies back to the caller's Person2D objects
         back = {id(c): o for ps_c, ps_o in zip(own, per_camera) if ps_c is not None for c, o in zip(ps_c, ps_o)}
         views = [{c: back[id(p)] for c, p in obs.views.items()} for obs in observations]
@@ -189,7 +190,7 @@ def _associated_count(cameras: Sequence[Camera], frames: Sequence[Sequence[list[
                       config: AssociationConfig) -> float:
     """Mean number of 3D people per frame that association finds in `frames` (per camera lists)."""
     associator = Associator(cameras, config)
-    found = sum(len(associator.update(f, [[dataclasses.replace(p) for p in ps] for ps in frame]))
+    found = sum(len(associator.update(f / FRAME_RATE, [[dataclasses.replace(p) for p in ps] for ps in frame]))
                 for f, frame in enumerate(frames))
     return found / max(len(frames), 1)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.video import look_at
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, NUM_JOINTS, UP
 from mvpose_ros.core.geometry.camera import Camera
@@ -23,6 +23,7 @@ from mvpose_ros.core.types import Person2D, Sequence2D
 
 HEAD_MODEL = 'direct'  # the projected joints 12 and 13 are the annotated bottom and top of the head
 STRIDE, SIGMA = 4.0, 6.0  # px: heatmap cells and the Gaussian of each keypoint
+WALK_RADIUS = 1.0  # m: the circle a walking scene goes round, well inside the default ring's views
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,9 @@ class RingConfig:
     horizontal field of view; noise_px: std of every keypoint's pixel noise; outlier_share: the
     share of views in which one joint, picked at random, is moved by outlier_px (std, per axis);
     miss_share: the share of keypoints a view misses, each on its own (a detector's misses, so that
-    with few cameras some joints are seen by one camera or none); seed: of the noise."""
+    with few cameras some joints are seen by one camera or none); walk_speed: m/s at which the
+    whole scene walks round a horizontal circle of WALK_RADIUS (its annotation with it), so that
+    people cross the views faster than Shelf's actors; seed: of the noise."""
 
     cameras: int = 8
     radius: float = 5.0
@@ -44,15 +47,16 @@ class RingConfig:
     outlier_share: float = 0.2
     outlier_px: float = 60.0
     miss_share: float = 0.0
+    walk_speed: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
         if self.cameras < 2:
             raise ValueError(f'a ring needs at least 2 cameras, got {self.cameras}')
         if not (self.radius > 0 and self.heights and self.noise_px >= 0 and 0 <= self.outlier_share <= 1
-                and 0 <= self.miss_share < 1):
-            raise ValueError('radius must be > 0, heights not empty, noise_px >= 0, outlier_share in [0, 1] and '
-                             'miss_share in [0, 1)')
+                and 0 <= self.miss_share < 1 and self.walk_speed >= 0):
+            raise ValueError('radius must be > 0, heights not empty, noise_px >= 0, outlier_share in [0, 1], '
+                             'miss_share in [0, 1) and walk_speed >= 0')
 
 
 def ring_cameras(centre: np.ndarray, config: RingConfig) -> list[Camera]:
@@ -71,10 +75,19 @@ def ring_sequence(root: str | None, config: RingConfig) -> tuple[Sequence2D, Gro
     head model its keypoints need."""
     gt = load_actors_gt(dataset_dir('shelf', root) / 'actorsGT.mat', SHELF_TEST_FRAMES)
     centre = np.nanmean(gt.poses.reshape(-1, 3), axis=0)
+    if config.walk_speed:
+        gt = GroundTruth(gt.frames, gt.poses + walked(gt.frames, config.walk_speed)[:, None, None])
     cameras = ring_cameras(centre, config)
     rng = np.random.default_rng(config.seed)
     people = [[_seen(camera, poses, config, rng) for camera in cameras] for poses in gt.poses]
     return Sequence2D(cameras, [int(f) for f in gt.frames], people), gt, HEAD_MODEL
+
+
+def walked(frames: np.ndarray, speed: float) -> np.ndarray:
+    """(F, 3) metres: where a scene walking round a horizontal circle of WALK_RADIUS at `speed` m/s
+    has gone at each frame (Shelf's FRAME_RATE), from where it was at the first."""
+    angle = speed / WALK_RADIUS * (np.asarray(frames) - frames[0]) / FRAME_RATE
+    return WALK_RADIUS * np.stack([np.cos(angle) - 1.0, np.sin(angle), np.zeros_like(angle)], axis=-1)
 
 
 def _seen(camera: Camera, poses: np.ndarray, config: RingConfig, rng: np.random.Generator) -> list[Person2D]:
