@@ -17,7 +17,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import Any, Sequence, TextIO
 
 import numpy as np
 
@@ -60,6 +60,20 @@ def _heights(text: str) -> tuple[float, ...]:
         return tuple(float(h) for h in text.split(','))
     except ValueError:
         raise argparse.ArgumentTypeError(f'expected metres, comma separated, got {text!r}') from None
+
+
+# `mvpose-eval ring` options -> (RingConfig field, type, help)
+RING_OPTIONS: dict[str, tuple[str, Any, str]] = {
+    '--ring-cameras': ('cameras', int, 'cameras on the circle around the actors (core.evaluation.ring)'),
+    '--ring-noise': ('noise_px', float, "std of every projected keypoint's noise, px"),
+    '--ring-radius': ('radius', float, "the cameras' distance from the actors' centre, horizontally, m"),
+    '--ring-heights': ('heights', _heights, "the cameras' heights above the actors' centre, m, comma separated, "
+                       'camera after camera in turn (negative: below; give it as --ring-heights=-0.6,-0.3)'),
+    '--ring-fov': ('fov_deg', float, "every camera's horizontal field of view, degrees"),
+    '--ring-miss': ('miss_share', float, 'the share of keypoints each view misses, each on its own (0 to below 1)'),
+    '--ring-walk': ('walk_speed', float, 'm/s at which the whole scene walks round a circle of 1 m (people crossing '
+                    'the views)'),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -115,21 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help='for each wrong limb end, whether the 2D detections back the estimate or the annotation; '
                         'where the annotated heads sit against ours (shelf)')
     p.add_argument('--campus-dir', type=Path, help='a full CampusSeq1 folder (campus only)')
-    p.add_argument('--ring-cameras', type=int, default=RingConfig.cameras,
-                   help='ring: cameras on the circle around the actors (core.evaluation.ring)')
-    p.add_argument('--ring-noise', type=float, default=RingConfig.noise_px,
-                   help="ring: std of every projected keypoint's noise, px")
-    p.add_argument('--ring-radius', type=float, default=RingConfig.radius,
-                   help="ring: the cameras' distance from the actors' centre, horizontally, m")
-    p.add_argument('--ring-heights', type=_heights, default=RingConfig.heights,
-                   help="ring: the cameras' heights above the actors' centre, m, comma separated, camera after "
-                        "camera in turn (negative: below; give it as --ring-heights=-0.6,-0.3)")
-    p.add_argument('--ring-fov', type=float, default=RingConfig.fov_deg,
-                   help="ring: every camera's horizontal field of view, degrees")
-    p.add_argument('--ring-miss', type=float, default=RingConfig.miss_share,
-                   help='ring: the share of keypoints each view misses, each on its own (0 to below 1)')
-    p.add_argument('--ring-walk', type=float, default=RingConfig.walk_speed,
-                   help='ring: m/s at which the whole scene walks round a circle of 1 m (people crossing the views)')
+    for option, (name, kind, help_text) in RING_OPTIONS.items():
+        p.add_argument(option, type=kind, default=getattr(RingConfig, name), help=f'ring: {help_text}')
     return p
 
 
@@ -170,9 +171,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
                   'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
     else:
-        ring = RingConfig(cameras=args.ring_cameras, radius=args.ring_radius, heights=args.ring_heights,
-                          fov_deg=args.ring_fov, noise_px=args.ring_noise, miss_share=args.ring_miss,
-                          walk_speed=args.ring_walk)
+        ring = RingConfig(**{name: getattr(args, option[2:].replace('-', '_'))
+                             for option, (name, _, _) in RING_OPTIONS.items()})
         seq, gt, head_model = ring_sequence(args.data_root, ring)
         actors, reference = SHELF_ACTORS, None
         heights = ', '.join(f'{h:g}' for h in ring.heights)
