@@ -14,9 +14,8 @@ from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
 from mvpose_ros.core.evaluation.video import look_at
-from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _plan, _tree_depth, _unseen_depth,
-                                                  camera_subsets,
-                                                  bone_scales, own_bone_lengths, sample_people, split_draws,
+from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _depth, _plan, bone_scales,
+                                                  camera_subsets, own_bone_lengths, sample_people, split_draws,
                                                   subset_count)
 
 SIGMA, STRIDE = 1.5, 1.0
@@ -532,7 +531,7 @@ def _numpy_sample_people(people, stack, rngs, config):
         out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
     else:
         lengths = PRIOR_BONE_LENGTH * scales
-        level = np.array([_tree_depth(j) for j in single_j], dtype=int)
+        level = np.array([_depth(INFERENCE_PARENT[:, None], j) for j in single_j], dtype=int)
         for lv in np.unique(level):  # parents first: a parent seen once is the anchor of each hypothesis
             s = level == lv
             sp, sj = single_p[s], single_j[s]
@@ -553,7 +552,7 @@ def _numpy_sample_people(people, stack, rngs, config):
     unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
     out[unseen_p, unseen_j] = centre[unseen_p, None]
     if config.unseen_joints == 'body':
-        for j in sorted(range(n_joints), key=_unseen_depth):  # sources first
+        for j in sorted(range(n_joints), key=lambda k: _depth(UNSEEN_FROM, k)):  # sources first
             (a, b), rise = UNSEEN_FROM[j], UNSEEN_RISE[j] * scales[:, j]
             put = located & (n_seen[:, j] == 0) & (a >= 0) & ~np.isnan(rise)
             out[put, j] = 0.5 * (out[put, a] + out[put, b]) + rise[put, None, None] * UP

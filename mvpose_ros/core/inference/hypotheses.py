@@ -146,33 +146,35 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     located = np.empty(n_people, dtype=np.bool_)
     anchors = _anchors(out, config)
     scales = bone_scales(anchors) if config.single_view_depth == 'own_limb' else np.ones((n_people, n_joints))
+    up = kernel_array(up, np.float64)
     _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, config.single_view_depth != 'centre',
-              _PARENT, kernel_array(PRIOR_BONE_LENGTH * scales, np.float64), HANGING & config.hanging_legs,
-              kernel_array(up, np.float64), _PARENTS_FIRST, located)
+              _PARENT, kernel_array(PRIOR_BONE_LENGTH * scales, np.float64), HANGING & config.hanging_legs, up,
+              _PARENTS_FIRST, located)
     if config.unseen_joints == 'body':
-        _place_unseen(out, n_seen, located, _UNSEEN_FROM, kernel_array(UNSEEN_RISE * scales, np.float64),
-                      kernel_array(up, np.float64), _UNSEEN_ORDER)
+        _place_unseen(out, n_seen, located, _UNSEEN_FROM, kernel_array(UNSEEN_RISE * scales, np.float64), up,
+                      _UNSEEN_ORDER)
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
 _PARENT = INFERENCE_PARENT.astype(np.int64)
 
 
-def _tree_depth(j: int) -> int:
-    return 0 if INFERENCE_PARENT[j] < 0 else 1 + _tree_depth(INFERENCE_PARENT[j])
+def _depth(sources: np.ndarray, j: int) -> int:
+    """How many joints lie below j on its longest chain of sources (sources (J, K): each joint's
+    sources, -1 for none)."""
+    return 0 if sources[j, 0] < 0 else 1 + max(_depth(sources, int(s)) for s in sources[j])
 
 
-# joints parents first, so that a joint seen once can hang from a parent seen once
-_PARENTS_FIRST = np.array(sorted(range(len(INFERENCE_PARENT)), key=_tree_depth), dtype=np.int64)
+def _sources_first(sources: np.ndarray) -> np.ndarray:
+    """(J,) the joints, each after its sources."""
+    return np.array(sorted(range(len(sources)), key=lambda j: _depth(sources, j)), dtype=np.int64)
+
+
+# joints parents first, so that a joint seen once can hang from a parent seen once, and the joints
+# after those they are placed from when no camera sees them
+_PARENTS_FIRST = _sources_first(_PARENT[:, None])
 _UNSEEN_FROM = UNSEEN_FROM.astype(np.int64)
-
-
-def _unseen_depth(j: int) -> int:
-    return 0 if UNSEEN_FROM[j, 0] < 0 else 1 + max(_unseen_depth(int(s)) for s in UNSEEN_FROM[j])
-
-
-# joints after the joints they are placed from when no camera sees them
-_UNSEEN_ORDER = np.array(sorted(range(len(UNSEEN_FROM)), key=_unseen_depth), dtype=np.int64)
+_UNSEEN_ORDER = _sources_first(_UNSEEN_FROM)
 
 
 def own_bone_lengths(anchors: np.ndarray) -> np.ndarray:
@@ -361,7 +363,7 @@ def _place_unseen(out, n_seen, located, sources, rise, up, order):
             continue
         for j in order:
             a, b = sources[j, 0], sources[j, 1]
-            if n_seen[p, j] > 0 or a < 0 or np.isnan(rise[p, j]):
+            if n_seen[p, j] > 0 or a < 0:
                 continue
             for k in range(m):
                 for c in range(3):
