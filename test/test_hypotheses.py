@@ -9,7 +9,7 @@ import pytest
 
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_NAMES, INFERENCE_PARENT,
-                                           PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_RISE, UP)
+                                           PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_FROM_SEEN, UNSEEN_RISE, UP)
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
@@ -41,10 +41,11 @@ def rig(shelf_rig):
 @pytest.fixture(scope='module')
 def truth() -> np.ndarray:
     """(16, 3) inference joints of actor 2 at frame 300 (seen whole by all five cameras): GT
-    joints 0..13, then two 'ears' 8 cm either side of the head top."""
+    joints 0..13, then two 'ears' 8 cm either side of the head top, each on its shoulder's side."""
     gt = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', [300]).poses[0, 2]
     assert np.isfinite(gt).all()
-    return np.concatenate([gt, gt[13] + [[-0.08, 0.0, 0.0], [0.08, 0.0, 0.0]]])
+    right = (gt[8] - gt[9]) / np.linalg.norm(gt[8] - gt[9])  # towards the right shoulder
+    return np.concatenate([gt, gt[13] + 0.08 * np.stack([right, -right])])
 
 
 def _render(rig, points: np.ndarray, sigma: float = SIGMA, stride: float = STRIDE) -> list:
@@ -209,18 +210,19 @@ def test_a_leg_no_camera_sees_hangs_below_its_parent(views, truth):
 # how far from actor 2's true joint it may land; he stands upright, arms down)
 UNSEEN_CASES = {
     'arm': [('r_elbow', 'r_shoulder', 'r_shoulder', -0.33, 0.15), ('r_wrist', 'r_elbow', 'r_elbow', -0.26, 0.25)],
-    'head': [('head', 'neck', 'neck', 0.20, 0.10), ('r_ear', 'neck', 'neck', 0.20, 0.13)],
+    'head': [('head', 'neck', 'neck', 0.20, 0.10), ('r_ear', 'neck', 'r_shoulder', 0.20, 0.13)],
     'neck and head': [('neck', 'r_shoulder', 'l_shoulder', 0.0, 0.15), ('head', 'neck', 'neck', 0.20, 0.15)],
     'hip': [('l_hip', 'l_shoulder', 'l_shoulder', -0.50, 0.15)],
+    'shoulder': [('r_shoulder', 'r_hip', 'r_hip', 0.50, 0.15), ('r_elbow', 'r_shoulder', 'r_shoulder', -0.33, 0.2)],
 }
 
 
 @pytest.mark.parametrize('case', sorted(UNSEEN_CASES))
 def test_a_joint_no_camera_sees_is_put_on_the_body(views, truth, case):
     """unseen_joints 'body': an arm hangs from the shoulder, the head stands above the neck, the neck
-    sits between the shoulders, a hip under its shoulder, each hypothesis from its sources'
-    hypotheses of the same index (sources placed first), by a typical length times his scale; all
-    land near his true joints, nearer than the person's centre."""
+    sits between the shoulders, a hip under its shoulder, a shoulder above its hip, each hypothesis
+    from its sources' hypotheses of the same index (sources placed first), by a typical length
+    times his scale; all land near his true joints, nearer than the person's centre."""
     joints = [INFERENCE_NAMES.index(j) for j, *_ in UNSEEN_CASES[case]]
     sub = _without(views, joints, set(range(5)))
     config = SamplingConfig(hypotheses=32)
@@ -240,16 +242,20 @@ def test_a_joint_no_camera_sees_is_put_on_the_body(views, truth, case):
 
 
 def test_an_unseen_joint_hangs_from_an_unseen_source_at_the_centre(views):
-    """A shoulder no camera sees has no place on the body: it takes the person's centre, and its
-    unseen elbow hangs from there (as a leg from a hip at the centre)."""
-    shoulder, elbow = INFERENCE_NAMES.index('r_shoulder'), INFERENCE_NAMES.index('r_elbow')
+    """A shoulder no camera sees whose hip no camera sees either has no place on the body (the hip
+    would hang from it): it takes the person's centre, and its unseen elbow and hip hang from there
+    (as a leg from a hip at the centre)."""
+    shoulder, elbow, hip = (INFERENCE_NAMES.index(n) for n in ('r_shoulder', 'r_elbow', 'r_hip'))
     config = SamplingConfig(hypotheses=32)
-    hyp = sample_hypotheses(_without(views, [shoulder, elbow], set(range(5))), np.random.default_rng(0), config)
-    centre = np.delete(hyp, [shoulder, elbow], axis=0).mean(axis=(0, 1))  # of the joints seen
+    hidden = [shoulder, elbow, hip]
+    hyp = sample_hypotheses(_without(views, hidden, set(range(5))), np.random.default_rng(0), config)
+    centre = np.delete(hyp, hidden, axis=0).mean(axis=(0, 1))  # of the joints seen
     np.testing.assert_allclose(hyp[shoulder], np.broadcast_to(centre, (32, 3)), atol=1e-9)
     anchors = _anchors(hyp[None], config)
-    anchors[:, [shoulder, elbow]] = np.nan
-    np.testing.assert_allclose(hyp[elbow], hyp[shoulder] - 0.33 * bone_scales(anchors)[0, elbow] * UP, atol=1e-12)
+    anchors[:, hidden] = np.nan
+    scale = bone_scales(anchors)[0]
+    np.testing.assert_allclose(hyp[elbow], hyp[shoulder] - 0.33 * scale[elbow] * UP, atol=1e-12)
+    np.testing.assert_allclose(hyp[hip], hyp[shoulder] - 0.50 * scale[hip] * UP, atol=1e-12)
 
 
 def test_deterministic_for_a_seed(views):
@@ -527,8 +533,15 @@ def _numpy_sample_people(people, stack, rngs, config):
     depth = np.einsum('smd,sd->sm', direction, centre[single_p] - origin)
     anchors = _anchors(out, config)
     scales = bone_scales(anchors) if config.single_view_depth == 'own_limb' else np.ones((n_people, n_joints))
+    # without a parent to hang from: the depth nearest where the body puts the joint from its anchored sources
+    body_rise = UNSEEN_RISE * scales if config.unseen_joints == 'body' else np.full_like(scales, np.nan)
+    (a, b), rise = UNSEEN_FROM[single_j].T, body_rise[single_p, single_j]
+    body = 0.5 * (anchors[single_p, a] + anchors[single_p, b]) + rise[:, None] * UP
+    placed = (a >= 0) & ~np.isnan(body[:, 0])
+    target = np.where(placed[:, None], body, centre[single_p])
+    body_depth = np.einsum('smd,sd->sm', direction, target - origin)
     if config.single_view_depth == 'centre':
-        out[single_p, single_j] = origin[:, None] + depth[..., None] * direction
+        out[single_p, single_j] = origin[:, None] + body_depth[..., None] * direction
     else:
         lengths = PRIOR_BONE_LENGTH * scales
         level = np.array([_depth(INFERENCE_PARENT[:, None], j) for j in single_j], dtype=int)
@@ -548,34 +561,66 @@ def _numpy_sample_people(people, stack, rngs, config):
             lower = np.where(rise * (near - far) <= 0.0, near, far)
             limb = np.where((HANGING[sj] & config.hanging_legs)[:, None], lower, limb)
             on_limb = (parent >= 0) & ~np.isnan(anchor[:, 0, 0]) & ~np.isnan(length)
-            out[sp, sj] = origin[s][:, None] + np.where(on_limb[:, None], limb, depth[s])[..., None] * direction[s]
+            out[sp, sj] = origin[s][:, None] + np.where(on_limb[:, None], limb, body_depth[s])[..., None] * direction[s]
     unseen_p, unseen_j = np.nonzero((n_seen == 0) & located[:, None])
     out[unseen_p, unseen_j] = centre[unseen_p, None]
     if config.unseen_joints == 'body':
-        for j in sorted(range(n_joints), key=lambda k: _depth(UNSEEN_FROM, k)):  # sources first
+        waits_for = np.where(UNSEEN_FROM_SEEN[:, None], -1, UNSEEN_FROM)  # seen sources are never placed
+        for j in sorted(range(n_joints), key=lambda k: _depth(waits_for, k)):  # sources first
             (a, b), rise = UNSEEN_FROM[j], UNSEEN_RISE[j] * scales[:, j]
             put = located & (n_seen[:, j] == 0) & (a >= 0) & ~np.isnan(rise)
+            if UNSEEN_FROM_SEEN[j]:
+                put &= (n_seen[:, a] > 0) & (n_seen[:, b] > 0)
             out[put, j] = 0.5 * (out[put, a] + out[put, b]) + rise[put, None, None] * UP
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
 @pytest.mark.parametrize('config', [SamplingConfig(), SamplingConfig(27, False, 'centre'), SamplingConfig(5),
-                                    SamplingConfig(40, False, 'limb'), SamplingConfig(40, False, 'own_limb', False)])
+                                    SamplingConfig(40, False, 'limb'), SamplingConfig(40, False, 'own_limb', False),
+                                    SamplingConfig(unseen_joints='centre')])
 def test_sampling_is_numpys_arithmetic(views, config):
     """Several people at once, as the kernels take them: one seen by all five cameras, one with a
     wrist seen once (its elbow twice) and a wrist seen by none, one seen once only, one whose
     joints no two of its cameras share (None), one with an elbow and its wrist seen once, one with
-    both ankles seen once."""
+    both ankles seen once, one with a shoulder seen by none (its hip seen) and the other shoulder and
+    its hip seen by none, one with an ear and a hip seen once (their places on the body anchored)."""
     wrist_seen_once = _without(_without(views, [6], {0, 1, 3, 4}), [11], set(range(5)))
     split = _without(_without(views[:2], list(range(8, 16)), {0}), list(range(8)), {1})
     limb_seen_once = _without(views[1:4], [10, 11], {1, 2})
     ankles_seen_once = _without(views, [0, 5], {1, 2, 3, 4})
-    people = [views, wrist_seen_once, views[2:3], split, limb_seen_once, ankles_seen_once]
+    shoulders_unseen = _without(views, [8, 9, 3], set(range(5)))
+    ear_and_hip_seen_once = _without(views, [14, 3], {1, 2, 3, 4})
+    people = [views, wrist_seen_once, views[2:3], split, limb_seen_once, ankles_seen_once, shoulders_unseen,
+              ear_and_hip_seen_once]
     stack = HeatmapStack.of([hm for person in people for _, hm in person])
-    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(6)], config)
-    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(6)], config)
-    assert [h is None for h in out] == [False, False, True, True, False, False]
+    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(8)], config)
+    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(8)], config)
+    assert [h is None for h in out] == [False, False, True, True, False, False, False, False]
     for got, want in zip(out, expected):
         if want is not None:
             np.testing.assert_array_equal(got, want)
     assert sample_people([], HeatmapStack.of([]), [], config) == []
+
+
+def test_a_joint_seen_once_without_a_parent_takes_its_depth_from_the_body(views, truth):
+    """A hip, the head and an ear seen by one camera have no parent to hang from: each hypothesis
+    lies on its ray at the depth nearest where unseen_joints 'body' would put the joint from its
+    anchored sources (the hip under its shoulder, the head above the neck, the ear beside it), nearer the
+    truth than at the depth nearest the person's centre ('centre')."""
+    names = ('l_hip', 'head', 'r_ear')
+    joints = [INFERENCE_NAMES.index(n) for n in names]
+    sub = _without(views, joints, {1, 2, 3, 4})
+    config = SamplingConfig(hypotheses=32)
+    hyp = sample_hypotheses(sub, np.random.default_rng(0), config)
+    centred = sample_hypotheses(sub, np.random.default_rng(0), replace(config, unseen_joints='centre'))
+    anchors = _anchors(hyp[None], config)
+    anchors[:, joints] = np.nan  # as the sampler saw them: not seen twice
+    scale, anchors = bone_scales(anchors)[0], anchors[0]
+    origin = views[0][0].centre
+    for j in joints:
+        (a, b), rise = UNSEEN_FROM[j], UNSEEN_RISE[j] * scale[j]
+        body = 0.5 * (anchors[a] + anchors[b]) + rise * UP
+        rays = (hyp[j] - origin) / np.linalg.norm(hyp[j] - origin, axis=-1, keepdims=True)
+        np.testing.assert_allclose(np.einsum('md,md->m', rays, hyp[j] - origin), rays @ (body - origin), atol=1e-9)
+        errors = [np.linalg.norm(h[j] - truth[j], axis=-1).mean() for h in (hyp, centred)]
+        assert errors[0] < errors[1] - 0.015

@@ -47,7 +47,8 @@ SOLVER_PARAMETERS = {
                     'parent joint lower along up (legs hang from hips and knees), not nearer the person\'s centre',
     'unseen_joints': f'where a joint no camera sees is put, from {", ".join(UNSEEN_JOINTS)}: the person\'s centre, '
                      'or on the body (legs and arms hang from their parents, the neck between the shoulders, the '
-                     'head above the neck)',
+                     'head above the neck, a shoulder above a seen hip); with body, a joint seen by one camera '
+                     'without a parent to hang from also takes the depth nearest where the body puts it',
     'terms': f'CRF terms, from {", ".join(TERMS)}',
     'head_model': f'head and neck from the detected face: {", ".join(HEAD_MODELS)}',
     'seed': 'seed of the hypothesis sampling',

@@ -102,23 +102,29 @@ INFERENCE_PARENT = np.array([INFERENCE_NAMES.index(_PARENTS[n][0]) if n in _PARE
 PRIOR_BONE_LENGTH = np.array([_PARENTS[n][1] if n in _PARENTS else np.nan for n in INFERENCE_NAMES])  # (16,) m
 # The joints below their parent in a standing, walking or sitting person: knees below hips, ankles below knees
 HANGING = np.isin(INFERENCE_NAMES, ('r_knee', 'l_knee', 'r_ankle', 'l_ankle'))  # (16,)
-# Where a joint no camera sees is put (hypotheses.py, unseen_joints 'body'): above or below the
+# Where the body puts a joint no camera sees, and near which a joint seen by one camera without a
+# parent to hang from takes its depth (hypotheses.py, unseen_joints 'body'): above or below the
 # point between two others (the same joint twice for one), by a typical adult length along up
 # (metres, negative: below). Legs and arms hang their bone's length from their parent, a hip is
 # the trunk's length (0.50 m: Winter's shoulder and hip heights, 0.818 and 0.530 of stature) below
 # its shoulder, the neck is the shoulders' midpoint (COCO's neck), and the head point (nose, or
-# MPII's head top) and ears stand a head's height above the neck: Shelf's anatomical heads measure
-# 0.20-0.22 m from neck to ear midpoint. Shoulders have no such rule (-1).
+# MPII's head top) stands a head's height above the neck: Shelf's anatomical heads measure
+# 0.20-0.22 m from neck to ear midpoint. An ear stands as high above the point between the neck
+# and its own shoulder: ears are to the side. A shoulder stands the trunk's length above its hip,
+# but only above a hip a camera sees (UNSEEN_FROM_SEEN): hips hang from shoulders, and the two
+# rules may not feed each other.
 _UNSEEN: dict[str, tuple[str, str, float]] = {
     **{n: (_PARENTS[n][0], _PARENTS[n][0], -_PARENTS[n][1]) for n in ('r_ankle', 'r_knee', 'l_knee', 'l_ankle',
                                                                       'r_wrist', 'r_elbow', 'l_elbow', 'l_wrist')},
     'r_hip': ('r_shoulder', 'r_shoulder', -0.50), 'l_hip': ('l_shoulder', 'l_shoulder', -0.50),
+    'r_shoulder': ('r_hip', 'r_hip', 0.50), 'l_shoulder': ('l_hip', 'l_hip', 0.50),
     'neck': ('r_shoulder', 'l_shoulder', 0.0),
-    'head': ('neck', 'neck', 0.20), 'r_ear': ('neck', 'neck', 0.20), 'l_ear': ('neck', 'neck', 0.20),
+    'head': ('neck', 'neck', 0.20), 'r_ear': ('neck', 'r_shoulder', 0.20), 'l_ear': ('neck', 'l_shoulder', 0.20),
 }
 UNSEEN_FROM = np.array([[INFERENCE_NAMES.index(a) for a in _UNSEEN[n][:2]] if n in _UNSEEN else [-1, -1]
                         for n in INFERENCE_NAMES])  # (16, 2)
 UNSEEN_RISE = np.array([_UNSEEN[n][2] if n in _UNSEEN else np.nan for n in INFERENCE_NAMES])  # (16,) m along up
+UNSEEN_FROM_SEEN = np.isin(INFERENCE_NAMES, ('r_shoulder', 'l_shoulder'))  # (16,) placed from seen sources only
 # How far a person's bones may be from the typical lengths above, as a factor: people of 0.8 to 2.3 m,
 # children too, and the spread of where detectors put joints
 PLAUSIBLE_BONE_SCALE = (0.45, 1.3)

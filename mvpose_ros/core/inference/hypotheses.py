@@ -18,7 +18,7 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_PARENT, PLAUSIBLE_BONE_SCALE,
-                                           PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_RISE, UP)
+                                           PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_FROM_SEEN, UNSEEN_RISE, UP)
 from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
@@ -34,16 +34,21 @@ class SamplingConfig:
     single_view_depth: where on its rays a joint seen by one camera is put, 'centre' (the depth
     nearest the person's centre), 'limb' (where the ray meets the sphere of the bone's typical
     adult length around the parent joint: around its best point when it is seen twice, around its
-    hypothesis of the same index when it is seen once; else as 'centre') or
+    hypothesis of the same index when it is seen once; else as 'centre', or as unseen_joints
+    'body' below) or
     'own_limb' (as 'limb', with the person's own bone length: own_bone_lengths). Of the sphere's two
     crossings the one nearer the person's centre is taken, but with hanging_legs the lower one
     (along up) for a knee or ankle (body.HANGING);
     unseen_joints: where a joint no camera sees (out of every picture, or hidden in every view) is
     put, 'centre' (the person's centre) or 'body' (body.UNSEEN_RISE: a leg or arm joint hangs its
     bone's length straight down from its parent, the neck is the shoulders' midpoint, the nose or
-    head top and the ears a head's height above the neck; lengths scaled to the person as for
-    'own_limb'; each of its hypotheses from its sources' hypotheses of the same index, wherever
-    they are: a joint without sources, an unseen shoulder, takes the centre)."""
+    head top a head's height above the neck and each ear as high beside it, a shoulder the trunk's
+    length above a hip a camera sees; lengths scaled to the person as for 'own_limb'; each of its
+    hypotheses from its sources' hypotheses of the same index, wherever they are: an unseen
+    shoulder whose hip no camera sees takes the centre). With 'body', a joint seen by one camera
+    without a parent to hang from (hips, neck, head, ears; a shoulder whose neck no two cameras
+    see) takes the depth on its rays nearest where that rule puts it from its sources' best points,
+    when they are seen twice, instead of the depth nearest the centre."""
 
     hypotheses: int = 64
     peak_hypotheses: bool = True
@@ -147,12 +152,14 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     anchors = _anchors(out, config)
     scales = bone_scales(anchors) if config.single_view_depth == 'own_limb' else np.ones((n_people, n_joints))
     up = kernel_array(up, np.float64)
+    # NaN: no place on the body for the joints seen once without a parent to hang from
+    body_rise = kernel_array(UNSEEN_RISE * scales if config.unseen_joints == 'body' else np.full_like(scales, np.nan),
+                             np.float64)
     _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, config.single_view_depth != 'centre',
               _PARENT, kernel_array(PRIOR_BONE_LENGTH * scales, np.float64), HANGING & config.hanging_legs, up,
-              _PARENTS_FIRST, located)
+              _PARENTS_FIRST, _UNSEEN_FROM, body_rise, located)
     if config.unseen_joints == 'body':
-        _place_unseen(out, n_seen, located, _UNSEEN_FROM, kernel_array(UNSEEN_RISE * scales, np.float64), up,
-                      _UNSEEN_ORDER)
+        _place_unseen(out, n_seen, located, _UNSEEN_FROM, _UNSEEN_FROM_SEEN, body_rise, up, _UNSEEN_ORDER)
     return [out[p] if located[p] else None for p in range(n_people)]
 
 
@@ -174,7 +181,8 @@ def _sources_first(sources: np.ndarray) -> np.ndarray:
 # after those they are placed from when no camera sees them
 _PARENTS_FIRST = _sources_first(_PARENT[:, None])
 _UNSEEN_FROM = UNSEEN_FROM.astype(np.int64)
-_UNSEEN_ORDER = _sources_first(_UNSEEN_FROM)
+_UNSEEN_FROM_SEEN = kernel_array(UNSEEN_FROM_SEEN, np.bool_)
+_UNSEEN_ORDER = _sources_first(np.where(UNSEEN_FROM_SEEN[:, None], -1, _UNSEEN_FROM))  # seen sources wait for none
 
 
 def own_bone_lengths(anchors: np.ndarray) -> np.ndarray:
@@ -285,16 +293,18 @@ def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
 
 @kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
         'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[:, ::1], boolean[::1], float64[::1], '
-        'int64[::1], boolean[::1])')
+        'int64[::1], int64[:, ::1], float64[:, ::1], boolean[::1])')
 def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, hanging, up, order,
-              located):
+              body_from, body_rise, located):
     # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
     # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
     # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
     # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
     # anchor, or around the parent's k-th point when the parent is seen once (order: parents first)
     # (the nearer of the two to the centre's depth, the lower along up for a hanging joint; a ray
-    # missing it: its point nearest the parent); a joint seen by none, the centre.
+    # missing it: its point nearest the parent); a joint seen by none, the centre. A joint seen
+    # once without a parent to hang from takes the depth nearest where the body puts it from its
+    # anchored sources (body_from, body_rise: _place_unseen's rule), or else nearest the centre.
     n_joints, m = out.shape[1], out.shape[2]
     for p in range(out.shape[0]):
         total = np.zeros(3)
@@ -330,13 +340,18 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
                 chained = np.isnan(rel[0]) and n_seen[p, parents[j]] == 1
                 on_limb = not np.isnan(rel[0]) or chained
             rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
+            to_body = to_centre
+            a, b = body_from[j, 0], body_from[j, 1]
+            if not on_limb and a >= 0 and not np.isnan(body_rise[p, j]) and not np.isnan(anchors[p, a, 0]) \
+                    and not np.isnan(anchors[p, b, 0]):
+                to_body = 0.5 * (anchors[p, a] + anchors[p, b]) + body_rise[p, j] * up - o
             for k in range(m):
                 d = dirs[first_draw[v, j] + k]
                 if chained:
                     rel = out[p, parents[j], k] - o
                     rel_sq = (rel[0] * rel[0] + rel[2] * rel[2]) + rel[1] * rel[1]
                 # dot products summed x, z, then y: numpy's einsum, for the same bits
-                depth = (d[0] * to_centre[0] + d[2] * to_centre[2]) + d[1] * to_centre[1]
+                depth = (d[0] * to_body[0] + d[2] * to_body[2]) + d[1] * to_body[1]  # to_centre on a limb
                 if on_limb:
                     mid = (d[0] * rel[0] + d[2] * rel[2]) + d[1] * rel[1]
                     half = np.sqrt(max(mid * mid - rel_sq + length * length, 0.0))
@@ -351,19 +366,20 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
                     out[p, j, k, c] = o[c] + depth * d[c]
 
 
-@kernel('void(float64[:, :, :, ::1], int64[:, ::1], boolean[::1], int64[:, ::1], float64[:, ::1], float64[::1], '
-        'int64[::1])')
-def _place_unseen(out, n_seen, located, sources, rise, up, order):
+@kernel('void(float64[:, :, :, ::1], int64[:, ::1], boolean[::1], int64[:, ::1], boolean[::1], float64[:, ::1], '
+        'float64[::1], int64[::1])')
+def _place_unseen(out, n_seen, located, sources, from_seen, rise, up, order):
     # out (P, J, m, 3) completed: each joint no view sees that has sources (the same joint twice
     # for one; placed before it, by order) goes rise (P, J) metres along up from their midpoint,
-    # hypothesis by hypothesis, wherever they are (seen, placed so, or at the centre)
+    # hypothesis by hypothesis, wherever they are (seen, placed so, or at the centre); a joint
+    # flagged in from_seen only from sources a view sees
     m = out.shape[2]
     for p in range(out.shape[0]):
         if not located[p]:
             continue
         for j in order:
             a, b = sources[j, 0], sources[j, 1]
-            if n_seen[p, j] > 0 or a < 0:
+            if n_seen[p, j] > 0 or a < 0 or (from_seen[j] and (n_seen[p, a] == 0 or n_seen[p, b] == 0)):
                 continue
             for k in range(m):
                 for c in range(3):
