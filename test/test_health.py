@@ -252,3 +252,18 @@ def test_links_statuses_tell_which_link_between_two_nodes_is_not_matched_yet():
     other = Status('association: node', Level.OK, '25 items/s', {'queue depth': '0'})
     msg = statuses_to_msg([other, *statuses(0, 1, 2)], Time())
     assert unmatched_links(msg_to_statuses(msg), seen) == ['/cam0/people2d: a writer has matched 0 of 1 readers']
+
+
+def test_a_person_one_camera_alone_sees_says_nothing_of_its_calibration(shelf_rig):
+    """A bundle of one view (single_view): its 3D person comes from that view alone, so it is left
+    out of the residuals: the bumped camera's residual is that of its people seen twice or more."""
+    rng = np.random.default_rng(1)
+    joints = _cloud(rng)
+    seen = list(shelf_rig)
+    seen[2] = bumped_camera(shelf_rig[2], axis_rotation('y', 2.0))
+    bundles = _bundles(seen, joints, 3.0, rng)
+    both = frame_residuals(shelf_rig, [0, 1, 2], joints, bundles, 0.3)
+    alone = [(pid, {2: views[2]}) for pid, views in bundles[:2]] + bundles[2:]
+    only_third = frame_residuals(shelf_rig, [0, 1, 2], joints, alone, 0.3)
+    assert both[2] > 25 and only_third[2] > 25
+    np.testing.assert_allclose(only_third[2], frame_residuals(shelf_rig, [2], joints[2:], bundles[2:], 0.3)[2])

@@ -466,7 +466,7 @@ def test_data_term_prefers_the_true_point(rig, truth, sigma, stride):
     np.testing.assert_allclose(empty, 0.5)
 
 
-def _numpy_sample_people(people, stack, rngs, config):
+def _numpy_sample_people(people, stack, rngs, config, before):
     """sample_people as numpy on whole arrays (the formulation the kernels replaced)."""
     m = config.hypotheses
     n_views, n_joints = stack.start.shape
@@ -526,6 +526,8 @@ def _numpy_sample_people(people, stack, rngs, config):
     located = ~np.isnan(out).all(axis=(1, 2, 3))
     centre = np.full((n_people, 3), np.nan)
     centre[located] = np.nanmean(out[located].reshape(-1, n_joints * m, 3), axis=1)
+    placed = ~located & ~np.isnan(before[:, 0])  # nothing seen twice: from where he was
+    centre[placed], located = before[placed], located | placed
     keep = located[single_p]
     single_p, single_j, single_view = single_p[keep], single_j[keep], single_view[keep]
     origin = centres[single_view]
@@ -578,12 +580,13 @@ def _numpy_sample_people(people, stack, rngs, config):
 @pytest.mark.parametrize('config', [SamplingConfig(), SamplingConfig(27, False, 'centre'), SamplingConfig(5),
                                     SamplingConfig(40, False, 'limb'), SamplingConfig(40, False, 'own_limb', False),
                                     SamplingConfig(unseen_joints='centre')])
-def test_sampling_is_numpys_arithmetic(views, config):
+def test_sampling_is_numpys_arithmetic(views, truth, config):
     """Several people at once, as the kernels take them: one seen by all five cameras, one with a
     wrist seen once (its elbow twice) and a wrist seen by none, one seen once only, one whose
     joints no two of its cameras share (None), one with an elbow and its wrist seen once, one with
     both ankles seen once, one with a shoulder seen by none (its hip seen) and the other shoulder and
-    its hip seen by none, one with an ear and a hip seen once (their places on the body anchored)."""
+    its hip seen by none, one with an ear and a hip seen once (their places on the body anchored),
+    one seen once only but placed from where he was."""
     wrist_seen_once = _without(_without(views, [6], {0, 1, 3, 4}), [11], set(range(5)))
     split = _without(_without(views[:2], list(range(8, 16)), {0}), list(range(8)), {1})
     limb_seen_once = _without(views[1:4], [10, 11], {1, 2})
@@ -591,11 +594,13 @@ def test_sampling_is_numpys_arithmetic(views, config):
     shoulders_unseen = _without(views, [8, 9, 3], set(range(5)))
     ear_and_hip_seen_once = _without(views, [14, 3], {1, 2, 3, 4})
     people = [views, wrist_seen_once, views[2:3], split, limb_seen_once, ankles_seen_once, shoulders_unseen,
-              ear_and_hip_seen_once]
+              ear_and_hip_seen_once, views[4:5]]
     stack = HeatmapStack.of([hm for person in people for _, hm in person])
-    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(8)], config)
-    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(8)], config)
-    assert [h is None for h in out] == [False, False, True, True, False, False, False, False]
+    before = np.full((len(people), 3), np.nan)
+    before[[0, 8]] = [[0.0, 0.0, 0.0], truth.mean(axis=0) + 0.1]  # where they were (the first is seen twice)
+    out = sample_people(people, stack, [np.random.default_rng(i) for i in range(9)], config, UP, before)
+    expected = _numpy_sample_people(people, stack, [np.random.default_rng(i) for i in range(9)], config, before)
+    assert [h is None for h in out] == [False, False, True, True, False, False, False, False, False]
     for got, want in zip(out, expected):
         if want is not None:
             np.testing.assert_array_equal(got, want)
@@ -624,3 +629,18 @@ def test_a_joint_seen_once_without_a_parent_takes_its_depth_from_the_body(views,
         np.testing.assert_allclose(np.einsum('md,md->m', rays, hyp[j] - origin), rays @ (body - origin), atol=1e-9)
         errors = [np.linalg.norm(h[j] - truth[j], axis=-1).mean() for h in (hyp, centred)]
         assert errors[0] < errors[1] - 0.015
+
+
+def test_a_person_one_camera_alone_sees_is_placed_from_where_he_was(views, truth):
+    """Nothing seen twice: without a centre from the frame before he is left out (None); with one
+    (0.1 m off his own), each joint lies on its camera's rays near his true joint, roots at the
+    given centre's depth and limbs hanging from them."""
+    alone = views[1:2]
+    config = SamplingConfig(hypotheses=32)
+    stack = HeatmapStack.of([hm for _, hm in alone])
+    assert sample_people([alone], stack, [np.random.default_rng(0)], config)[0] is None
+    before = truth.mean(axis=0) + [0.1, 0.0, 0.0]
+    hyp = sample_people([alone], stack, [np.random.default_rng(0)], config, UP, before[None])[0]
+    errors = np.linalg.norm(hyp - truth[:, None], axis=-1).mean(axis=1)  # (J,)
+    assert np.median(errors) < 0.15 and errors.max() < 0.45  # limbs along a ray: either crossing of a bone
+    assert np.linalg.norm(hyp.mean(axis=(0, 1)) - truth.mean(axis=0)) < 0.15

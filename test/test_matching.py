@@ -259,6 +259,48 @@ def test_person_seen_by_one_camera_is_dropped(rig, poses):
     assert all((0, 2) not in g for g in groups)
 
 
+@pytest.mark.parametrize('single_view', [True, False])
+def test_a_person_one_camera_alone_sees_keeps_his_id_while_it_is_remembered(rig, poses, single_view):
+    """Actor 2 walks out of every view but camera 0's: with single_view his one view keeps his
+    id (no rough centre: the solver places him from where he was) until id_memory has passed since
+    two cameras last saw him; without it he is dropped at once. The others keep theirs."""
+    rng = np.random.default_rng(9)
+    config = AssociationConfig(single_view=single_view)
+    associator = Associator(rig, config)
+    ids = [_run(associator, FRAMES[k], *_frame(rig, poses[FRAMES[k]], rng)) for k in range(4)]
+    assert all(i == ids[0] for i in ids)
+    last_seen = FRAMES[3] * PERIOD
+    hidden = {c: {2} for c in range(1, len(rig))}
+    for k in range(1, 40):
+        t = last_seen + k * PERIOD
+        people, actors = _frame(rig, poses[FRAMES[3]], rng, hidden=hidden)
+        skeleton_actor = {id(p): a for ps, order in zip(people, actors) for p, a in zip(ps, order)}
+        out = {_observed_actor(o, skeleton_actor): o for o in associator.update(t, people)}
+        assert {a: o.person_id for a, o in out.items() if a != 2} == {0: ids[0][0], 1: ids[0][1]}
+        kept = single_view and t - last_seen <= config.id_memory
+        assert (2 in out) == kept, t - last_seen
+        if kept:
+            assert out[2].person_id == ids[0][2] and list(out[2].views) == [0]
+            assert np.isnan(out[2].centre).all()
+
+
+def test_a_view_alone_keeps_the_id_its_track_had_unless_that_id_is_taken():
+    """continue_alone: the id a track was part of the most frames; -1 when the frame's people took
+    it (the view is a duplicate), for a track without history, for the second view voting for the
+    same id, and once the id is forgotten."""
+    keeper = _keeper()
+    centres = np.array([[0.0, 0.0, 1.0], [2.0, 0.0, 1.0]])
+    assert keeper.assign(0.0, _members([0, 1]), centres) == [0, 1]
+    assert keeper.assign(PERIOD, _members([0, 1]), centres) == [0, 1]
+    assert keeper.assign(2 * PERIOD, [{(0, 0), (1, 0)}, {(0, 1), (2, 7)}], centres) == [0, 1]
+    assert keeper.assign(3 * PERIOD, [{(0, 0), (1, 0)}], centres[:1]) == [0]
+    assert keeper.continue_alone([(0, 1), (1, 0), (3, 5)], taken={0}) == [1, -1, -1]
+    # (0, 1) was part of id 1 three frames, (2, 7) one: the longer history wins whatever the order
+    assert keeper.continue_alone([(2, 7), (0, 1)], taken={0}) == [-1, 1]
+    assert keeper.assign(3 * PERIOD + keeper.memory + 0.01, [], np.zeros((0, 3))) == []
+    assert keeper.continue_alone([(0, 1)], taken=set()) == [-1]
+
+
 def _observed_actor(observation, skeleton_actor: dict[int, int]) -> int:
     """The one actor behind every view of an observation."""
     actors = {skeleton_actor[id(p)] for p in observation.views.values()}

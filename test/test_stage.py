@@ -40,7 +40,7 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     assert all(s.low is not None or s.high is not None for s in specs
                if isinstance(s.default, (int, float)) and not isinstance(s.default, bool))
     assert {s.name for s in specs if s.live} == {'collision_centre', 'collision_width', 'max_gap', 'track_iou',
-                                                 'match_distance', 'max_view_residual'}
+                                                 'match_distance', 'max_view_residual', 'single_view'}
     changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
                                        'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored',
                                        'max_gap': 0.5, 'frame_rate': 30.0, 'max_view_residual': 0.25,

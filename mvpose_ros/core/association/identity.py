@@ -13,9 +13,9 @@ the id is recovered from the 3D position alone within the reach of the time sinc
 before: the motion of one step of the stream, not of the person's whole absence, so a newcomer
 does not take the id of someone lost a second ago a metre or two away. Only a person none of
 whose tracks has a history is placed so: one whose tracks vote for an id is that id's (or, below,
-its duplicate), not whoever was last seen nearby. Times
-are the frames' own (seconds): sets 0.4 s apart keep walking people's ids as frames 40 ms apart
-do. An id not seen for `memory` seconds is forgotten.
+its duplicate), not whoever was last seen nearby. Times are the frames' own (seconds): sets
+0.4 s apart keep walking people's ids as frames 40 ms apart do. An id not seen for `memory`
+seconds is forgotten.
 
 A person the detector found twice in a camera splits into two clusters, each with one of that
 camera's two views. The part that gets no id of its own, but whose tracks vote for the id the
@@ -26,6 +26,10 @@ over the person's (Shelf thinned 15 ways: 26 id changes, none with it and the pa
 Telling a duplicate from someone close by is what the tracks are for: ray distances alone cannot
 (two people near each other, one seen by two cameras only, match on average as well).
 
+A person whose views all but one camera's lost (he walks out of the covered volume) is no longer
+matched, but that view's track still votes: it keeps his id (`continue_alone`), for at most
+`memory` seconds after two cameras last saw him, as the solver places him from where he was.
+
 The keeper's state that outlives a restart is small: the next id and where each recent person
 was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
 person found within reach of where it was last seen gets its old id back (its camera tracks
@@ -34,7 +38,7 @@ are new after a restart, so only the position can match).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Collection, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -120,6 +124,23 @@ class IdentityKeeper:
             self._known[pid] = _Known({t: min(before.get(t, 0) + 1, MAX_VOTES) for t in tracks}, centre_of[pid],
                                       time_s)
         self._last_time = time_s
+        return ids
+
+    def continue_alone(self, tracks: Sequence[tuple[int, int]], taken: Collection[int]) -> list[int]:
+        """Ids for views no other camera's matched this frame, after `assign`: each (camera, track
+        id) gets the id its track has been part of for the most frames, unless that id is in
+        `taken` (the frame's people's: the view is then a duplicate of one of them), each id once,
+        or -1. A person who walks out of all but one camera's view so keeps his id (module doc); the
+        keeper's state is left as it was, so he keeps it at most `memory` seconds after two cameras
+        last saw him."""
+        votes = [max(((known.members.get(t, 0), k) for k, known in self._known.items()), default=(0, -1))
+                 for t in tracks]
+        votes = [(0, -1) if pid in taken else (frames, pid) for frames, pid in votes]
+        ids = [-1] * len(tracks)
+        for row in sorted(range(len(tracks)), key=lambda r: -votes[r][0]):  # the longest history first
+            frames, pid = votes[row]
+            if frames > 0 and pid not in ids:
+                ids[row] = pid
         return ids
 
     def _join_duplicates(self, ids: list[int], shared: np.ndarray, known_ids: list[int],

@@ -84,11 +84,18 @@ def triangulate(cameras: Sequence[Camera], views: Sequence[dict[int, Person2D]],
     return points
 
 
+def _triangulated(config: AssociationConfig | None) -> AssociationConfig:
+    """config (or the default) counting only the people two cameras see: a scene's people are
+    copied from their triangulated joints."""
+    return dataclasses.replace(config or AssociationConfig(), single_view=False)
+
+
 def scene_people(cameras: Sequence[Camera], frames: Sequence[int], people: Sequence[Frame2D],
                  config: AssociationConfig | None = None) -> list[list[ScenePerson]]:
-    """Per frame, the associated 3D people of the scene with their triangulated joints. The
-    association runs on copies of the 2D people, so their track ids are left as they were."""
-    config = config or AssociationConfig()
+    """Per frame, the associated 3D people of the scene with their triangulated joints (people
+    two cameras see: not single_view). The association runs on copies of the 2D people, so their
+    track ids are left as they were."""
+    config = _triangulated(config)
     associator = Associator(cameras, config)
     out = []
     for frame, per_camera in zip(frames, people):
@@ -211,7 +218,7 @@ def choose_offsets(cameras: Sequence[Camera], scene: Sequence[Sequence[ScenePers
     `target`.
     Candidates adding fewer than min_seen x the scene's people per frame are not used.
     """
-    config = config or AssociationConfig()
+    config = _triangulated(config)
     original = sum(len(f) for f in scene) / max(len(scene), 1)
     if target <= original or original == 0:
         return np.zeros((1, 3)), original

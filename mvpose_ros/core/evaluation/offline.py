@@ -20,7 +20,7 @@ from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, d
 from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.body import LIMB_BONES, LIMB_LENGTHS, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
-from mvpose_ros.core.inference.solver import person_frames
+from mvpose_ros.core.inference.solver import frame_centres, person_frames
 from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
 from mvpose_ros.core.stage import Stage3D, StageConfig
 from mvpose_ros.core.timing import StageTimer
@@ -75,9 +75,10 @@ def drop_frames(seq: Sequence2D, drop: FrameDrop) -> Sequence2D:
 def prepare(seq: Sequence2D, config: StageConfig) -> Prepared:
     """Association, hypotheses and data term of every frame, in order."""
     stage = Stage3D(seq.cameras, config)
-    out = [person_frames(seq.cameras, stage.associate(frame, people), frame, config.solver, stage.timer,
-                         stage.solver.up)
-           for frame, people in zip(seq.frames, seq.people)]
+    out: list[list[PersonFrame]] = []
+    for frame, people in zip(seq.frames, seq.people):
+        out.append(person_frames(seq.cameras, stage.associate(frame, people), frame, config.solver, stage.timer,
+                                 stage.solver.up, frame_centres(out[-1]) if out else None))
     return Prepared(list(seq.frames), out, stage.timer)
 
 

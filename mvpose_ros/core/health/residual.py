@@ -21,13 +21,14 @@ LIMB_JOINTS = 12  # joints 0..11 are the same in the dataset (3D) and inference 
 def frame_residuals(cameras: Sequence[Camera | None], person_ids: Sequence[int], joints: np.ndarray,
                     bundles: Sequence[Bundle], min_score: float) -> np.ndarray:
     """(C,) median pixel distance per camera over every limb joint of every output person seen in
-    that camera's view of it (the bundle of the same person id) with a keypoint scoring >= min_score;
-    NaN for a camera with no such joint. joints: (P, 14, 3) metres, in person_ids order."""
+    that camera's view of it (the bundle of the same person id, seen by two or more cameras) with a
+    keypoint scoring >= min_score; NaN for a camera with no such joint. joints: (P, 14, 3) metres,
+    in person_ids order."""
     out = np.full(len(cameras), np.nan)
     row = {int(pid): p for p, pid in enumerate(person_ids)}
     pairs: dict[int, tuple[list, list]] = {}
     for pid, views in bundles:
-        if pid not in row:
+        if pid not in row or len(views) < 2:  # one view places a person where that camera sees him
             continue
         for c, person in views.items():
             kp = np.asarray(person.keypoints)[:LIMB_JOINTS]

@@ -89,11 +89,14 @@ View = tuple[Camera, PersonHeatmap]
 
 def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
                   rngs: Sequence[np.random.Generator], config: SamplingConfig,
-                  up: np.ndarray = UP) -> list[np.ndarray | None]:
+                  up: np.ndarray = UP, before: np.ndarray | None = None) -> list[np.ndarray | None]:
     """Hypotheses (J, M, 3) in metres of each person of a frame (None when no joint of theirs is
-    seen twice), all people batched. people[p]: person p's views (camera, heatmap); stack: every
-    view's heatmap, person after person; rngs[p]: person p's generator (draws per view in order,
-    so a person's hypotheses do not depend on who else is in the frame); up: (3,) the world's up.
+    seen twice and `before` gives none), all people batched. people[p]: person p's views (camera,
+    heatmap); stack: every view's heatmap, person after person; rngs[p]: person p's generator
+    (draws per view in order, so a person's hypotheses do not depend on who else is in the frame);
+    up: (3,) the world's up; before: (P, 3) where each person was (NaN: unknown), the centre of
+    a person none of whose joints is seen twice (one camera alone sees him), whose joints then
+    all take their depths from it as joints seen once do.
 
     A joint seen by a single camera gets points on that camera's sampled rays at the depth
     closest to the person's centre (so it stays near the body instead of being dropped) or, with
@@ -149,6 +152,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
     # the joints seen by one camera or none, from the person's centre (mean hypothesis) and
     # the anchors of the joints seen twice
     located = np.empty(n_people, dtype=np.bool_)
+    given = np.full((n_people, 3), np.nan) if before is None else kernel_array(before, np.float64)
     anchors = _anchors(out, config)
     scales = bone_scales(anchors) if config.single_view_depth == 'own_limb' else np.ones((n_people, n_joints))
     up = kernel_array(up, np.float64)
@@ -157,7 +161,7 @@ def sample_people(people: Sequence[Sequence[View]], stack: HeatmapStack,
                              np.float64)
     _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, config.single_view_depth != 'centre',
               _PARENT, kernel_array(PRIOR_BONE_LENGTH * scales, np.float64), HANGING & config.hanging_legs, up,
-              _PARENTS_FIRST, _UNSEEN_FROM, body_rise, located)
+              _PARENTS_FIRST, _UNSEEN_FROM, body_rise, given, located)
     if config.unseen_joints == 'body':
         _place_unseen(out, n_seen, located, _UNSEEN_FROM, _UNSEEN_FROM_SEEN, body_rise, up, _UNSEEN_ORDER)
     return [out[p] if located[p] else None for p in range(n_people)]
@@ -293,11 +297,12 @@ def _ray_sets(n_seen, seeing, first_draw, cam_of, draw, out):
 
 @kernel('void(float64[:, :, :, ::1], int64[:, ::1], int64[:, :, ::1], int64[:, ::1], float64[:, ::1], '
         'float64[:, ::1], float64[:, :, ::1], boolean, int64[::1], float64[:, ::1], boolean[::1], float64[::1], '
-        'int64[::1], int64[:, ::1], float64[:, ::1], boolean[::1])')
+        'int64[::1], int64[:, ::1], float64[:, ::1], float64[:, ::1], boolean[::1])')
 def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, parents, lengths, hanging, up, order,
-              body_from, body_rise, located):
+              body_from, body_rise, given, located):
     # out (P, J, m, 3) holding the joints seen twice: a person is located if it has any; its
-    # centre is their mean (NaN-skipping, summed in order as numpy's nanmean); a joint seen by
+    # centre is their mean (NaN-skipping, summed in order as numpy's nanmean), or else the given
+    # centre (P, 3), when there is one (not NaN); a joint seen by
     # one view gets its m rays (dirs from the view's centre) at the depth nearest the centre
     # or, with limb, where they meet the sphere of the bone's length (lengths (P, J)) around the parent's
     # anchor, or around the parent's k-th point when the parent is seen once (order: parents first)
@@ -319,9 +324,13 @@ def _complete(out, n_seen, seeing, first_draw, dirs, centres, anchors, limb, par
                         total[c] += x
                         count[c] += 1
         located[p] = count[0] > 0 or count[1] > 0 or count[2] > 0
-        if not located[p]:
+        if located[p]:
+            centre = total / count
+        elif not np.isnan(given[p, 0]):
+            located[p] = True
+            centre = given[p].copy()
+        else:
             continue
-        centre = total / count
         for j in order:
             if n_seen[p, j] == 0:
                 for k in range(m):

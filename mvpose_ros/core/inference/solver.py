@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -38,10 +38,13 @@ class SolverConfig:
 
 
 def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: int,
-                  config: SolverConfig, timer: StageTimer | None = None, up: np.ndarray = UP) -> list[PersonFrame]:
+                  config: SolverConfig, timer: StageTimer | None = None, up: np.ndarray = UP,
+                  before: Mapping[int, np.ndarray] | None = None) -> list[PersonFrame]:
     """Hypotheses and data term of each person of a frame (person id, camera index -> 2D
-    person), all people batched; a person none of whose joints is seen twice is left out. up:
-    (3,) the world's up (sampling's hanging legs).
+    person), all people batched; a person none of whose joints is seen twice is placed from his
+    centre in the frame before (before: person id -> (3,) metres, frame_centres of that frame's
+    person frames), and left out when he was not in it. up: (3,) the world's up (sampling's
+    hanging legs).
 
     Each person's generator is seeded by (seed, frame, person id), so the same frame gives the
     same hypotheses whatever the window, the order of processing, the other people or the
@@ -51,7 +54,8 @@ def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: in
     views = [[(cameras[c], p.heatmap) for c, p in sorted(v.items())] for _, v in people]
     stack = HeatmapStack.of([hm for person in views for _, hm in person])
     rngs = [np.random.default_rng([config.seed, frame, pid]) for pid, _ in people]
-    hyps = sample_people(views, stack, rngs, config.sampling, up)
+    centres = np.array([before[pid] if before and pid in before else np.full(3, np.nan) for pid, _ in people])
+    hyps = sample_people(views, stack, rngs, config.sampling, up, centres.reshape(-1, 3))
     if timer:
         t0 = timer.add('sampling', t0)
     kept = [p for p, h in enumerate(hyps) if h is not None]
@@ -61,6 +65,12 @@ def person_frames(cameras: Sequence[Camera], people: Sequence[Bundle], frame: in
         timer.add('data term', t0)
     support = [joint_support([v.keypoints[:, 2] for v in people[p][1].values()], len(cameras)) for p in kept]
     return [PersonFrame(people[p][0], hyps[p], d, s) for p, d, s in zip(kept, data, support)]
+
+
+def frame_centres(frames: Sequence[PersonFrame]) -> dict[int, np.ndarray]:
+    """Person id -> (3,) the mean of his hypotheses, metres: where person_frames places him in the
+    next frame if one camera alone sees him there."""
+    return {f.person_id: f.hypotheses.reshape(-1, 3).mean(axis=0) for f in frames}
 
 
 class Inference3D:
@@ -75,11 +85,13 @@ class Inference3D:
         self.up = np.asarray(up, dtype=np.float64)
         self.timer = StageTimer()
         self.window = SlidingWindow(config.inference, np.array(SYMMETRIC_PAIRS), LIMB_BONES, LIMB_LENGTHS, self.timer)
+        self._centres: dict[int, np.ndarray] = {}  # of the frame before (person_frames)
 
     def push(self, frame: int, people: Sequence[Bundle], time_s: float | None = None) -> list[FrameResult]:
         """people: (person id, camera index -> 2D person) of this frame, taken at time_s seconds
         (None: frame / the nominal frame rate; see window.SlidingWindow.push); returns the frames due."""
-        frames = person_frames(self.cameras, people, frame, self.config, self.timer, self.up)
+        frames = person_frames(self.cameras, people, frame, self.config, self.timer, self.up, self._centres)
+        self._centres = frame_centres(frames)
         return [self._finish(r) for r in self.window.push(frame, frames, time_s)]
 
     def live(self) -> FrameResult | None:
