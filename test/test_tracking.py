@@ -7,7 +7,7 @@ import pytest
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.types import Person2D
-from mvpose_ros.core.association.tracking import IouTracker, box_iou, keypoint_boxes
+from mvpose_ros.core.association.tracking import IouTracker, box_iou, keypoint_boxes, shared_box_iou
 
 EMPTY_MAPS = PersonHeatmap(np.zeros((NUM_INFERENCE_JOINTS, 1, 1), np.float32), np.zeros(2), 1.0)
 
@@ -176,3 +176,32 @@ def test_empty_frames_are_fine():
     p = _person(0, 0, 50, 50)
     tracker.update([p])
     assert p.track_id == 0
+
+
+def test_a_person_walking_out_of_the_image_keeps_his_track():
+    """His lower joints leave the image (undetected) as he moves 3 px: the box over all his
+    keypoints halves (IoU 0.5), the boxes over the keypoints both frames detect barely move."""
+    tracker = IouTracker(0.7)
+    v = np.linspace(100.0, 400.0, NUM_INFERENCE_JOINTS)  # head to feet
+    u = 150.0 + 50.0 * np.cos(np.arange(NUM_INFERENCE_JOINTS))
+    before = Person2D(np.column_stack([u, v, np.full_like(u, 0.9)]), EMPTY_MAPS)
+    tracker.update([before])
+    kp = before.keypoints.copy()
+    kp[:, 0] += 3.0
+    kp[v > 250.0, 2] = 0.0  # below the image's lower edge now
+    after = Person2D(kp, EMPTY_MAPS)
+    assert box_iou(keypoint_boxes(before.keypoints[None]), keypoint_boxes(kp[None]))[0, 0] < 0.7
+    tracker.update([after])
+    assert after.track_id == before.track_id
+
+
+def test_shared_box_iou_uses_the_keypoints_both_detect():
+    a = _person(0, 0, 100, 100).keypoints
+    b = a.copy()
+    b[:, 0] += 10.0
+    b[5:9, 2] = 0.0  # four joints b misses do not count for a either
+    both = (a[:, 2] > 0) & (b[:, 2] > 0)
+    expected = box_iou(keypoint_boxes(np.where(both[:, None], a, 0.0)[None]),
+                       keypoint_boxes(np.where(both[:, None], b, 0.0)[None]))
+    np.testing.assert_allclose(shared_box_iou(a[None], b[None]), expected)
+    assert shared_box_iou(a[None], np.zeros((1, NUM_INFERENCE_JOINTS, 3)))[0, 0] == 0.0  # nothing shared

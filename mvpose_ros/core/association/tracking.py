@@ -1,4 +1,5 @@
-"""Identity of 2D skeletons over time within one camera, by bounding-box overlap (paper: IoU >= 0.7)."""
+"""Identity of 2D skeletons over time within one camera, by bounding-box overlap (paper: IoU >= 0.7),
+each pair's boxes over the keypoints both skeletons detect."""
 from __future__ import annotations
 
 from typing import Sequence
@@ -63,21 +64,55 @@ def keypoint_boxes(keypoints: np.ndarray) -> np.ndarray:
     return _keypoint_boxes(kernel_array(keypoints, np.float64))
 
 
+@kernel('float64[:, ::1](float64[:, :, ::1], float64[:, :, ::1])')
+def _shared_iou(a, b):
+    """shared_box_iou of C-contiguous keypoints."""
+    out = np.zeros((len(a), len(b)))
+    box_a, box_b = np.empty((1, 4)), np.empty((1, 4))
+    for i in range(len(a)):
+        for k in range(len(b)):
+            shared = 0
+            for j in range(a.shape[1]):
+                if a[i, j, 2] > 0 and b[k, j, 2] > 0:
+                    for box, kp in ((box_a, a[i, j]), (box_b, b[k, j])):
+                        if shared == 0:
+                            box[0, 0] = box[0, 2] = kp[0]
+                            box[0, 1] = box[0, 3] = kp[1]
+                        else:  # NaN propagates, as in keypoint_boxes
+                            box[0, 0] = kp[0] if kp[0] != kp[0] or kp[0] < box[0, 0] else box[0, 0]
+                            box[0, 1] = kp[1] if kp[1] != kp[1] or kp[1] < box[0, 1] else box[0, 1]
+                            box[0, 2] = kp[0] if kp[0] != kp[0] or kp[0] > box[0, 2] else box[0, 2]
+                            box[0, 3] = kp[1] if kp[1] != kp[1] or kp[1] > box[0, 3] else box[0, 3]
+                    shared += 1
+            if shared > 0:
+                out[i, k] = _box_iou(box_a, box_b)[0, 0]
+    return out
+
+
+def shared_box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, K) IoU of the boxes of each pair of skeletons a (N, J, 3) and b (K, J, 3) over the
+    keypoints both detect (score > 0); 0 for a pair sharing none. A joint that one of the two
+    misses (it left the image, or is hidden) changes neither box."""
+    return _shared_iou(kernel_array(a, np.float64), kernel_array(b, np.float64))
+
+
 class IouTracker:
-    """Gives each skeleton the track id of the previous frame's skeleton it overlaps enough."""
+    """Gives each skeleton the track id of the previous frame's skeleton it overlaps enough, the
+    boxes of each pair over the keypoints both detect (shared_box_iou): a person walking out of the
+    image, whose box over all his keypoints shrinks as joints leave it, keeps his track."""
 
     def __init__(self, min_iou: float = 0.7) -> None:
         self.min_iou = min_iou
-        self._boxes = np.zeros((0, 4))
+        self._keypoints = np.zeros((0, 0, 3))
         self._ids: list[int] = []
         self._next_id = 0
 
     def update(self, people: Sequence[Keypoints2D]) -> None:
         """Set `track_id` on each person of the new frame (one-to-one, highest total IoU)."""
-        boxes = keypoint_boxes(np.array([p.keypoints for p in people])) if len(people) else np.zeros((0, 4))
+        keypoints = np.array([p.keypoints for p in people], dtype=np.float64) if len(people) else np.zeros((0, 0, 3))
         ids = [-1] * len(people)
         if len(people) and len(self._ids):
-            iou = box_iou(boxes, self._boxes)
+            iou = shared_box_iou(keypoints, self._keypoints)
             rows, cols = linear_sum_assignment(-iou)
             for r, c in zip(rows.tolist(), cols.tolist()):
                 if iou[r, c] >= self.min_iou:
@@ -87,4 +122,4 @@ class IouTracker:
                 ids[i] = self._next_id
                 self._next_id += 1
             person.track_id = ids[i]
-        self._boxes, self._ids = boxes, ids
+        self._keypoints, self._ids = keypoints, ids
