@@ -7,7 +7,7 @@ import pytest
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.types import Person2D
-from mvpose_ros.core.association.tracking import IouTracker, box_iou, keypoint_boxes, shared_box_iou
+from mvpose_ros.core.association.tracking import IouTracker, box_iou, shared_box_iou
 
 EMPTY_MAPS = PersonHeatmap(np.zeros((NUM_INFERENCE_JOINTS, 1, 1), np.float32), np.zeros(2), 1.0)
 
@@ -71,22 +71,25 @@ def test_box_iou_equals_the_array_formulation(n, k):
     np.testing.assert_array_equal(box_iou(a, b), _iou_by_arrays(a, b))
 
 
-def test_keypoint_boxes_equal_each_persons_bbox():
+def test_shared_box_iou_equals_the_array_formulation():
     """Random keypoints, a third undetected, one person with none detected, one with a NaN on a
-    detected keypoint (numpy's min and max give NaN there)."""
+    detected keypoint (numpy's min and max give NaN there, and the pair IoU 0): each pair's boxes
+    over the keypoints both detect, then box_iou."""
     rng = np.random.default_rng(0)
     kp = np.concatenate([rng.uniform(0, 1000, (6, NUM_INFERENCE_JOINTS, 2)),
                          np.where(rng.random((6, NUM_INFERENCE_JOINTS, 1)) < 0.3, 0.0, 0.7)], axis=-1)
     kp[kp[..., 2] == 0, :2] = np.nan
     kp[1, :, 2] = 0.0
     kp[2, 3] = (np.nan, 5.0, 0.9)
-    detected = (kp[..., 2] > 0)[..., None]
-    lo = np.where(detected, kp[..., :2], np.inf).min(axis=1)
-    hi = np.where(detected, kp[..., :2], -np.inf).max(axis=1)
-    expected = np.where(detected.any(axis=1), np.concatenate([lo, hi], axis=-1), np.nan)
-    np.testing.assert_array_equal(keypoint_boxes(kp), expected)
-    np.testing.assert_array_equal(keypoint_boxes(kp[[0, 3]]), [Person2D(k, EMPTY_MAPS).bbox() for k in kp[[0, 3]]])
-    assert keypoint_boxes(np.zeros((0, NUM_INFERENCE_JOINTS, 3))).shape == (0, 4)
+    a, b = kp[:4], kp[2:] + [3.0, -2.0, 0.0]
+    expected = np.zeros((len(a), len(b)))
+    for i, k in np.ndindex(*expected.shape):
+        both = (a[i, :, 2] > 0) & (b[k, :, 2] > 0)
+        if both.any():
+            boxes = [np.concatenate([x[both, :2].min(axis=0), x[both, :2].max(axis=0)]) for x in (a[i], b[k])]
+            expected[i, k] = box_iou(boxes[0][None], boxes[1][None])[0, 0]
+    np.testing.assert_array_equal(shared_box_iou(a, b), expected)
+    assert shared_box_iou(a, np.zeros((0, NUM_INFERENCE_JOINTS, 3))).shape == (4, 0)
 
 
 def test_bbox_uses_detected_keypoints_only():
@@ -190,18 +193,6 @@ def test_a_person_walking_out_of_the_image_keeps_his_track():
     kp[:, 0] += 3.0
     kp[v > 250.0, 2] = 0.0  # below the image's lower edge now
     after = Person2D(kp, EMPTY_MAPS)
-    assert box_iou(keypoint_boxes(before.keypoints[None]), keypoint_boxes(kp[None]))[0, 0] < 0.7
+    assert box_iou(before.bbox()[None], after.bbox()[None])[0, 0] < 0.7
     tracker.update([after])
     assert after.track_id == before.track_id
-
-
-def test_shared_box_iou_uses_the_keypoints_both_detect():
-    a = _person(0, 0, 100, 100).keypoints
-    b = a.copy()
-    b[:, 0] += 10.0
-    b[5:9, 2] = 0.0  # four joints b misses do not count for a either
-    both = (a[:, 2] > 0) & (b[:, 2] > 0)
-    expected = box_iou(keypoint_boxes(np.where(both[:, None], a, 0.0)[None]),
-                       keypoint_boxes(np.where(both[:, None], b, 0.0)[None]))
-    np.testing.assert_allclose(shared_box_iou(a[None], b[None]), expected)
-    assert shared_box_iou(a[None], np.zeros((1, NUM_INFERENCE_JOINTS, 3)))[0, 0] == 0.0  # nothing shared

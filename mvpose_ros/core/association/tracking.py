@@ -36,37 +36,10 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                     kernel_array(b, np.float64).reshape(-1, 4))
 
 
-@kernel('float64[:, ::1](float64[:, :, ::1])')
-def _keypoint_boxes(keypoints):
-    """keypoint_boxes of C-contiguous keypoints; a detected keypoint with a NaN coordinate makes
-    that side NaN, as numpy's min and max do."""
-    out = np.full((len(keypoints), 4), np.nan)
-    for p in range(len(keypoints)):
-        lo_u = lo_v = np.inf
-        hi_u = hi_v = -np.inf
-        detected = False
-        for j in range(keypoints.shape[1]):
-            u, v = keypoints[p, j, 0], keypoints[p, j, 1]
-            if keypoints[p, j, 2] > 0:
-                detected = True
-                lo_u = u if u != u or u < lo_u else lo_u  # once NaN, stays NaN
-                lo_v = v if v != v or v < lo_v else lo_v
-                hi_u = u if u != u or u > hi_u else hi_u
-                hi_v = v if v != v or v > hi_v else hi_v
-        if detected:
-            out[p, 0], out[p, 1], out[p, 2], out[p, 3] = lo_u, lo_v, hi_u, hi_v
-    return out
-
-
-def keypoint_boxes(keypoints: np.ndarray) -> np.ndarray:
-    """(P, 4) u_min, v_min, u_max, v_max over each person's detected keypoints (P, J, 3) (score
-    > 0), as Person2D.bbox; NaN for a person with none."""
-    return _keypoint_boxes(kernel_array(keypoints, np.float64))
-
-
 @kernel('float64[:, ::1](float64[:, :, ::1], float64[:, :, ::1])')
 def _shared_iou(a, b):
-    """shared_box_iou of C-contiguous keypoints."""
+    """shared_box_iou of C-contiguous keypoints; a detected keypoint with a NaN coordinate makes
+    that side of its box NaN, and the pair's IoU 0 (box_iou)."""
     out = np.zeros((len(a), len(b)))
     box_a, box_b = np.empty((1, 4)), np.empty((1, 4))
     for i in range(len(a)):
@@ -78,7 +51,7 @@ def _shared_iou(a, b):
                         if shared == 0:
                             box[0, 0] = box[0, 2] = kp[0]
                             box[0, 1] = box[0, 3] = kp[1]
-                        else:  # NaN propagates, as in keypoint_boxes
+                        else:  # a NaN coordinate makes that side NaN, as numpy's min and max do
                             box[0, 0] = kp[0] if kp[0] != kp[0] or kp[0] < box[0, 0] else box[0, 0]
                             box[0, 1] = kp[1] if kp[1] != kp[1] or kp[1] < box[0, 1] else box[0, 1]
                             box[0, 2] = kp[0] if kp[0] != kp[0] or kp[0] > box[0, 2] else box[0, 2]
