@@ -255,7 +255,7 @@ def test_links_statuses_tell_which_link_between_two_nodes_is_not_matched_yet():
 
 
 def test_a_person_one_camera_alone_sees_says_nothing_of_its_calibration(shelf_rig):
-    """A bundle of one view (single_view): its 3D person comes from that view alone, so it is left
+    """A bundle of one view (single_view_people): its 3D person comes from that view alone, so it is left
     out of the residuals: the bumped camera's residual is that of its people seen twice or more."""
     rng = np.random.default_rng(1)
     joints = _cloud(rng)

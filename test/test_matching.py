@@ -259,13 +259,13 @@ def test_person_seen_by_one_camera_is_dropped(rig, poses):
     assert all((0, 2) not in g for g in groups)
 
 
-@pytest.mark.parametrize('single_view', [True, False])
-def test_a_person_one_camera_alone_sees_keeps_his_id_while_it_is_remembered(rig, poses, single_view):
-    """Actor 2 walks out of every view but camera 0's: with single_view his one view keeps his
+@pytest.mark.parametrize('single_view_people', [True, False])
+def test_a_person_one_camera_alone_sees_keeps_his_id_while_it_is_remembered(rig, poses, single_view_people):
+    """Actor 2 walks out of every view but camera 0's: with single_view_people his one view keeps his
     id (no rough centre: the solver places him from where he was) until id_memory has passed since
     two cameras last saw him; without it he is dropped at once. The others keep theirs."""
     rng = np.random.default_rng(9)
-    config = AssociationConfig(single_view=single_view)
+    config = AssociationConfig(single_view_people=single_view_people)
     associator = Associator(rig, config)
     ids = [_run(associator, FRAMES[k], *_frame(rig, poses[FRAMES[k]], rng)) for k in range(4)]
     assert all(i == ids[0] for i in ids)
@@ -277,7 +277,7 @@ def test_a_person_one_camera_alone_sees_keeps_his_id_while_it_is_remembered(rig,
         skeleton_actor = {id(p): a for ps, order in zip(people, actors) for p, a in zip(ps, order)}
         out = {_observed_actor(o, skeleton_actor): o for o in associator.update(t, people)}
         assert {a: o.person_id for a, o in out.items() if a != 2} == {0: ids[0][0], 1: ids[0][1]}
-        kept = single_view and t - last_seen <= config.id_memory
+        kept = single_view_people and t - last_seen <= config.id_memory
         assert (2 in out) == kept, t - last_seen
         if kept:
             assert out[2].person_id == ids[0][2] and list(out[2].views) == [0]

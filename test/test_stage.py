@@ -40,7 +40,7 @@ def test_parameters_round_trip_and_defaults_are_the_dataclasses():
     assert all(s.low is not None or s.high is not None for s in specs
                if isinstance(s.default, (int, float)) and not isinstance(s.default, bool))
     assert {s.name for s in specs if s.live} == {'collision_centre', 'collision_width', 'max_gap', 'track_iou',
-                                                 'match_distance', 'max_view_residual', 'single_view'}
+                                                 'match_distance', 'max_view_residual', 'single_view_people'}
     changed = StageConfig.from_params({'window': 0, 'bp_hypotheses': 0, 'slide_iterations': 0, 'hypotheses': 32,
                                        'terms': ['data', 'temp'], 'match_distance': 0.2, 'unrelated': 'ignored',
                                        'max_gap': 0.5, 'frame_rate': 30.0, 'max_view_residual': 0.25,
@@ -247,15 +247,15 @@ def test_legs_seen_by_one_camera_hang_along_the_rigs_up():
         np.testing.assert_allclose(other.joints, plain.joints @ turn.T, atol=1e-6)
 
 
-@pytest.mark.parametrize('single_view', [True, False])
-def test_a_person_walking_out_of_all_views_but_one_stays_where_he_is(single_view):
+@pytest.mark.parametrize('single_view_people', [True, False])
+def test_a_person_walking_out_of_all_views_but_one_stays_where_he_is(single_view_people):
     """The narrow ring (cameras close above the actors): in frames 577-584 one camera alone sees
     actor 3. The streaming stage (the graph's bp_solver) keeps him under his id, placed from where
-    he was, within 0.3 m of his annotated joints on average; without single_view he is gone."""
+    he was, within 0.3 m of his annotated joints on average; without single_view_people he is gone."""
     from mvpose_ros.core.evaluation.ring import RingConfig, ring_sequence
     seq, gt, head_model = ring_sequence(None, RingConfig(cameras=5, radius=2.5, fov_deg=40, heights=(1.2, 1.5)))
     stage = Stage3D(seq.cameras, StageConfig.from_params({'window': 6, 'lag': 3, 'head_model': head_model,
-                                                          'single_view': single_view}))
+                                                          'single_view_people': single_view_people}))
     first, last = seq.frames.index(566), seq.frames.index(584)
     results = []
     for k in range(first, last + 1):
@@ -266,7 +266,7 @@ def test_a_person_walking_out_of_all_views_but_one_stays_where_he_is(single_view
         truth = gt.poses[seq.frames.index(result.frame), 2]
         errors = np.linalg.norm(result.joints - truth, axis=-1).mean(axis=1) if len(result.person_ids) else []
         near = [pid for pid, e in zip(result.person_ids, errors) if e < 0.3]
-        if result.frame <= 576 or single_view:
+        if result.frame <= 576 or single_view_people:
             assert len(near) == 1, (result.frame, errors)
             ids += near
         else:

@@ -107,8 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help='cross-view matching threshold, metres of mean ray distance')
     p.add_argument('--max-view-residual', type=float, default=d['max_view_residual'],
                    help=ASSOCIATION_PARAMETERS['max_view_residual'])
-    p.add_argument('--single-view', action=argparse.BooleanOptionalAction, default=d['single_view'],
-                   help=ASSOCIATION_PARAMETERS['single_view'])
+    p.add_argument('--single-view-people', action=argparse.BooleanOptionalAction, default=d['single_view_people'],
+                   help=ASSOCIATION_PARAMETERS['single_view_people'])
     p.add_argument('--collision-centre', type=float, default=d['collision_centre'])
     p.add_argument('--collision-width', type=float, default=d['collision_width'])
     p.add_argument('--seed', type=int, default=d['seed'])

@@ -65,8 +65,9 @@ ASSOCIATION_PARAMETERS = {
     'match_distance': 'cross-view matching: maximum mean ray-to-ray distance between two views of a person, metres',
     'max_view_residual': 'a matched view whose keypoints lie further from the joints the other views triangulate '
                          'than this share of its size (median) is left out (0: every view kept)',
-    'single_view': 'a person one camera alone sees keeps the id his track had and is placed from where he was in '
-                   'the frame before, while his id is remembered after two cameras last saw him (false: dropped)',
+    'single_view_people': 'a person one camera alone sees keeps the id his track had and is placed from where he '
+                          'was in the frame before, while his id is remembered after two cameras last saw him '
+                          '(false: dropped)',
 }
 # (low, high) inclusive of every numeric parameter (None: unbounded on that side)
 PARAMETER_RANGES: dict[str, tuple[float | None, float | None]] = {
@@ -79,7 +80,7 @@ PARAMETER_RANGES: dict[str, tuple[float | None, float | None]] = {
 # Thresholds and distances a running node applies to the frames after the change; every other
 # parameter sizes or seeds state made at start-up (read-only: a change needs a restart).
 LIVE_PARAMETERS = frozenset({'collision_centre', 'collision_width', 'max_gap', 'track_iou', 'match_distance',
-                             'max_view_residual', 'single_view'})
+                             'max_view_residual', 'single_view_people'})
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,7 @@ class StageConfig:
         ASSOCIATION_PARAMETERS; others are ignored, absent ones keep their defaults). ValueError
         naming the problem when a value is invalid."""
         d = {**cls().to_params(), **{k: v for k, v in params.items() if k in ALL_PARAMETERS}}
-        for name in ('hanging_legs', 'single_view'):
+        for name in ('hanging_legs', 'single_view_people'):
             if not isinstance(d[name], (bool, np.bool_)):  # bool('false') would be True
                 raise ValueError(f'{name} must be true or false, got {d[name]!r}')
         window = int(d['window']) or None
@@ -113,7 +114,8 @@ class StageConfig:
                               inference=inference, head_model=str(d['head_model']), seed=int(d['seed']))
         association = replace(AssociationConfig(), track_iou=float(d['track_iou']),
                               matching=replace(MatchingConfig(), max_distance=float(d['match_distance'])),
-                              max_view_residual=float(d['max_view_residual']), single_view=bool(d['single_view']))
+                              max_view_residual=float(d['max_view_residual']),
+                              single_view_people=bool(d['single_view_people']))
         return cls(association, solver)
 
     def to_params(self) -> dict[str, Any]:
@@ -130,7 +132,8 @@ class StageConfig:
             'collision_width': inference.factors.collision_width,
             'frame_rate': inference.frame_rate, 'max_gap': inference.max_gap, 'threads': inference.threads,
             'track_iou': self.association.track_iou, 'match_distance': self.association.matching.max_distance,
-            'max_view_residual': self.association.max_view_residual, 'single_view': self.association.single_view,
+            'max_view_residual': self.association.max_view_residual,
+            'single_view_people': self.association.single_view_people,
         }
 
 

@@ -27,7 +27,7 @@ from each camera's CameraInfo: until every camera's is known, inputs are dropped
 
 Diagnostics (nodes.health, on /diagnostics): per camera its people2d rate, drops by reason, sync
 offset and silence; the node's ms per set, pending messages, set skew and latency. Live
-parameters: sync_timeout, max_skew, track_iou, match_distance, max_view_residual, single_view and
+parameters: sync_timeout, max_skew, track_iou, match_distance, max_view_residual, single_view_people and
 the diagnostics thresholds.
 """
 from __future__ import annotations

@@ -87,13 +87,13 @@ def triangulate(cameras: Sequence[Camera], views: Sequence[dict[int, Person2D]],
 def _triangulated(config: AssociationConfig | None) -> AssociationConfig:
     """config (or the default) counting only the people two cameras see: a scene's people are
     copied from their triangulated joints."""
-    return dataclasses.replace(config or AssociationConfig(), single_view=False)
+    return dataclasses.replace(config or AssociationConfig(), single_view_people=False)
 
 
 def scene_people(cameras: Sequence[Camera], frames: Sequence[int], people: Sequence[Frame2D],
                  config: AssociationConfig | None = None) -> list[list[ScenePerson]]:
     """Per frame, the associated 3D people of the scene with their triangulated joints (people
-    two cameras see: not single_view). The association runs on copies of the 2D people, so their
+    two cameras see: not single_view_people). The association runs on copies of the 2D people, so their
     track ids are left as they were."""
     config = _triangulated(config)
     associator = Associator(cameras, config)
