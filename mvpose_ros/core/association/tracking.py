@@ -1,5 +1,5 @@
 """Identity of 2D skeletons over time within one camera, by bounding-box overlap (paper: IoU >= 0.7),
-each pair's boxes over the keypoints both skeletons detect."""
+each pair's boxes over the keypoints both skeletons detect, less the fifth that moved most."""
 from __future__ import annotations
 
 from typing import Sequence
@@ -38,41 +38,54 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @kernel('float64[:, ::1](float64[:, :, ::1], float64[:, :, ::1])')
 def _shared_iou(a, b):
-    """shared_box_iou of C-contiguous keypoints; a detected keypoint with a NaN coordinate makes
-    that side of its box NaN, and the pair's IoU 0 (box_iou)."""
+    """shared_box_iou of C-contiguous keypoints; a displacement that is NaN counts as the largest,
+    and a NaN coordinate left in makes that side of its box NaN, and the pair's IoU 0 (box_iou)."""
     out = np.zeros((len(a), len(b)))
     box_a, box_b = np.empty((1, 4)), np.empty((1, 4))
+    n_joints = a.shape[1]
+    shared = np.empty(n_joints, dtype=np.int64)
+    moved = np.empty(n_joints)
     for i in range(len(a)):
         for k in range(len(b)):
-            shared = 0
-            for j in range(a.shape[1]):
+            n = 0
+            for j in range(n_joints):
                 if a[i, j, 2] > 0 and b[k, j, 2] > 0:
-                    for box, kp in ((box_a, a[i, j]), (box_b, b[k, j])):
-                        if shared == 0:
-                            box[0, 0] = box[0, 2] = kp[0]
-                            box[0, 1] = box[0, 3] = kp[1]
-                        else:  # a NaN coordinate makes that side NaN, as numpy's min and max do
-                            box[0, 0] = kp[0] if kp[0] != kp[0] or kp[0] < box[0, 0] else box[0, 0]
-                            box[0, 1] = kp[1] if kp[1] != kp[1] or kp[1] < box[0, 1] else box[0, 1]
-                            box[0, 2] = kp[0] if kp[0] != kp[0] or kp[0] > box[0, 2] else box[0, 2]
-                            box[0, 3] = kp[1] if kp[1] != kp[1] or kp[1] > box[0, 3] else box[0, 3]
-                    shared += 1
-            if shared > 0:
-                out[i, k] = _box_iou(box_a, box_b)[0, 0]
+                    du, dv = a[i, j, 0] - b[k, j, 0], a[i, j, 1] - b[k, j, 1]
+                    d = du * du + dv * dv
+                    moved[n] = d if d == d else np.inf
+                    shared[n] = j
+                    n += 1
+            if n == 0:
+                continue
+            kept = shared[:n][np.argsort(moved[:n], kind='mergesort')[:n - n // 5]]
+            for m, j in enumerate(kept):
+                for box, kp in ((box_a, a[i, j]), (box_b, b[k, j])):
+                    if m == 0:
+                        box[0, 0] = box[0, 2] = kp[0]
+                        box[0, 1] = box[0, 3] = kp[1]
+                    else:  # a NaN coordinate makes that side NaN, as numpy's min and max do
+                        box[0, 0] = kp[0] if kp[0] != kp[0] or kp[0] < box[0, 0] else box[0, 0]
+                        box[0, 1] = kp[1] if kp[1] != kp[1] or kp[1] < box[0, 1] else box[0, 1]
+                        box[0, 2] = kp[0] if kp[0] != kp[0] or kp[0] > box[0, 2] else box[0, 2]
+                        box[0, 3] = kp[1] if kp[1] != kp[1] or kp[1] > box[0, 3] else box[0, 3]
+            out[i, k] = _box_iou(box_a, box_b)[0, 0]
     return out
 
 
 def shared_box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(N, K) IoU of the boxes of each pair of skeletons a (N, J, 3) and b (K, J, 3) over the
-    keypoints both detect (score > 0); 0 for a pair sharing none. A joint that one of the two
-    misses (it left the image, or is hidden) changes neither box."""
+    keypoints both detect (score > 0), less the fifth of them (n // 5 of n) that moved most
+    between the two; 0 for a pair sharing none. A joint that one of the two misses (it left the
+    image, or is hidden) changes neither box, and one keypoint of a detector's gone astray (on
+    another person, 60 px off) does not break a track."""
     return _shared_iou(kernel_array(a, np.float64), kernel_array(b, np.float64))
 
 
 class IouTracker:
     """Gives each skeleton the track id of the previous frame's skeleton it overlaps enough, the
-    boxes of each pair over the keypoints both detect (shared_box_iou): a person walking out of the
-    image, whose box over all his keypoints shrinks as joints leave it, keeps his track."""
+    boxes of each pair over the keypoints both detect less the fifth that moved most
+    (shared_box_iou): a person walking out of the image, whose box over all his keypoints shrinks as
+    joints leave it, or with a keypoint astray, keeps his track."""
 
     def __init__(self, min_iou: float = 0.7) -> None:
         self.min_iou = min_iou
