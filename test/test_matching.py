@@ -259,6 +259,29 @@ def test_person_seen_by_one_camera_is_dropped(rig, poses):
     assert all((0, 2) not in g for g in groups)
 
 
+def _observed_actor(observation, skeleton_actor: dict[int, int]) -> int:
+    """The one actor behind every view of an observation."""
+    actors = {skeleton_actor[id(p)] for p in observation.views.values()}
+    assert len(actors) == 1
+    return actors.pop()
+
+
+def _observe(associator: Associator, time_s: float, people: list[list[Person2D] | None],
+             actors: list[list[int]]) -> dict:
+    """actor -> his PersonObservation at time_s; every observation of one actor, none two."""
+    skeleton_actor = {id(p): a for ps, order in zip(people, actors) if ps is not None for p, a in zip(ps, order)}
+    out = associator.update(time_s, people)
+    observed = {_observed_actor(obs, skeleton_actor): obs for obs in out}
+    assert len({obs.person_id for obs in observed.values()}) == len(out)
+    return observed
+
+
+def _run(associator: Associator, frame: int, people: list[list[Person2D] | None],
+         actors: list[list[int]]) -> dict[int, int]:
+    """actor -> person id for one frame."""
+    return {a: obs.person_id for a, obs in _observe(associator, frame * PERIOD, people, actors).items()}
+
+
 @pytest.mark.parametrize('single_view_people', [True, False])
 def test_a_person_one_camera_alone_sees_keeps_his_id_while_it_is_remembered(rig, poses, single_view_people):
     """Actor 2 walks out of every view but camera 0's: with single_view_people his one view keeps his
@@ -273,9 +296,7 @@ def test_a_person_one_camera_alone_sees_keeps_his_id_while_it_is_remembered(rig,
     hidden = {c: {2} for c in range(1, len(rig))}
     for k in range(1, 40):
         t = last_seen + k * PERIOD
-        people, actors = _frame(rig, poses[FRAMES[3]], rng, hidden=hidden)
-        skeleton_actor = {id(p): a for ps, order in zip(people, actors) for p, a in zip(ps, order)}
-        out = {_observed_actor(o, skeleton_actor): o for o in associator.update(t, people)}
+        out = _observe(associator, t, *_frame(rig, poses[FRAMES[3]], rng, hidden=hidden))
         assert {a: o.person_id for a, o in out.items() if a != 2} == {0: ids[0][0], 1: ids[0][1]}
         kept = single_view_people and t - last_seen <= config.id_memory
         assert (2 in out) == kept, t - last_seen
@@ -299,23 +320,6 @@ def test_a_view_alone_keeps_the_id_its_track_had_unless_that_id_is_taken():
     assert keeper.continue_alone([(2, 7), (0, 1)], taken={0}) == [-1, 1]
     assert keeper.assign(3 * PERIOD + keeper.memory + 0.01, [], np.zeros((0, 3))) == []
     assert keeper.continue_alone([(0, 1)], taken=set()) == [-1]
-
-
-def _observed_actor(observation, skeleton_actor: dict[int, int]) -> int:
-    """The one actor behind every view of an observation."""
-    actors = {skeleton_actor[id(p)] for p in observation.views.values()}
-    assert len(actors) == 1
-    return actors.pop()
-
-
-def _run(associator: Associator, frame: int, people: list[list[Person2D] | None],
-         actors: list[list[int]]) -> dict[int, int]:
-    """actor -> person id for one frame."""
-    skeleton_actor = {id(p): a for ps, order in zip(people, actors) if ps is not None for p, a in zip(ps, order)}
-    out = associator.update(frame * PERIOD, people)
-    ids = {_observed_actor(obs, skeleton_actor): obs.person_id for obs in out}
-    assert len(set(ids.values())) == len(out)
-    return ids
 
 
 def test_associator_keeps_ids_over_consecutive_frames(rig, poses):

@@ -1,8 +1,8 @@
 """Per-frame multi-view association: tracking in each camera, matching across cameras, 3D ids.
 
 This is the work of the association node: it turns each camera's 2D skeletons of one instant
-into people seen by at least two cameras, each with a stable id, and (single_view_people) into the people
-two cameras saw less than `id_memory` ago that one camera alone sees now.
+into people seen by at least two cameras, each with a stable id, and (single_view_people) into
+the people two cameras saw less than `id_memory` ago that one camera alone sees now.
 """
 from __future__ import annotations
 
@@ -26,9 +26,10 @@ class AssociationConfig:
     """track_iou: the paper's 0.7; max_jump (m), max_speed (m/s), id_memory (s): how far from where
     it was last seen a person keeps its id, and for how long an id unseen is kept (identity);
     max_view_residual: a matched view the others contradict by more than this share of its size is
-    left out (view_consistency; 0: every matched view kept); single_view_people: a view no other camera's
-    matches keeps the id its track had (identity.IdentityKeeper.continue_alone), so that a person
-    one camera alone sees for a while is still there (the solver places him from where he was)."""
+    left out (view_consistency; 0: every matched view kept); single_view_people: a view no other
+    camera's matches keeps the id its track had (identity.IdentityKeeper.continue_alone), so that a
+    person one camera alone sees for a while is still there (the solver places him from where he
+    was)."""
 
     track_iou: float = 0.7
     matching: MatchingConfig = field(default_factory=MatchingConfig)
@@ -156,7 +157,7 @@ class Associator:
         ids = self._ids.assign(time_s, members, centres)
         if len(set(ids)) < len(ids):
             rows, centres, ids = self._merge_seen_twice(dist, rays, rows, ids)
-        if self.config.single_view_people:  # views no other camera's matched (not those the view check left out)
+        if self.config.single_view_people:  # views no other camera's matched (not those the view check left)
             matched = {first[c] + i for cl in clusters for c, i in cl.items()}
             alone = [r for r in range(len(skeleton)) if r not in matched]
             kept = self._ids.continue_alone([(owner[r], skeleton[r].track_id) for r in alone], set(ids))

@@ -93,8 +93,8 @@ def _triangulated(config: AssociationConfig | None) -> AssociationConfig:
 def scene_people(cameras: Sequence[Camera], frames: Sequence[int], people: Sequence[Frame2D],
                  config: AssociationConfig | None = None) -> list[list[ScenePerson]]:
     """Per frame, the associated 3D people of the scene with their triangulated joints (people
-    two cameras see: not single_view_people). The association runs on copies of the 2D people, so their
-    track ids are left as they were."""
+    two cameras see: not single_view_people). The association runs on copies of the 2D people, so
+    their track ids are left as they were."""
     config = _triangulated(config)
     associator = Associator(cameras, config)
     out = []
