@@ -2,7 +2,7 @@
 
 This is the work of the association node: it turns each camera's 2D skeletons of one instant
 into people seen by at least two cameras, each with a stable id, and (single_view_people) into
-the people two cameras saw less than `id_memory` ago that one camera alone sees now.
+the people two cameras saw within the last `id_memory` seconds of frames that one camera alone sees now.
 """
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ from mvpose_ros.core.association.view_consistency import consistent_views
 @dataclass(frozen=True)
 class AssociationConfig:
     """track_iou: the paper's 0.7; max_jump (m), max_speed (m/s), id_memory (s): how far from where
-    it was last seen a person keeps its id, and for how long an id unseen is kept (identity);
+    it was last seen a person keeps its id, and how long the frames may go without an id before it
+    is forgotten (identity);
     max_view_residual: a matched view the others contradict by more than this share of its size is
     left out (view_consistency; 0: every matched view kept); single_view_people: a view no other
     camera's matches keeps the id its track had (identity.IdentityKeeper.continue_alone), so that a

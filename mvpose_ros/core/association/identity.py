@@ -14,8 +14,10 @@ before: the motion of one step of the stream, not of the person's whole absence,
 does not take the id of someone lost a second ago a metre or two away. Only a person none of
 whose tracks has a history is placed so: one whose tracks vote for an id is that id's (or, below,
 its duplicate), not whoever was last seen nearby. Times are the frames' own (seconds): sets
-0.4 s apart keep walking people's ids as frames 40 ms apart do. An id not seen for `memory`
-seconds is forgotten.
+0.4 s apart keep walking people's ids as frames 40 ms apart do. An id is forgotten once the
+frames have gone more than `memory` seconds without it; a stream that stalls (no frame at all for a
+while: an overloaded graph, a paused bag) shows no one leaving, and the people of the frame after
+it keep their ids, found within the reach of the stall.
 
 A person the detector found twice in a camera splits into two clusters, each with one of that
 camera's two views. The part that gets no id of its own, but whose tracks vote for the id the
@@ -28,7 +30,7 @@ Telling a duplicate from someone close by is what the tracks are for: ray distan
 
 A person whose views all but one camera's lost (he walks out of the covered volume) is no longer
 matched, but that view's track still votes: it keeps his id (`continue_alone`), for at most
-`memory` seconds after two cameras last saw him, as the solver places him from where he was.
+`memory` seconds of frames after two cameras last saw him, as the solver places him from where he was.
 
 The keeper's state that outlives a restart is small: the next id and where each recent person
 was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
@@ -58,8 +60,8 @@ class _Known:
 class IdentityKeeper:
     """Assigns ids to each frame's multi-view clusters. max_jump (m) and max_speed (m/s): how far
     from where it was last seen an id may be taken, max_jump + max_speed x the seconds since it was
-    seen (by its tracks) or since the frame before (by position alone); memory (s): how long an id
-    unseen is kept."""
+    seen (by its tracks) or since the frame before (by position alone); memory (s): how long the
+    frames may go without an id before it is forgotten."""
 
     max_jump: float = 0.5
     max_speed: float = 2.5
@@ -77,7 +79,10 @@ class IdentityKeeper:
         """
         for known in self._known.values():
             known.last_time = time_s if known.last_time is None else known.last_time
-        self._known = {k: v for k, v in self._known.items() if time_s - v.last_time <= self.memory}
+        # Absence is what the frames show: a stream that stalls (no frame at all for a while, an
+        # overloaded graph dropping sets) is no sign that anyone left.
+        before = time_s if self._last_time is None else self._last_time
+        self._known = {k: v for k, v in self._known.items() if before - v.last_time <= self.memory}
         known_ids = list(self._known)
         ids = [-1] * len(members)
         twice: set[int] = set()  # the people that are another one seen twice
@@ -96,14 +101,15 @@ class IdentityKeeper:
                                   axis=-1)
             elapsed = np.maximum(time_s - np.array([self._known[k].last_time for k in known_ids]), 0.0)
             gap = max(time_s - self._last_time, 0.0) if self._last_time is not None else 0.0
+            by_tracks = self.max_jump + self.max_speed * elapsed  # (K,) m
+            by_position = self.max_jump + self.max_speed * gap
             # by position alone only a person none of whose tracks has a history (module doc)
             new_tracks = (shared == 0).all(axis=1, keepdims=True)
-            allowed = np.where(shared > 0, jump <= self.max_jump + self.max_speed * elapsed[None],
-                               new_tracks & (jump <= self.max_jump + self.max_speed * gap))
+            allowed = np.where(shared > 0, jump <= by_tracks[None], new_tracks & (jump <= by_position))
             # Shared track history dominates; distance breaks ties and decides when no track survives.
             # A new id costs more than any allowed match but far less than a forbidden one, so a
             # person nobody matches takes one instead of pushing another person off its id.
-            new_id = self.max_jump + self.max_speed * self.memory + 1.0  # above any allowed jump
+            new_id = max(by_tracks.max(), by_position) + 1.0  # above any allowed jump
             cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6), np.full((len(members),) * 2, new_id)])
             rows, cols = linear_sum_assignment(cost)
             for r, c in zip(rows.tolist(), cols.tolist()):
@@ -131,8 +137,8 @@ class IdentityKeeper:
         id) gets the id its track has been part of for the most frames, unless that id is in
         `taken` (the frame's people's: the view is then a duplicate of one of them), each id once,
         or -1. A person who walks out of all but one camera's view so keeps his id (module doc); the
-        keeper's state is left as it was, so he keeps it at most `memory` seconds after two cameras
-        last saw him."""
+        keeper's state is left as it was, so he keeps it until the frames have gone `memory` seconds
+        without two cameras seeing him."""
         votes = [max(((known.members.get(t, 0), k) for k, known in self._known.items()), default=(0, -1))
                  for t in tracks]
         votes = [(0, -1) if pid in taken else (frames, pid) for frames, pid in votes]
