@@ -1,10 +1,12 @@
-"""The dataset timeline: frame f is stamped f / rate seconds exactly (rate 25 Hz: frame 300 ->
-12 s), and a stamp maps back to the nearest frame."""
+"""The dataset timeline: frame f is stamped f / rate seconds exactly (the datasets' 25 Hz by
+default: frame 300 -> 12 s), and a stamp maps back to the nearest frame."""
 from __future__ import annotations
 
 from fractions import Fraction
 
 from builtin_interfaces.msg import Time
+
+from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 
 NS_PER_S = 1_000_000_000
 MAX_SEC = (1 << 31) - 1  # Time.sec is INT32
@@ -16,7 +18,7 @@ def _check_rate(rate: float) -> Fraction:
     return Fraction(rate)
 
 
-def stamp_of_frame(frame: int, rate: float = 25.0) -> Time:
+def stamp_of_frame(frame: int, rate: float = FRAME_RATE) -> Time:
     """Header stamp of dataset frame (>= 0) at rate frames per second, rounded to the ns."""
     if int(frame) != frame or frame < 0:
         raise ValueError(f'frame: expected an integer >= 0, got {frame}')
@@ -36,6 +38,6 @@ def stamp_of_ns(ns: int) -> Time:
     return Time(sec=int(ns) // NS_PER_S, nanosec=int(ns) % NS_PER_S)
 
 
-def frame_of_stamp(stamp: Time, rate: float = 25.0) -> int:
+def frame_of_stamp(stamp: Time, rate: float = FRAME_RATE) -> int:
     """The frame nearest to stamp at rate frames per second."""
     return round(stamp_ns(stamp) * _check_rate(rate) / NS_PER_S)

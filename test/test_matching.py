@@ -566,7 +566,7 @@ def test_identity_state_restored_keeps_ids_by_position_and_never_reuses_one(pose
 ])
 def test_identity_state_malformed_is_a_value_error(state, problem):
     with pytest.raises(ValueError, match=problem):
-        IdentityKeeper().restore(state)
+        _keeper().restore(state)
 
 
 def test_a_person_seen_twice_shares_its_id_only_beside_it_and_by_its_tracks():

@@ -177,7 +177,7 @@ def test_new_people_get_fresh_ids_never_reused():
 
 
 def test_empty_frames_are_fine():
-    tracker = IouTracker()
+    tracker = IouTracker(0.7)
     tracker.update([])
     p = _person(0, 0, 50, 50)
     tracker.update([p])

@@ -8,7 +8,7 @@ import pstats
 import cProfile
 from dataclasses import replace
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import Iterable, Sequence, TextIO
 
 from mvpose_ros.bench.runs import OTHER, SWEEPS, RunConfig
 from mvpose_ros.core.evaluation.offline import GROUPING
@@ -21,7 +21,7 @@ SHORT = {GROUPING: 'group+hm', 'association': 'trk+match', 'sampling': 'sampling
          'factors': 'factors', 'bp': 'BP', 'decoding': 'decode', OTHER: 'other'}
 
 
-def stage_order(names) -> list[str]:
+def stage_order(names: Iterable[str]) -> list[str]:
     """Stage names in pipeline order: the known ones first, then others, 'other' last."""
     names = list(dict.fromkeys(names))
     known = [n for n in PREFERRED if n in names]

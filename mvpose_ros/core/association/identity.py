@@ -61,11 +61,12 @@ class IdentityKeeper:
     """Assigns ids to each frame's multi-view clusters. max_jump (m) and max_speed (m/s): how far
     from where it was last seen an id may be taken, max_jump + max_speed x the seconds since it was
     seen (by its tracks) or since the frame before (by position alone); memory (s): how long the
-    frames may go without an id before it is forgotten."""
+    frames may go without an id before it is forgotten. Their defaults are the association's
+    (associator.AssociationConfig)."""
 
-    max_jump: float = 0.5
-    max_speed: float = 2.5
-    memory: float = 1.0
+    max_jump: float
+    max_speed: float
+    memory: float
     _known: dict[int, _Known] = field(default_factory=dict)
     _next_id: int = 0
     _last_time: float | None = None  # of the frame before

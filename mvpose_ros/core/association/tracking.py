@@ -85,9 +85,10 @@ class IouTracker:
     """Gives each skeleton the track id of the previous frame's skeleton it overlaps enough, the
     boxes of each pair over the keypoints both detect less the fifth that moved most
     (shared_box_iou): a person walking out of the image, whose box over all his keypoints shrinks as
-    joints leave it, or with a keypoint astray, keeps his track."""
+    joints leave it, or with a keypoint astray, keeps his track. min_iou: the overlap that continues a
+    track (its default is the association's track_iou)."""
 
-    def __init__(self, min_iou: float = 0.7) -> None:
+    def __init__(self, min_iou: float) -> None:
         self.min_iou = min_iou
         self._keypoints = np.zeros((0, 0, 3))
         self._ids: list[int] = []
