@@ -1,6 +1,6 @@
 """CameraInfo for a calibrated camera (its lens model: plumb_bob, rational_polynomial or
-equidistant), the intrinsics of the images that come with one (raw or rectified, binned, a
-region of interest), and its check against the rig a node loaded itself."""
+equidistant), the intrinsics of the images that come with one (raw or rectified, a stereo pair's
+too, binned, a region of interest), and its check against the rig a node loaded itself."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,6 +11,7 @@ from std_msgs.msg import Header
 
 from mvpose_ros.core.geometry import lens
 from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rig import RigCamera
 
 PROBE_DEPTH_M = 1.0  # depth of the points the distortion check projects (any depth works)
 
@@ -30,11 +31,11 @@ def info_to_intrinsics(msg: CameraInfo, rectified: bool = False) -> tuple[np.nda
     camera's CameraInfo) K is P's left 3 x 3 and there is no distortion: d and its model are not
     read. A driver that bins or cuts a region of interest (binning_x/y, roi) sends the calibration
     of the whole sensor with them: K and the size are those of the image it sends, as image_geometry
-    computes them (cx' = (cx - x_offset) / binning_x, ...). ValueError of one line for a model
-    core.geometry.lens does not have, a d of another length than the model's, a K (or P) that is
-    not finite, upper-triangular with fx, fy > 0 (an uncalibrated driver publishes zeros), a
-    rectified frame of a stereo pair (P with a baseline, R not the identity), a size below 1x1, or a
-    region of interest outside the sensor."""
+    computes them (cx' = (cx - x_offset) / binning_x, ...). A stereo pair's rectified frame is
+    also turned from the camera's: see info_camera, which applies CameraInfo's R. ValueError of one
+    line for a model core.geometry.lens does not have, a d of another length than the model's, a K
+    (or P) that is not finite, upper-triangular with fx, fy > 0 (an uncalibrated driver publishes
+    zeros), a size below 1x1, or a region of interest outside the sensor."""
     K, dist, model = _rectified(msg) if rectified else _raw(msg)
     if msg.width < 1 or msg.height < 1:
         raise ValueError(f'CameraInfo size: expected width, height >= 1, got '
@@ -74,17 +75,39 @@ def _raw(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, str]:
 
 
 def _rectified(msg: CameraInfo) -> tuple[np.ndarray, np.ndarray, str]:
-    """K, dist, model of the rectified image of a monocular camera: P's left 3 x 3, none, plumb_bob."""
+    """K, dist, model of a rectified image: P's left 3 x 3, none, plumb_bob. P's last column (a
+    stereo pair's baseline, Tx = -fx' B) places the second camera in the first one's frame; each
+    camera's own pose comes from the rig, so it is not used, but a P that does not project
+    (P[2, 3] != 0) is refused."""
     P = np.array(msg.p, dtype=np.float64).reshape(3, 4)
     K = _intrinsic_matrix('p', P[:, :3])
-    if P[:, 3].any():
-        raise ValueError(f"CameraInfo p: a baseline {P[:, 3].tolist()}: a stereo pair's second camera, whose "
-                         f'rectified image is not at its own pose; use its raw image (rectified: false)')
-    R = np.array(msg.r, dtype=np.float64).reshape(3, 3)
-    if R.any() and not np.allclose(R, np.eye(3), rtol=0, atol=1e-9):  # zeros: not given
-        raise ValueError(f"CameraInfo r: {R.ravel().tolist()} is not the identity: a stereo pair's rectified "
-                         f"frame, turned from the camera's; use the raw image (rectified: false)")
+    if not (np.isfinite(P[:, 3]).all() and P[2, 3] == 0):
+        raise ValueError(f'CameraInfo p: expected a last column [Tx, Ty, 0] (a stereo baseline, or zeros), '
+                         f'got {P[:, 3].tolist()}')
     return K, np.zeros(len(lens.MODELS[lens.DEFAULT_MODEL])), lens.DEFAULT_MODEL
+
+
+def rectification(msg: CameraInfo) -> np.ndarray:
+    """(3, 3) CameraInfo's R, the rotation from the camera's optical frame to its rectified image's
+    (x_rect = R @ x_camera): a stereo pair's rectified frames are turned so that their rows are
+    epipolar lines; all zeros (not given) is the identity. ValueError of one line when it is not a
+    rotation."""
+    R = np.array(msg.r, dtype=np.float64).reshape(3, 3)
+    if not R.any():
+        return np.eye(3)
+    if not (np.isfinite(R).all() and np.allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-6)
+            and np.linalg.det(R) > 0):
+        raise ValueError(f'CameraInfo r: {R.ravel().tolist()} is not a rotation')
+    return R
+
+
+def info_camera(rig_camera: RigCamera, msg: CameraInfo) -> Camera:
+    """rig_camera's Camera with the intrinsics of the images that come with msg (info_to_intrinsics);
+    of rectified images (rig_camera.rectified) turned by msg's R (rectification), so that a stereo
+    pair's rectified images, at their cameras' poses in the rig, are each where they are. ValueError
+    of one line naming the camera or CameraInfo's field."""
+    turn = rectification(msg) if rig_camera.rectified else None
+    return rig_camera.with_info(*info_to_intrinsics(msg, rig_camera.rectified), rectification=turn)
 
 
 def _intrinsic_matrix(field: str, values: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from msg_adapters.camera_info_msg import camera_to_info, check_info, info_to_intrinsics
+from msg_adapters.camera_info_msg import camera_to_info, check_info, info_camera, info_to_intrinsics
 from msg_adapters.image_msg import image_to_msg, msg_to_image
 from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame, stamp_of_ns
 from mvpose_ros.core.geometry.rig import RigCamera
@@ -148,8 +148,8 @@ def test_binning_and_a_region_of_interest_give_the_sent_images_intrinsics(rig):
 def test_a_rectified_image_is_described_by_p_without_distortion(rig):
     """image_proc's image_rect goes with the raw camera's CameraInfo: with `rectified` the camera is
     P's, without distortion, whatever d and its model say; a point lands where OpenCV's
-    rectification (undistortPoints onto P) puts its raw pixel. A stereo pair's rectified frames
-    (a baseline in P, R not the identity) are refused."""
+    rectification (undistortPoints onto P) puts its raw pixel. A P that does not project and an R
+    that is not a rotation are refused in one line."""
     import cv2
     raw = dataclasses.replace(rig[1], dist=np.array([-0.25, 0.08, 0.001, -0.002, 0.0]))
     new_K, _ = cv2.getOptimalNewCameraMatrix(raw.K, raw.dist, (raw.width, raw.height), 0.0)
@@ -163,24 +163,62 @@ def test_a_rectified_image_is_described_by_p_without_distortion(rig):
     X = X[np.all((raw.project(X) > 0) & (raw.project(X) < [raw.width, raw.height]), axis=1)]
     rectified = cv2.undistortPoints(raw.project(X)[:, None], raw.K, raw.dist, None, None, new_K,
                                     (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))[:, 0]
-    np.testing.assert_allclose(rc.with_info(*info_to_intrinsics(msg, True)).project(X), rectified, atol=1e-6)
+    np.testing.assert_allclose(info_camera(rc, msg).project(X), rectified, atol=1e-6)
     assert np.abs(raw.project(X) - rectified).max() > 5  # the lens matters here
-    check_info(msg, rc.with_info(*info_to_intrinsics(msg, True)), rectified=True)
+    check_info(msg, info_camera(rc, msg), rectified=True)
     msg.distortion_model, msg.d = 'kannala_brandt', [0.1] * 9  # the raw lens is not read
     np.testing.assert_array_equal(info_to_intrinsics(msg, True)[0], new_K)
     for field, value, problem in (
-            ('p', np.column_stack([new_K, [-50.0, 0, 0]]).ravel(), "CameraInfo p: a baseline [-50.0, 0.0, 0.0]: "
-             "a stereo pair's second camera"),
-            ('r', np.array([[1.0, 0, 0], [0, 0.8, -0.6], [0, 0.6, 0.8]]).ravel(), 'CameraInfo r: [1.0, 0.0, 0.0, '
-             "0.0, 0.8, -0.6, 0.0, 0.6, 0.8] is not the identity: a stereo pair's rectified frame"),
+            ('p', np.column_stack([new_K, [-50.0, 0, 3.0]]).ravel(), 'CameraInfo p: expected a last column '
+             '[Tx, Ty, 0] (a stereo baseline, or zeros), got [-50.0, 0.0, 3.0]'),
+            ('r', np.array([[1.0, 0, 0], [0, 0.8, -0.6], [0, 0.6, 0.9]]).ravel(), 'CameraInfo r: [1.0, 0.0, 0.0, '
+             '0.0, 0.8, -0.6, 0.0, 0.6, 0.9] is not a rotation'),
+            ('r', np.diag([1.0, 1.0, -1.0]).ravel(), 'CameraInfo r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0] '
+             'is not a rotation'),
             ('p', np.zeros(12), 'CameraInfo p: expected a finite upper-triangular P with fx, fy > 0')):
         bad = camera_to_info(raw, Header())
         bad.p = np.column_stack([new_K, np.zeros(3)]).ravel()
         setattr(bad, field, value)
         with pytest.raises(ValueError) as err:
-            info_to_intrinsics(bad, rectified=True)
+            info_camera(rc, bad)
         assert str(err.value).startswith(problem) and '\n' not in str(err.value)
         info_to_intrinsics(bad)  # the raw image's K and d are fine
+
+
+def test_a_stereo_pairs_rectified_images_are_each_at_their_cameras_pose(rig):
+    """Two cameras 12 cm apart, rectified as a stereo pair by OpenCV (stereoRectify: R1, R2, P1, P2,
+    P2 with the baseline), each given in the rig by its own raw pose: a world point lands in each
+    rectified image where OpenCV's P projects it from the first camera's rectified frame, on the
+    same row in both; without R it would not (the turn matters here)."""
+    import cv2
+    left = dataclasses.replace(rig[1], dist=np.array([-0.2, 0.05, 0.001, -0.001, 0.0]))
+    turn = cv2.Rodrigues(np.array([0.02, -0.05, 0.01]))[0]  # right <- left
+    shift = np.array([-0.12, 0.004, 0.006])  # the left centre in the right frame, metres
+    right = dataclasses.replace(left, name='r', R=turn @ left.R, t=turn @ left.t + shift,
+                                dist=np.array([-0.18, 0.04, -0.001, 0.0005, 0.0]))
+    size = (left.width, left.height)
+    R1, R2, P1, P2, *_ = cv2.stereoRectify(left.K, left.dist[None], right.K, right.dist[None], size, turn,
+                                           shift[:, None], alpha=0)
+    assert abs(P2[0, 3]) > 1.0 and np.abs(cv2.Rodrigues(R1)[0]).max() > 0.01  # a baseline and a turn
+    X = np.random.default_rng(3).uniform([-1, -1, 0], [1, 1, 2], (200, 3))
+    in_left = (left.R @ X.T).T + left.t  # left raw frame
+    X = X[in_left[:, 2] > 1.0]
+    in_left_rect = (R1 @ ((left.R @ X.T).T + left.t).T).T
+    for cam, R, P in ((left, R1, P1), (right, R2, P2)):
+        msg = camera_to_info(cam, Header())
+        msg.r, msg.p = R.ravel(), P.ravel()
+        rc = RigCamera(cam.name, 'image_rect', 'camera_info', cam.name, cam.R, cam.t, rectified=True)
+        uvw = (P @ np.column_stack([in_left_rect, np.ones(len(X))]).T).T
+        expected = uvw[:, :2] / uvw[:, 2:]
+        np.testing.assert_allclose(info_camera(rc, msg).project(X), expected, atol=1e-6)
+        msg.r = np.eye(3).ravel()
+        assert np.abs(info_camera(rc, msg).project(X) - expected).max() > 5
+    msgs = [camera_to_info(c, Header()) for c in (left, right)]
+    for msg, R, P in zip(msgs, (R1, R2), (P1, P2)):
+        msg.r, msg.p = R.ravel(), P.ravel()
+    rows = [info_camera(RigCamera(c.name, 'i', 'c', c.name, c.R, c.t, rectified=True), m).project(X)[:, 1]
+            for c, m in zip((left, right), msgs)]
+    np.testing.assert_allclose(rows[0], rows[1], atol=1e-6)  # epipolar lines are rows
 
 
 def _image(h: int = 6, w: int = 7) -> np.ndarray:

@@ -91,7 +91,7 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header
 
-from msg_adapters.camera_info_msg import check_info, info_to_intrinsics
+from msg_adapters.camera_info_msg import check_info, info_camera
 from msg_adapters.cdr_header import (CLOUD_OVERHEAD, after_stamp, deserialise, deserialise_cloud,
                                      header_frame_id, header_stamp_ns)
 from msg_adapters.image_msg import check_camera_image, to_bgr
@@ -402,7 +402,7 @@ class HeatmapDetectorNode(Node):
             if msg.header.frame_id != cam.rig.frame_id:
                 raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
             if cam.camera is None:
-                cam.camera = cam.rig.with_info(*info_to_intrinsics(msg, cam.rig.rectified))
+                cam.camera = info_camera(cam.rig, msg)
                 cam.source = f'the CameraInfo of stamp {stamp_ns(msg.header.stamp)} ns'
                 self.get_logger().info(f'{cam.rig.name}: intrinsics from {cam.info_topic} '
                                        f'({cam.camera.width}x{cam.camera.height})')

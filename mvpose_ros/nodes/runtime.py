@@ -23,7 +23,7 @@ from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverriding
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo
 
-from msg_adapters.camera_info_msg import info_to_intrinsics
+from msg_adapters.camera_info_msg import info_camera
 from mvpose_ros.core.evaluation.datasets import data_root
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
@@ -216,7 +216,7 @@ class RigIntrinsics:
             return
         rig_camera = self._rig.cameras[index]
         try:
-            self._cameras[index] = rig_camera.with_info(*info_to_intrinsics(msg, rig_camera.rectified))
+            self._cameras[index] = info_camera(rig_camera, msg)
         except ValueError as exc:
             problem = " ".join(str(exc).split())
             if (rig_camera.name, problem) not in self._problems:

@@ -14,7 +14,8 @@ A rig file lists, per camera, its name, topics, frame id and extrinsics; intrins
         orientation: [qx, qy, qz, qw]           # rotation world <- camera optical frame (REP-103
                                                 # optical: x right, y down, z forward), unit
         rectified: false                        # true: `image` is image_proc's rectified image
-                                                # (image_rect): its intrinsics are CameraInfo's P
+                                                # (image_rect): its intrinsics are CameraInfo's P,
+                                                # turned by its R (a stereo pair's)
         # optional intrinsics, all of width, height, K or none of them:
         width: 1920                             # pixels
         height: 1080
@@ -126,7 +127,8 @@ class RigCamera:
     R: (3, 3) world -> camera optical rotation; t: (3,) metres (x_cam = R @ X + t, as Camera);
     camera: the calibrated Camera when the rig gives intrinsics, else None (see with_info);
     rectified: its images are rectified (image_proc's image_rect), so CameraInfo's P, not K and D,
-    describes them.
+    describes them, and its R turns them from this pose (a stereo pair's; msg_adapters'
+    camera_info_msg.info_camera).
     """
 
     name: str
@@ -149,11 +151,14 @@ class RigCamera:
         return matrix_to_quaternion(self.R.T)
 
     def with_info(self, K: np.ndarray, D: np.ndarray, width: int, height: int,
-                  distortion_model: str = lens.DEFAULT_MODEL) -> Camera:
+                  distortion_model: str = lens.DEFAULT_MODEL, rectification: np.ndarray | None = None) -> Camera:
         """This camera's Camera with intrinsics from a CameraInfo: K (3, 3) pixels, D the
-        coefficients of distortion_model, image size in pixels. ValueError naming the camera and field."""
-        return intrinsics_camera(f'camera {self.name!r}', self.name, self.R, self.t, np.asarray(K).tolist(),
-                                 np.asarray(D).tolist(), width, height, distortion_model)
+        coefficients of distortion_model, image size in pixels; rectification (3, 3): the rotation
+        from this camera's optical frame to its images' (a stereo pair's rectified frame; None:
+        the same). ValueError naming the camera and field."""
+        turn = np.eye(3) if rectification is None else np.asarray(rectification, dtype=np.float64)
+        return intrinsics_camera(f'camera {self.name!r}', self.name, turn @ self.R, turn @ self.t,
+                                 np.asarray(K).tolist(), np.asarray(D).tolist(), width, height, distortion_model)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
