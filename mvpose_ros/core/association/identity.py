@@ -108,10 +108,10 @@ class IdentityKeeper:
             new_tracks = (shared == 0).all(axis=1, keepdims=True)
             allowed = np.where(shared > 0, jump <= by_tracks[None], new_tracks & (jump <= by_position))
             # Shared track history dominates; distance breaks ties and decides when no track survives.
-            # A new id costs more than any allowed match but far less than a forbidden one, so a
-            # person nobody matches takes one instead of pushing another person off its id.
+            # A new id costs more than any allowed match, and a forbidden one is never taken, so a
+            # person nobody matches takes a new id instead of pushing another person off its own.
             new_id = max(by_tracks.max(), by_position) + 1.0  # above any allowed jump
-            cost = np.hstack([np.where(allowed, -100.0 * shared + jump, 1e6), np.full((len(members),) * 2, new_id)])
+            cost = np.hstack([np.where(allowed, -100.0 * shared + jump, np.inf), np.full((len(members),) * 2, new_id)])
             rows, cols = linear_sum_assignment(cost)
             for r, c in zip(rows.tolist(), cols.tolist()):
                 if c < len(known_ids) and allowed[r, c]:
