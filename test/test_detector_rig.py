@@ -109,7 +109,7 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
             image(sensor, payload=b'\x00' * 64)
             image(sensor, frame_id='cam_2_optical')
             assert spin_until(executor, lambda: 'not a JPEG or PNG' in log.read_text()
-                              and 'is not this camera' in log.read_text()), log.read_text()
+                              and "is not 'cam_1_optical'" in log.read_text()), log.read_text()
             bad = set(range(truncated, truncated + 4 * 40 * MS, 40 * MS))
             # 3. a reliable publisher reaches it too
             reliable = node.create_publisher(CompressedImage, topic, RELIABLE)
@@ -138,7 +138,8 @@ def test_a_compressed_camera_of_a_driver_style_rig_best_effort_and_reliable(doma
     assert f'cam_1: image stamp {truncated} ns dropped: CompressedImage data: the jpeg (1032x776) has no end ' \
            'marker (truncated)' in text
     assert sum('not a JPEG or PNG' in line for line in errors) == 1
-    assert sum("frame_id 'cam_2_optical' is not this camera ('cam_1_optical')" in line for line in errors) == 1
+    assert sum("frame_id 'cam_2_optical' is not 'cam_1_optical'; set frame_id: cam_2_optical" in line
+               for line in errors) == 1
     assert 'cam_1: 2 x CompressedImage data: the jpeg (1032x776) has no end marker (truncated)' in text  # counted
     assert 'Traceback' not in text
 
@@ -166,14 +167,16 @@ def _dropped_since_start(arrays: list[DiagnosticArray], camera: str) -> int:
     return counts[-1] if counts else 0
 
 
-def _explicit_rig(path, names: list[str], with_intrinsics: list[bool]) -> None:
-    """A rig file of Shelf cameras 0.. under driver-style names, intrinsics where asked."""
+def _explicit_rig(path, names: list[str], with_intrinsics: list[bool], with_frame_id: list[bool]) -> None:
+    """A rig file of Shelf cameras 0.. under driver-style names, intrinsics and frame ids (their
+    driver's, <name>_optical) where asked."""
     lines = ['world_frame: world', 'cameras:']
-    for cam, name, intrinsics in zip(shelf_cameras(), names, with_intrinsics):
+    for cam, name, intrinsics, frame_id in zip(shelf_cameras(), names, with_intrinsics, with_frame_id):
         position = (-cam.R.T @ cam.t).tolist()
         q = matrix_to_quaternion(cam.R.T).tolist()
         lines += [f'  - name: {name}', f'    image: {name}/image/compressed', f'    camera_info: {name}/camera_info',
-                  f'    frame_id: {name}_optical', f'    position: {position}', f'    orientation: {q}']
+                  f'    position: {position}', f'    orientation: {q}']
+        lines += [f'    frame_id: {name}_optical'] if frame_id else []
         if intrinsics:
             lines += [f'    width: {cam.width}', f'    height: {cam.height}', f'    K: {cam.K.ravel().tolist()}',
                       f'    D: {cam.dist.tolist()}']
@@ -183,7 +186,9 @@ def _explicit_rig(path, names: list[str], with_intrinsics: list[bool]) -> None:
 def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(domain, tmp_path):
     names = ['left', 'middle', 'right']
     rig = tmp_path / 'rig.yaml'
-    _explicit_rig(rig, names, [True, True, False])  # right's intrinsics come from its CameraInfo
+    # right's intrinsics come from its CameraInfo; middle's and right's frame ids from their first
+    # image and CameraInfo, as drivers name them
+    _explicit_rig(rig, names, [True, True, False], [True, False, False])
     jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
     offsets = [0, 6 * MS, -7 * MS]  # each camera stamps its own capture time
     jitter = [[0, 1 * MS, -1 * MS, 0, 1 * MS, 0, -1 * MS, 0], [1 * MS, 0, 0, -1 * MS, 0, 1 * MS, 0, -1 * MS],
@@ -265,7 +270,7 @@ def test_the_first_set_waits_for_a_camera_info_taken_just_after_its_images(domai
     then) and detects the set once the CameraInfo is in: the first set is not lost."""
     names = ['left', 'middle', 'right']
     rig = tmp_path / 'rig.yaml'
-    _explicit_rig(rig, names, [True, True, False])  # right's intrinsics come from its CameraInfo
+    _explicit_rig(rig, names, [True, True, False], [True] * 3)  # right's intrinsics come from its CameraInfo
     jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
     stamp = 1000 * MS
     log = tmp_path / 'detector.log'
@@ -303,7 +308,7 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
     next set search only around it, where MultiPose finds no one; the set after is whole again."""
     names = ['left', 'middle', 'right']
     rig = tmp_path / 'rig.yaml'
-    _explicit_rig(rig, names, [True, True, True])
+    _explicit_rig(rig, names, [True] * 3, [True] * 3)
     jpegs = [image_to_compressed_msg(_frame(c), Header()) for c in range(3)]
     stamps = [1000 * MS + k * 40 * MS for k in range(3)]
     joints = np.stack([2.5 + 0.05 * (np.arange(14) % 2 - 0.5), np.zeros(14), np.linspace(0.0, 0.6, 14)], axis=1)
@@ -375,3 +380,40 @@ def test_a_camera_mounted_upside_down_is_detected_turned_upright(domain, tmp_pat
     assert len(got) == len(expected) == 4 and len(as_it_comes) == 1
     for a, b in zip(got, expected):
         np.testing.assert_allclose(a.keypoints, b.keypoints, atol=0.05)
+
+
+def test_a_camera_every_image_of_which_is_refused_for_one_cause_is_an_error_with_its_fix(domain, tmp_path):
+    """A rig file whose frame_id is not what the driver stamps: every image is refused, and after
+    core.health.refusals' few seconds the camera is an ERROR on /diagnostics, logged once, naming
+    the cause and the fix; the node goes on."""
+    rig = tmp_path / 'rig.yaml'
+    _explicit_rig(rig, ['hd00'], [True], [False])
+    rig.write_text(rig.read_text() + '    frame_id: hd00\n')
+    jpeg = image_to_compressed_msg(_frame(0), Header())
+    log = tmp_path / 'detector.log'
+    line = ("every image refused: frame_id 'hd00_optical_frame' is not 'hd00'; set frame_id: hd00_optical_frame in "
+            "the rig file, or leave it out")
+    with probe(domain, 'rig_refused_probe') as (node, executor):
+        arrays: list[DiagnosticArray] = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, DIAGNOSTICS_QOS)
+        pub = node.create_publisher(CompressedImage, '/rig/hd00/image/compressed', qos_profile_sensor_data)
+        proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=hd00',
+                          '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}',
+                          '-p', 'diagnostics.period:=0.2')
+        sent = iter(range(1000 * MS, 100_000 * MS, 40 * MS))
+
+        def refused() -> list:
+            return [s for a in arrays for s in msg_to_statuses(a) if s.name.endswith(': refusals hd00')
+                    and s.level == 2]
+        try:
+            assert _stream_until(executor, lambda: pub.publish(CompressedImage(
+                header=_header(next(sent), 'hd00_optical_frame'), format=jpeg.format, data=jpeg.data)),
+                refused, period=0.1), log.read_text()
+            spin_until(executor, lambda: False, 0.5)
+            assert proc.poll() is None, 'the node goes on'
+        finally:
+            stop(proc)
+    status = refused()[0]
+    assert status.message == line and status.hardware_id == 'hd00'
+    errors = [text for text in log.read_text().splitlines() if '[ERROR]' in text and line in text]
+    assert len(errors) == 1 and errors[0].endswith(f'hd00: {line}'), log.read_text()

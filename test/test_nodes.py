@@ -97,7 +97,7 @@ def test_heatmap_detector_turns_raw_openpose_into_people_and_logs_bad_frames(dom
         for a, b in zip(got, expected):
             np.testing.assert_allclose(a.keypoints, b.keypoints, rtol=1e-6, atol=1e-4)
     text = log.read_text()
-    assert "stamp 12120000000 ns dropped: frame_id 'cam7' is not this camera" in text
+    assert "stamp 12120000000 ns dropped: frame_id 'cam7' is not 'cam1'; set frame_id: cam7 in the rig file" in text
     assert 'stamp 12160000000 ns dropped' in text
     assert 'stamp 12160000000 ns dropped: failed to deserialize' in text
     assert f'more than one image can have ({max_openpose_bytes()} data bytes)' in text
@@ -244,7 +244,7 @@ def test_association_drops_a_wrong_frame_id_and_a_camera_with_no_partner_and_cou
     text = log.read_text()
     assert re.search(rf'cam3 people2d stamp 12200000000 ns dropped \(oversize\): \d+ serialised bytes, more than a '
                      rf'people2d of a 1032x776 camera carries \({limit} \+ {CLOUD_OVERHEAD}\)', text), text
-    assert "cam2 people2d stamp 12160000000 ns dropped (frame_id): frame_id 'cam9', the rig says 'cam2'" in text
+    assert "cam2 people2d stamp 12160000000 ns dropped (frame_id): frame_id 'cam9' is not 'cam2'; set frame_id" in text
     assert 'cam0 people2d stamp 12140000000 ns dropped (unmatched)' in text and 'max skew 5.0 ms' in text
 
 

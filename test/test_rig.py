@@ -91,7 +91,8 @@ def test_defaults_and_intrinsics_forms(tmp_path, shelf):
              'width': 640, 'height': 480, 'K': [fx, fy, cx, cy]}
     rig = load_rig_file(_write(tmp_path, {'cameras': [entry]}))
     rc = rig.cameras[0]
-    assert (rc.name, rc.image, rc.camera_info, rc.frame_id) == ('left', 'left/image_raw', 'left/camera_info', 'left')
+    # no frame_id: the one its messages carry (core.geometry.frame_id), not its name
+    assert (rc.name, rc.image, rc.camera_info, rc.frame_id) == ('left', 'left/image_raw', 'left/camera_info', None)
     assert rig.world_frame == 'world' and rig.up.tolist() == [0.0, 0.0, 1.0]
     np.testing.assert_array_equal(rc.camera.K, [[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
     np.testing.assert_array_equal(rc.camera.dist, np.zeros(5))

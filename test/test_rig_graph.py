@@ -338,3 +338,15 @@ def test_a_bag_at_another_rate_than_frame_rate_is_said_with_the_rate_to_set():
     note = frame_rate_note(15.0, 25.0)
     assert note.startswith("the bag's cameras run at 15.0 Hz, the parameters' frame_rate is 25 Hz") and '\n' not in note
     assert 'set it to 15.0' in note and frame_rate_note(60.0, 25.0).startswith("the bag's cameras run at 60.0 Hz")
+
+
+def test_the_run_summary_lists_the_refusals_by_camera_and_cause():
+    import io
+    from collections import Counter
+    from mvpose_ros.graph.report import print_refusals
+    out = io.StringIO()
+    print_refusals({'b': Counter({'no intrinsics yet': 2, 'frame_id x': 5}), 'a': Counter()}, out)
+    assert out.getvalue() == 'refused inputs, by camera and cause:\n  b: 5 x frame_id x\n  b: 2 x no intrinsics yet\n'
+    out = io.StringIO()
+    print_refusals({'a': Counter()}, out)
+    assert out.getvalue() == 'refused inputs: none\n'

@@ -66,3 +66,12 @@ def test_numbers_are_written_exactly():
         args = parsed(node['arguments'])
         assert [float(args[f]) for f in FLAGS[:3]] == cam.position.tolist()
         assert [float(args[f]) for f in FLAGS[3:7]] == cam.orientation.tolist()
+
+
+def test_a_camera_without_frame_id_is_refused_with_the_fix(tmp_path):
+    """A rig file may leave frame_id to the messages, but TF must name the frame before any comes."""
+    doc = {'cameras': [{'name': 'hd00', 'position': [0.0, 0.0, 1.0], 'orientation': [0.0, 0.0, 0.0, 1.0]}]}
+    path = tmp_path / 'rig.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ValueError, match=r"camera 'hd00': tf needs its frame_id in the rig file .*hd00_optical_frame"):
+        static_transform_nodes(load_rig_file(path))

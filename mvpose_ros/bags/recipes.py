@@ -334,9 +334,10 @@ def shelf_rig_stamps(rig: type[ForeignRig] = ForeignRig) -> dict[str, list[int |
 
 
 def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = False, lenses: bool = False) -> str:
-    """The shelf_rig bags' rig file: per camera its driver topics, frame id and extrinsics from the
-    Shelf calibration (position, orientation quaternion; turned: each camera turned by
-    ForeignRig.TURNS), and no intrinsics: those come from the bag's CameraInfo, at the upscaled size."""
+    """The shelf_rig bags' rig file: per camera its driver topics and extrinsics from the Shelf
+    calibration (position, orientation quaternion; turned: each camera turned by ForeignRig.TURNS),
+    as a user writes it: no intrinsics (those come from the bag's CameraInfo, at the upscaled size)
+    and no frame ids (the driver's, ForeignRig.frame_id, come with the messages)."""
     cameras = dataset_cameras('shelf', calibration=calibration)
     if turned:
         cameras = [turned_camera(cam, k) for cam, k in zip(cameras, ForeignRig.TURNS)]
@@ -344,7 +345,7 @@ def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = Fal
     for name, cam in zip(ForeignRig.NAMES, cameras):
         position = -cam.R.T @ cam.t
         entries.append({'name': name, 'image': ForeignRig.image_topic(name, compressed),
-                        'camera_info': ForeignRig.info_topic(name), 'frame_id': ForeignRig.frame_id(name),
+                        'camera_info': ForeignRig.info_topic(name),
                         'position': [round(float(v), 9) for v in position],
                         'orientation': [round(float(v), 12) for v in matrix_to_quaternion(cam.R.T)]})
     doc = {'world_frame': 'world', 'up': [0.0, 0.0, 1.0], 'cameras': entries}
@@ -355,7 +356,7 @@ def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = Fal
         how += f'# Their lenses (CameraInfo\'s distortion_model): {", ".join(m for m, _, _ in ForeignRig.LENSES)}.\n'
     return (f'# The rig of the shelf_rig bags (mvpose-make-bag): the five Shelf cameras under a driver\'s\n'
             f'# names, {kind} images upscaled x{ForeignRig.SCALE:g}; extrinsics from\n'
-            f'# {calibration.name}; intrinsics and image size come from each camera\'s CameraInfo.\n'
+            f'# {calibration.name}; intrinsics, image size and frame ids come from each camera\'s CameraInfo.\n'
             + how + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
 
 

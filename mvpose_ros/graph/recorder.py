@@ -59,7 +59,8 @@ from mvpose_ros.bags.io import read_bag
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.health.links import unmatched_links
-from mvpose_ros.core.health.status import Status
+from mvpose_ros.core.health.refusals import refusals_of
+from mvpose_ros.core.health.status import Level, Status
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import expected_connections
 from mvpose_ros.nodes.bag_player import START_QOS
@@ -158,6 +159,7 @@ class SkeletonRecorder(Node):
                     event_callbacks=NO_EVENTS))
         self._output_name = self.resolve_topic_name(OUTPUT_TOPIC)
         self._statuses: dict[str, Status] = {}  # name -> the latest status of that name on /diagnostics
+        self._status_at: dict[str, float] = {}  # name -> when (monotonic s) its latest status came
         self.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, DIAGNOSTICS_QOS,
                                  event_callbacks=NO_EVENTS)
 
@@ -170,7 +172,30 @@ class SkeletonRecorder(Node):
             statuses = msg_to_statuses(msg)
         except ValueError:  # not a status of ours (a level no node here sends)
             return
-        self._statuses.update((s.name, s) for s in statuses)
+        now = time.monotonic()
+        for status in statuses:
+            self._statuses[status.name] = status
+            self._status_at[status.name] = now
+
+    def refusals_since(self, since: float) -> bool:
+        """Whether every refusals status (core.health.refusals) heard was heard again after
+        `since` (monotonic s): the counts then include every input before it."""
+        return all(self._status_at[name] > since for name, s in self._statuses.items() if refusals_of(s) is not None)
+
+    def unusable_cameras(self) -> list[str]:
+        """'<camera>: every image refused: <cause>' of each camera a detector found unusable
+        (core.health.refusals), in name order."""
+        return sorted(f'{s.hardware_id}: {s.message}' for s in self._statuses.values()
+                      if s.level == Level.ERROR and refusals_of(s) is not None)
+
+    def refusals(self) -> dict[str, Counter]:
+        """Camera -> its inputs refused since the start by cause, as the detectors last reported."""
+        out: dict[str, Counter] = {}
+        for status in self._statuses.values():
+            found = refusals_of(status)
+            if found is not None:
+                out[found[0]] = out.get(found[0], Counter()) + found[1]
+        return out
 
     def _on_people(self, topic: str, cdr: bytes) -> None:
         self.people_stamps[topic].append(header_stamp_ns(cdr))

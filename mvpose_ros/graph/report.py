@@ -7,6 +7,7 @@ one-scene bag scored set by set against a Shelf frame."""
 from __future__ import annotations
 
 import json
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import AbstractSet, Mapping, MutableMapping, Protocol, Sequence, TextIO
@@ -326,6 +327,18 @@ def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Rec
     problems += [f'{len(unexpected)} {OUTPUT_NAME} stamps are not set stamps of the bag'] if unexpected else []
     problems += [f'{len(node.bad)} undecodable {OUTPUT_NAME} messages, first: {node.bad[0]}'] if node.bad else []
     return problems
+
+
+def print_refusals(refusals: Mapping[str, Counter], out: TextIO) -> None:
+    """The inputs the detectors refused, by camera and cause (core.health.refusals), or that none were."""
+    refused = {camera: causes for camera, causes in sorted(refusals.items()) if causes}
+    if not refused:
+        print('refused inputs: none', file=out)
+        return
+    print('refused inputs, by camera and cause:', file=out)
+    for camera, causes in refused.items():
+        for cause, n in causes.most_common():
+            print(f'  {camera}: {n} x {cause}', file=out)
 
 
 def rig_prediction_lines(set_stamps: Sequence[int], outputs: Mapping[int, Skeletons]) -> list[str]:

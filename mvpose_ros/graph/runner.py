@@ -32,6 +32,7 @@ from rclpy.executors import SingleThreadedExecutor
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.evaluation.predictions import frame_line
+from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, expected_connections, node_command,
                                      played_connections)
@@ -44,6 +45,10 @@ from mvpose_ros.graph.respawn import Restart, Respawner
 PLAYER = 'bag_player'
 SPIN_S = 0.05
 DRAIN_S = 0.25  # at most this long for camera infos and live estimates still queued once every output has come
+# at most this long for the detectors' next diagnostics after the end, which hold their refusals
+REFUSALS_DRAIN_S = HealthThresholds().period + 0.5
+# once a camera cannot work, the others that cannot (a camera that started later) are waited for this long
+UNUSABLE_GRACE_S = REFUSALS_DRAIN_S
 OVERLAY_DRAIN_S = 1.0  # at most this long for the overlays of the last set (drawn after its live estimate)
 OVERLAY_QUIET_S = 0.2  # the last set's overlays are all in once none came for this long after its first
 # Node start-up (imports, calibration, models, DDS discovery, the player's wait for readers).
@@ -163,10 +168,13 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     graph drops sets): also done, not stalled, once the player has exited and nothing came for
     `quiet` s. A run in which a node was restarted is done once the player has exited and the
     last frame's output is in: the graph keeps the frames' order, so every frame still to come
-    has come, and those lost in the restart never will."""
+    has come, and those lost in the restart never will. GraphFailure, a line per camera with its
+    cause, once a detector says a camera cannot work (core.health.refusals) and UNUSABLE_GRACE_S
+    more have passed for the others that cannot either."""
     wanted = set(stamps)
     started = time.monotonic()
     player_done: float | None = None
+    unusable_since: float | None = None  # when a detector first said a camera cannot work
     sampled = 0.0
     while not node.accounted(wanted):
         executor.spin_once(timeout_sec=SPIN_S)
@@ -174,6 +182,10 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
             sampled = time.monotonic()
             memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
         _check_crashes(group, (PLAYER,), watch, node)
+        if unusable_since is None and node.unusable_cameras():
+            unusable_since = time.monotonic()
+        if unusable_since is not None and time.monotonic() - unusable_since > UNUSABLE_GRACE_S:
+            raise GraphFailure('', '\n'.join(node.unusable_cameras()))
         if player_done is None and PLAYER in group.poll():
             player_done = time.monotonic()
         limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S
@@ -185,6 +197,11 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
             return False
         if idle > limit:
             return True
+    # The detectors' refusal counts as of the end: their next diagnostics.
+    end = time.monotonic()
+    deadline = end + REFUSALS_DRAIN_S
+    while not node.refusals_since(end) and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=SPIN_S)
     # Camera infos and live estimates of the last frames may still be queued behind their outputs.
     deadline = time.monotonic() + DRAIN_S
     solved = wanted - node.dropped

@@ -36,7 +36,7 @@ from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTI
                                      runner_section, sets_frame_rate, unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
 from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, frame_rate_note, print_periods,
-                                     print_restarts, report, restart_effects, rig_prediction_lines,
+                                     print_refusals, print_restarts, report, restart_effects, rig_prediction_lines,
                                      rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
@@ -95,6 +95,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         return _failed(outcome, err)
     effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
     problems = report(outcome.stamps, node, settings, out, effects)
+    print_refusals(node.refusals(), out)
     print_restarts(effects, _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
         print_periods(outcome.stamps, node, outcome.memory, args.report_every, out)
@@ -281,6 +282,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
               f'graph): counted as those sets', file=out)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
                           round(run.max_skew * 1e9), run.lockstep, out)
+    print_refusals(node.refusals(), out)
     print_restarts(restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate),
                    _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
@@ -332,8 +334,10 @@ def _verdict(outcome, problems: list[str], timeout: float, err: TextIO) -> int:
 
 
 def _failed(outcome, err: TextIO) -> int:
-    """Print why the graph could not run, with the end of the failing node's log; exit code 1."""
-    print(f'{PROG}: error: {outcome.failure}', file=err)
+    """Print why the graph could not run (a line each reason), with the end of the failing node's
+    log; exit code 1."""
+    for line in str(outcome.failure).splitlines():
+        print(f'{PROG}: error: {line}', file=err)
     for line in outcome.log_tail.splitlines():
         print(f'  | {line}', file=err)
     return 1

@@ -15,9 +15,13 @@ def static_transform_nodes(rig: Rig) -> list[dict[str, object]]:
     """One static_transform_publisher per camera, in rig order, as launch_ros Node keyword
     arguments (package, executable, name, arguments). The arguments are its named form (Humble
     on): the camera's position (metres) and orientation (world <- optical, x y z w) as the
-    transform world_frame -> frame_id, each number the repr of its float64 (exact)."""
+    transform world_frame -> frame_id, each number the repr of its float64 (exact). ValueError for a
+    camera whose frame_id the rig file leaves to its messages: TF needs it before any comes."""
     nodes = []
     for cam in rig.cameras:
+        if cam.frame_id is None:
+            raise ValueError(f'{rig.path or "the rig"}: camera {cam.name!r}: tf needs its frame_id in the rig file '
+                             f'(the frame its driver stamps, e.g. {cam.name}_optical_frame)')
         pose = [*zip(_TRANSLATION, cam.position), *zip(_ROTATION, cam.orientation)]
         arguments = [text for flag, value in pose for text in (flag, repr(float(value)))]
         nodes.append({'package': TF_PACKAGE, 'executable': TF_EXECUTABLE, 'name': f'{cam.name}_frame',

@@ -3,7 +3,8 @@ camera, matches them across views and publishes the people seen by at least two 
 with a stable 3D id, as one bundle message per set (people/bundles, PointCloud2 encoding C).
 
 Inputs: `<camera name>/people2d` of each rig camera (names from the rig file, relative), whose
-frame_id must be that camera's frame_id in the rig file. Synchronisation is approximate
+frame_id must be that camera's: the rig file's `frame_id`, or without one the frame_id of the
+camera's first people2d (core.geometry.frame_id). Synchronisation is approximate
 (core.association.approximate_sync, message_filters' ApproximateTime semantics): a set holds at
 most one message per camera, their stamps within `max_skew` seconds (0: half a frame period of
 `frame_rate`); a camera missing from a set is waited for at most `sync_timeout` seconds, then the
@@ -54,6 +55,7 @@ from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, Approx
                                                           default_max_skew)
 from mvpose_ros.core.association.associator import Associator
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.geometry.frame_id import CameraFrameId
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
@@ -111,6 +113,7 @@ class AssociationNode(Node):
         self._skews: list[int] = []  # ns, of the sets since the last report
         now = time.monotonic()
         self._inputs = [InputMonitor(name, now) for name in self._names]
+        self._frame_ids = [CameraFrameId(c.name, c.frame_id) for c in rig.cameras]
         self._arrivals: dict[tuple[int, int], float] = {}  # (camera, stamp) of pending messages -> arrival
         self._monitor = NodeMonitor()
         self._health = NodeHealth(self, self._statuses)
@@ -208,9 +211,10 @@ class AssociationNode(Node):
         if not self._ready(camera):
             self._drop(camera, stamp, 'no intrinsics', 'no CameraInfo from this camera yet')
             return
-        expected = self._rig.cameras[camera].frame_id
-        if frame_id != expected:
-            self._drop(camera, stamp, 'frame_id', f'frame_id {frame_id!r}, the rig says {expected!r}')
+        try:
+            self._frame_ids[camera].check(frame_id, 'people2d')
+        except ValueError as exc:
+            self._drop(camera, stamp, 'frame_id', str(exc))
             return
         seen_by = self._associator.cameras[camera]
         limit = max_people_bytes(seen_by.width, seen_by.height)

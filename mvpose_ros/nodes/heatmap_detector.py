@@ -4,8 +4,7 @@ Backends: 'openpose' turns each camera's raw OpenPose output (`<camera>/openpose
 encoding A, reliable keep-last as the recorded data it is) into people; 'onnx' detects them in the
 camera image (MoveNet MultiPose, and EfficientPose when `heatmaps` is efficientpose or fused, on
 onnxruntime, core.onnx_detector). People go out on `<camera>/people2d` (PointCloud2 encoding B)
-with the input's stamp and the rig camera's frame_id, one message per used input, empty when nobody
-is seen.
+with the input's stamp and frame_id, one message per used input, empty when nobody is seen.
 
 Modes, by the parameter `camera`:
 
@@ -28,9 +27,10 @@ Modes, by the parameter `camera`:
   crops.
 
 Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace)
-and frame_id. The rig's namespace is the node's own, except that a one-camera node whose
-namespace ends with the camera's name (the Shelf graph's `/cam1`, or `/rig/cam1`) is in the
-camera's namespace: the rig's is then its parent. Outputs are `<camera name>/people2d` there.
+and, optionally, frame_id; without it, the frame_id of the camera's first CameraInfo or input is
+the camera's from then on (core.geometry.frame_id). The rig's namespace is the node's own, except
+that a one-camera node whose namespace ends with the camera's name (the Shelf graph's `/cam1`, or
+`/rig/cam1`) is in the camera's namespace: the rig's is then its parent. Outputs are `<camera name>/people2d` there.
 
 Image type: sensor_msgs/Image or CompressedImage (jpeg, png), its publishers' when one is known at
 start-up (get_publishers_info_by_topic), else by image_transport's naming: a topic ending in
@@ -65,7 +65,10 @@ leaves it out of its set. An empty people2d would instead claim the camera saw n
 A cause that repeats is logged at most every few seconds with a count (core.throttled_log).
 
 Diagnostics (nodes.health, on /diagnostics): per camera the input rate, drops by cause, sync
-offset (whole rig) and silence; the node's ms per detection, waiting sets and latency. Live
+offset (whole rig) and silence, and its inputs refused since the start by cause: ERROR, and logged
+once, when every one of a camera's first inputs was refused for one cause (core.health.refusals:
+a wrong rig file or topic, which `mvpose-graph` stops on); the node's ms per detection, waiting
+sets and latency. Live
 parameters: secondary_radius, box_margin, min_person_score, min_joint_score, heatmap_floor,
 sync_timeout, max_skew and the diagnostics thresholds; the others are read-only.
 """
@@ -109,9 +112,11 @@ from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.frame_id import CameraFrameId
 from mvpose_ros.core.geometry.rig import Rig, RigCamera
 from mvpose_ros.core.health.monitor import (InputMonitor, NodeMonitor, frame_rate_status, input_statuses,
                                             node_status)
+from mvpose_ros.core.health.refusals import Refusals
 from mvpose_ros.core.health.status import Level, Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.parameters import Param
@@ -179,11 +184,10 @@ class _Camera:
     info_problems: set[str] = field(default_factory=set)
     info_content: bytes | None = None  # cdr_header.after_stamp of the last CameraInfo taken in
     turns: int = 0  # onnx: quarter turns that stand its image up (upright.upright_turns)
+    frame_id: CameraFrameId = field(init=False)
 
-
-def _check_frame_id(cam: _Camera, frame_id: str) -> None:
-    if frame_id != cam.rig.frame_id:
-        raise ValueError(f'frame_id {frame_id!r} is not this camera ({cam.rig.frame_id!r})')
+    def __post_init__(self) -> None:
+        self.frame_id = CameraFrameId(self.rig.name, self.rig.frame_id)
 
 
 class HeatmapDetectorNode(Node):
@@ -311,6 +315,9 @@ class HeatmapDetectorNode(Node):
                                    f'{self.resolve_topic_name(cam.output.topic_name)}')
         now = time.monotonic()
         self._inputs = {cam.index: InputMonitor(cam.rig.name, now) for cam in self._cameras}
+        self._refusals = Refusals([cam.rig.name for cam in self._cameras], 'image' if self._backend == 'onnx'
+                                  else 'openpose input')
+        self._unusable: set[str] = set()  # cameras said to be unusable (logged once)
         self._health = NodeHealth(self, self._statuses)
         live_parameters(self, [*LIVE_DETECTOR[self._backend], 'sync_timeout', 'max_skew'], self._check, self._retune)
 
@@ -399,8 +406,7 @@ class HeatmapDetectorNode(Node):
 
     def _on_info(self, cam: _Camera, msg: CameraInfo) -> None:
         try:
-            if msg.header.frame_id != cam.rig.frame_id:
-                raise ValueError(f'frame_id {msg.header.frame_id!r} is not this camera ({cam.rig.frame_id!r})')
+            cam.frame_id.check(msg.header.frame_id, 'CameraInfo')
             if cam.camera is None:
                 cam.camera = info_camera(cam.rig, msg)
                 cam.source = f'the CameraInfo of stamp {stamp_ns(msg.header.stamp)} ns'
@@ -430,7 +436,7 @@ class HeatmapDetectorNode(Node):
         into the synchroniser, where a camera's first images may wait for its first CameraInfo
         (sent with them): checked against the largest size until then, against the camera's
         when worked on."""
-        _check_frame_id(cam, msg.header.frame_id)
+        cam.frame_id.check(msg.header.frame_id, self._what())
         if self._backend == 'openpose':
             if len(msg.data) > max_openpose_bytes():
                 raise ValueError(f'OpenPose output of {len(msg.data)} bytes, more than one image can have '
@@ -474,7 +480,7 @@ class HeatmapDetectorNode(Node):
         stamp = None
         try:
             stamp = header_stamp_ns(cdr)
-            _check_frame_id(cam, header_frame_id(cdr))
+            cam.frame_id.check(header_frame_id(cdr), self._what())
             if len(cdr) > max_openpose_bytes() + CLOUD_OVERHEAD:
                 raise ValueError(f'OpenPose output of {len(cdr)} serialised bytes, more than one image can have '
                                  f'({max_openpose_bytes()} data bytes)')
@@ -485,10 +491,15 @@ class HeatmapDetectorNode(Node):
             return
         callback(msg)
 
-    def _drop(self, cam: _Camera, stamp: int | None, cause: str) -> None:
-        """An input that could not be used: counted for diagnostics, logged throttled per camera and cause."""
+    def _drop(self, cam: _Camera, stamp: int | None, cause: str, refused: bool = True) -> None:
+        """An input that could not be used: counted for diagnostics, logged throttled per camera and
+        cause. refused: for what it is (not for when it came: synchronisation), so that a camera
+        every input of which is refused so is said to be unusable (core.health.refusals)."""
         cause = short_cause(cause)
-        self._inputs[cam.index].dropped(time.monotonic(), cause.split(':')[0])
+        now = time.monotonic()
+        self._inputs[cam.index].dropped(now, cause.split(':')[0])
+        if refused:
+            self._refusals.refused(cam.rig.name, cause, now)
         what = 'with no readable stamp' if stamp is None else f'stamp {stamp} ns'
         self._log.log((cam.rig.name, cause), f'{cam.rig.name}: {self._what()} {what} dropped: {cause}', 'error')
 
@@ -530,6 +541,7 @@ class HeatmapDetectorNode(Node):
         extra = ({'sets released': str(self._waiting.put_count), 'sets detected': str(self._processed),
                   'sets dropped whole while detecting': str(self._waiting.dropped)} if self._whole_rig else {})
         statuses = [*input_statuses(node, [i.stats(now, t.window) for i in self._inputs.values()], t),
+                    *self._refused_statuses(node, now),
                     node_status(node, self._monitor.stats(now, t.window), waiting, t, extra)]
         if self._whole_rig:
             camera_hz = stamp_rate([i.stamps(now, t.window) for i in self._inputs.values()])
@@ -539,6 +551,15 @@ class HeatmapDetectorNode(Node):
             if camera_hz is not None:  # a window too short to tell says nothing either way
                 self._rate_said = rate.level != Level.OK
             statuses.append(rate)
+        return statuses
+
+    def _refused_statuses(self, node: str, now: float) -> list[Status]:
+        """The refusals per camera (core.health.refusals); a camera found unusable is also logged, once."""
+        statuses = self._refusals.statuses(node, now)
+        for status in statuses:
+            if status.level == Level.ERROR and status.hardware_id not in self._unusable:
+                self._unusable.add(status.hardware_id)
+                self.get_logger().error(f'{status.hardware_id}: {status.message}')
         return statuses
 
     def _on_input(self, cam: _Camera, msg: Any) -> None:
@@ -553,6 +574,7 @@ class HeatmapDetectorNode(Node):
             self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
             return
         cam.output.publish(out)
+        self._refusals.used(cam.rig.name)
         self._delivered([stamp_ns(msg.header.stamp)], arrival, time.perf_counter() - t0)
         if self._backend == 'onnx':
             t = self._detector.timing
@@ -576,7 +598,7 @@ class HeatmapDetectorNode(Node):
             released = self._sync.add(stamp, cam.index, msg, time.monotonic())  # every rig camera: sync index
         except ValueError as exc:
             reason = next(iter(self._sync.dropped - before), 'rejected')
-            self._drop(cam, stamp, f'not synchronised ({reason}): {_without_numbers(str(exc))}')
+            self._drop(cam, stamp, f'not synchronised ({reason}): {_without_numbers(str(exc))}', refused=False)
             return
         self._offer(released)
 
@@ -588,7 +610,8 @@ class HeatmapDetectorNode(Node):
             cam = self._cameras[drop.camera]
             cause = {'unmatched': 'its set had fewer than min_cameras cameras',
                      'overflow': 'too many frames pending synchronisation (a camera stamping far ahead?)'}
-            self._drop(cam, drop.stamp_ns, f'not synchronised ({drop.reason}): {cause.get(drop.reason, drop.reason)}')
+            self._drop(cam, drop.stamp_ns, f'not synchronised ({drop.reason}): {cause.get(drop.reason, drop.reason)}',
+                       refused=False)
         for stamp in self._sync.take_lost():
             self._announce_dropped(stamp)
         now = time.monotonic()
@@ -656,6 +679,7 @@ class HeatmapDetectorNode(Node):
                     self._drop(cam, stamp_ns(msg.header.stamp), str(exc))
         for cam, out in outputs:
             cam.output.publish(out)
+            self._refusals.used(cam.rig.name)
         if not outputs:
             self._announce_dropped(synced.stamp_ns)
         self._delivered([s for s in synced.stamps if s is not None], self._released.pop(synced.index, time.monotonic()),

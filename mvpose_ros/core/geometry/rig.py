@@ -9,7 +9,8 @@ A rig file lists, per camera, its name, topics, frame id and extrinsics; intrins
       - name: left                # logs, diagnostics, namespaces: [A-Za-z_][A-Za-z0-9_]*
         image: /rig/left/image_raw/compressed   # default <name>/image_raw
         camera_info: /rig/left/camera_info      # default <name>/camera_info
-        frame_id: left_optical                  # default <name>
+        frame_id: left_optical                  # optional: default, the frame id of its first
+                                                # CameraInfo or image (core.geometry.frame_id)
         position: [x, y, z]                     # optical centre in the world, metres
         orientation: [qx, qy, qz, qw]           # rotation world <- camera optical frame (REP-103
                                                 # optical: x right, y down, z forward), unit
@@ -30,7 +31,7 @@ or, for a rig calibrated in the Shelf layout (see camera.load_rig)::
     width: 1032                   # image size, pixels: the calibration does not record it
     height: 776
     cameras:                      # optional; one entry per calibration camera, in its order
-      - {name: cam0, image: cam0/image_raw, camera_info: cam0/camera_info, frame_id: cam0}
+      - {name: cam0, image: cam0/image_raw, camera_info: cam0/camera_info, frame_id: cam0_optical}
 
 Every error is a ValueError of one line naming the file, the camera and the field.
 """
@@ -134,7 +135,7 @@ class RigCamera:
     name: str
     image: str
     camera_info: str
-    frame_id: str
+    frame_id: str | None  # None: learned from its messages (core.geometry.frame_id)
     R: np.ndarray
     t: np.ndarray
     camera: Camera | None = None
@@ -318,15 +319,15 @@ def _explicit_camera(path: Path, index: int, e: Any) -> RigCamera:
     return RigCamera(name, image, info, frame_id, R, t, camera, rectified)
 
 
-def _names(where: str, e: dict, default_name: str | None) -> tuple[str, str, str, str]:
-    """name, image topic, camera_info topic, frame_id of a camera entry."""
+def _names(where: str, e: dict, default_name: str | None) -> tuple[str, str, str, str | None]:
+    """name, image topic, camera_info topic, frame_id (None: not given) of a camera entry."""
     name = _string(where, 'name', e.get('name', default_name))
     if not NAME_PATTERN.fullmatch(name):
         raise ValueError(f'{where}: name: {name!r} is not a valid name ([A-Za-z_][A-Za-z0-9_]*: it names '
                          f'namespaces)')
     image = _string(where, 'image', e.get('image', f'{name}/image_raw'))
     info = _string(where, 'camera_info', e.get('camera_info', f'{name}/camera_info'))
-    frame_id = _string(where, 'frame_id', e.get('frame_id', name))
+    frame_id = _string(where, 'frame_id', e['frame_id']) if 'frame_id' in e else None
     for field, topic in (('image', image), ('camera_info', info)):
         if re.search(r'\s', topic):
             raise ValueError(f'{where}: {field}: {topic!r} is not a topic name')
