@@ -122,12 +122,22 @@ def _intrinsic_matrix(field: str, values: np.ndarray) -> np.ndarray:
     return K
 
 
-def check_info(msg: CameraInfo, camera: Camera, tol_px: float = 0.5, rectified: bool = False) -> None:
-    """Raise ValueError naming the first item (size, fx, fy, cx, cy, skew, distortion) where msg
+def check_info(msg: CameraInfo, camera: Camera, tol_px: float = 0.5, rectified: bool = False,
+               raw_R: np.ndarray | None = None) -> None:
+    """Raise ValueError naming the first item (size, fx, fy, cx, cy, skew, distortion, r) where msg
     disagrees with camera (of `rectified` images: info_to_intrinsics); intrinsics within tol_px
     pixels pass. Distortion is compared by where it moves the image's corners, edge midpoints and
-    centre."""
+    centre. Of rectified images, given raw_R (3, 3: the rig camera's own world -> optical rotation),
+    also R: how far the rectified frame it gives is turned from camera's (camera.R @ raw_R.T), in
+    pixels at the larger focal length."""
     K, dist, width, height, model = info_to_intrinsics(msg, rectified)
+    if rectified and raw_R is not None:
+        turn = rectification(msg) @ (camera.R @ np.asarray(raw_R, dtype=np.float64).T).T
+        angle = float(np.arccos(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0)))
+        moved = angle * max(K[0, 0], K[1, 1])
+        if not moved <= tol_px:
+            raise ValueError(f'CameraInfo r: turns the rectified frame {np.degrees(angle):.3g} degrees from the R in '
+                             f'use ({moved:.3g} px at its focal length; tolerance {tol_px} px)')
     if (width, height) != (camera.width, camera.height):
         raise ValueError(f'CameraInfo size: {width}x{height}, camera {camera.name} is '
                          f'{camera.width}x{camera.height}')

@@ -165,7 +165,15 @@ def test_a_rectified_image_is_described_by_p_without_distortion(rig):
                                     (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))[:, 0]
     np.testing.assert_allclose(info_camera(rc, msg).project(X), rectified, atol=1e-6)
     assert np.abs(raw.project(X) - rectified).max() > 5  # the lens matters here
-    check_info(msg, info_camera(rc, msg), rectified=True)
+    check_info(msg, info_camera(rc, msg), rectified=True, raw_R=rc.R)
+    # a later CameraInfo turning the rectified frame otherwise: reported as K would be, in pixels
+    later = camera_to_info(raw, Header())
+    later.p, tilt = msg.p, np.radians(0.5)
+    later.r = np.array([[1.0, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]]).ravel()
+    with pytest.raises(ValueError, match=r'^CameraInfo r: turns the rectified frame 0\.5 degrees from the R in use '
+                                         r'\(\d+\.?\d* px at its focal length; tolerance 0\.5 px\)$'):
+        check_info(later, info_camera(rc, msg), rectified=True, raw_R=rc.R)
+    check_info(later, info_camera(rc, later), rectified=True, raw_R=rc.R)  # the camera it gives itself
     msg.distortion_model, msg.d = 'kannala_brandt', [0.1] * 9  # the raw lens is not read
     np.testing.assert_array_equal(info_to_intrinsics(msg, True)[0], new_K)
     for field, value, problem in (

@@ -45,7 +45,8 @@ last `queue_depth`, so best-effort (sensor data) and reliable publishers both co
 parameter file can override them (qos_overrides.<topic>.subscription.*).
 
 Intrinsics: from the rig file, else from the camera's first usable CameraInfo (images wait
-for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use is logged
+for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use (of rectified
+images, their R too) is logged
 once per camera and problem and never acted on; one that differs from the last by its stamp alone
 is not even deserialised.
 
@@ -416,7 +417,7 @@ class HeatmapDetectorNode(Node):
                     with self._intrinsics_in:
                         self._intrinsics_in.notify_all()
                 return
-            check_info(msg, cam.camera, rectified=cam.rig.rectified)
+            check_info(msg, cam.camera, rectified=cam.rig.rectified, raw_R=cam.rig.R)
         except ValueError as exc:
             # A CameraInfo that disagrees means a wrong file or a re-calibrated camera: said once
             # per camera and problem, never acted on.
