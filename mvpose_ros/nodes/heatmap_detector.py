@@ -46,9 +46,8 @@ parameter file can override them (qos_overrides.<topic>.subscription.*).
 
 Intrinsics: from the rig file, else from the camera's first usable CameraInfo (images wait
 for it: dropped, with the reason). A CameraInfo contradicting the intrinsics in use (of rectified
-images, their R too) is logged
-once per camera and problem and never acted on; one that differs from the last by its stamp alone
-is not even deserialised.
+images, their R too) is logged once per camera and problem and never acted on; one that differs
+from the last by its stamp alone is not even deserialised.
 
 Bounded input: every input is checked before it is queued or worked on (_admit, no decoding):
 the camera's frame_id; an image against its camera's size (the data at most what such an image
