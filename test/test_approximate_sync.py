@@ -158,6 +158,26 @@ def test_a_camera_starting_late_beyond_the_timeout_is_left_out_until_it_starts()
         assert r.at == pytest.approx(max(ready, start + TIMEOUT), abs=0.0101)
 
 
+def test_a_camera_that_has_sent_nothing_yet_holds_a_set_back_first_wait_at_most():
+    """first_wait one frame period: camera 3, starting at frame 5, holds set 0 back one period
+    after its last member and is then left out until it starts; a camera heard before is still
+    waited for the timeout."""
+    sync = _sync(first_wait=PERIOD_NS / 1e9)
+    events = _stream(40, seed=2, skip={3: set(range(5)), 1: {20}})
+    released = _run(sync, events)
+    _check_invariants(released)
+    frames = _frames(released)
+    assert frames == [{c: f for c in range(5) if not (c == 3 and f < 5) and not (c == 1 and f == 20)}
+                      for f in range(40)]
+    last = max(e.arrival for e in events if e.frame == 0)
+    assert released[0].at == pytest.approx(last + PERIOD_NS / 1e9, abs=0.0101)
+    for f in range(1, 5):  # then absent: each set goes once its grace has passed
+        ready = max(e.arrival for e in events if e.frame == f) + MAX_SKEW
+        assert released[f].at == pytest.approx(ready, abs=0.0101)
+    # camera 1, heard before, missing from frame 20: that set waits until its frame 21 comes
+    assert released[20].at == min(e.arrival for e in events if e.camera == 1 and e.frame == 21)
+
+
 def test_a_camera_dropping_three_frames_leaves_exactly_those_sets_without_it():
     sync = _sync()
     events = _stream(40, seed=4, skip={2: {10, 11, 12}})
@@ -359,7 +379,7 @@ def test_a_synced_set_is_a_synced_frame_for_the_node():
 
 
 @pytest.mark.parametrize('kw', [dict(cameras=0), dict(timeout=0.0), dict(max_skew=-0.001), dict(min_cameras=3),
-                                dict(min_cameras=0), dict(queue_size=0)])
+                                dict(min_cameras=0), dict(queue_size=0), dict(first_wait=0.0)])
 def test_bad_construction_is_refused(kw):
     args = dict(cameras=2, timeout=0.5, max_skew=0.02) | kw
     with pytest.raises(ValueError, match='ApproximateSync needs'):

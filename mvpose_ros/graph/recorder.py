@@ -103,7 +103,8 @@ class SkeletonRecorder(Node):
                  overlay_files: Mapping[str, Path] | None = None) -> None:
         """timing_topics: camera_info topics a stamp's latency is timed from (read with timing_qos:
         best effort for a player or driver publishing so); people_topics: people2d topics whose
-        stamps are kept in `people_stamps` (by the topic as given); watch_topics: topics (as given,
+        stamps are kept in `people_stamps` (by the topic as given), with when each stamp's last
+        people2d and each set's bundles came (`people_at`, `bundles_at`); watch_topics: topics (as given,
         PointCloud2: the nodes' outputs) that `arm` can watch, each read from its first `arm` on
         (reading every node's output all along cost the runner 8% of a core at 25 Hz);
         overlay_files: overlay topic (CompressedImage, the overlay node's) -> folder each of its
@@ -129,9 +130,14 @@ class SkeletonRecorder(Node):
         self._infos = [self.create_subscription(CameraInfo, t, self._on_info, timing_qos, raw=True,
                                                 event_callbacks=NO_EVENTS) for t in timing_topics]
         self.people_stamps: dict[str, list[int]] = {t: [] for t in people_topics}
+        self.people_at: dict[int, int] = {}  # a people2d stamp -> receipt (ns) of its last one
+        self.bundles_at: dict[int, int] = {}  # a set's stamp -> receipt (ns) of its bundles (with people_topics)
         for topic in people_topics:
-            self.create_subscription(PointCloud2, topic, lambda cdr, t=topic: self._on_people(t, cdr), DATA_QOS,
-                                     raw=True, event_callbacks=NO_EVENTS)
+            self.create_subscription(PointCloud2, topic, lambda cdr, info, t=topic: self._on_people(t, cdr, info),
+                                     DATA_QOS, raw=True, event_callbacks=NO_EVENTS)
+        if people_topics:
+            self.create_subscription(PointCloud2, BUNDLES, self._on_bundles, DATA_QOS, raw=True,
+                                     event_callbacks=NO_EVENTS)
         self._outputs = [self.create_subscription(PointCloud2, OUTPUT_TOPIC, self._on_skeletons, DATA_QOS,
                                                   raw=True)]
         self.overlays = 0
@@ -197,8 +203,13 @@ class SkeletonRecorder(Node):
                 out[found[0]] = out.get(found[0], Counter()) + found[1]
         return out
 
-    def _on_people(self, topic: str, cdr: bytes) -> None:
-        self.people_stamps[topic].append(header_stamp_ns(cdr))
+    def _on_people(self, topic: str, cdr: bytes, info: Any) -> None:
+        stamp = header_stamp_ns(cdr)
+        self.people_stamps[topic].append(stamp)
+        self.people_at[stamp] = max(self.people_at.get(stamp, 0), info['received_timestamp'])
+
+    def _on_bundles(self, cdr: bytes, info: Any) -> None:
+        self.bundles_at.setdefault(header_stamp_ns(cdr), info['received_timestamp'])
 
     def _measure(self, topic: str, msg_type: Any, cdr: bytes) -> None:
         if msg_type is MarkerArray:  # no header of its own: the stamp of its first marker

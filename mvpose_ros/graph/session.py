@@ -35,9 +35,9 @@ from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTI
                                      rig_connections, rig_frame_rate, rig_graph_nodes, rig_played_connections, rig_sync,
                                      runner_section, sets_frame_rate, unknown_nodes, write_overrides)
 from mvpose_ros.graph.recorder import START_TOPIC, SkeletonRecorder
-from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, frame_rate_note, print_periods,
-                                     print_refusals, print_restarts, report, restart_effects, rig_prediction_lines,
-                                     rig_report, score, score_sets)
+from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, frame_rate_note, print_first_second,
+                                     print_periods, print_refusals, print_restarts, report, restart_effects,
+                                     rig_prediction_lines, rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
@@ -282,6 +282,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
               f'graph): counted as those sets', file=out)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
                           round(run.max_skew * 1e9), run.lockstep, out)
+    print_first_second(stamps, [list(s.members.values()) for s in sets], node, node.people_at, node.bundles_at, out)
     print_refusals(node.refusals(), out)
     print_restarts(restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate),
                    _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)

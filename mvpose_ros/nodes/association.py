@@ -107,7 +107,8 @@ class AssociationNode(Node):
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
         self._associator = Associator(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
                                       self._config)
-        self._sync = ApproximateSync(n, p['sync_timeout'], max_skew, p['min_cameras'])
+        # a camera that has sent nothing yet (one starting late) holds a set back one frame period at most
+        self._sync = ApproximateSync(n, p['sync_timeout'], max_skew, p['min_cameras'], first_wait=1.0 / p['frame_rate'])
         self.dropped: Counter[str] = Counter()  # every dropped input message, by reason
         self._log = ThrottledLog(self.get_logger())
         self._skews: list[int] = []  # ns, of the sets since the last report

@@ -332,7 +332,9 @@ class HeatmapDetectorNode(Node):
         # pending messages per camera: a sync_timeout's worth of frames, twice (more only from a
         # camera stamping far ahead of the others: its oldest are dropped as 'overflow', counted)
         queue = math.ceil(2 * p['sync_timeout'] * p['frame_rate']) + 2
-        self._sync = ApproximateSync(len(self._cameras), p['sync_timeout'], p['max_skew'], p['min_cameras'], queue)
+        # a camera that has sent nothing yet (one starting late) holds a set back one frame period at most
+        self._sync = ApproximateSync(len(self._cameras), p['sync_timeout'], p['max_skew'], p['min_cameras'], queue,
+                                     first_wait=1.0 / p['frame_rate'])
         self._waiting: NewestQueue[SyncedSet] = NewestQueue(p['waiting_sets'])
         # a set none of whose cameras reaches the association: its stamp goes here, as association
         # and bp_solver announce theirs, so that a subscriber waiting for every frame stops waiting

@@ -17,6 +17,9 @@ Semantics (stamps are integer nanoseconds, times monotonic seconds passed in by 
   and it has sent nothing since). An undecided camera is waited for at most `timeout` s from the
   arrival of the set's first member; the set then goes without it and the camera is absent until
   its next message (a late one too), so a camera gone for good delays one set, not every set.
+  A camera that has sent nothing yet is waited for `first_wait` (a frame period, say) after the
+  set's last member arrived, within the timeout: a rig's first sets do not wait the whole timeout
+  for a camera that starts late, and the others' messages may still come spread out.
   An absent camera is still waited for a *grace* of max_skew seconds after the set's last member
   arrived (a capture's images arrive about as spread as their stamps), so a camera coming back
   joins the first set it sends for; a dead camera delays each set by that much. Silence is not
@@ -109,18 +112,21 @@ class ApproximateSync:
     """Groups per-camera messages whose header stamps lie within max_skew (see the module)."""
 
     def __init__(self, cameras: int, timeout: float, max_skew: float, min_cameras: int = 1,
-                 queue_size: int = 100) -> None:
+                 queue_size: int = 100, first_wait: float | None = None) -> None:
         """cameras: how many; timeout: seconds (> 0) a set waits for a camera and after which a
         silent camera is left out; max_skew: seconds (>= 0) between a set's oldest and newest
         stamps; min_cameras: smallest set released (smaller ones are dropped as 'unmatched');
-        queue_size: messages pending per camera before its oldest is dropped as 'overflow'."""
+        queue_size: messages pending per camera before its oldest is dropped as 'overflow';
+        first_wait: seconds a set waits for a camera that has sent nothing yet, after its last
+        member came (None: timeout)."""
         if cameras < 1 or not timeout > 0 or not max_skew >= 0 or not 1 <= min_cameras <= cameras \
-                or queue_size < 1:
+                or queue_size < 1 or not (first_wait is None or first_wait > 0):
             raise ValueError(f'ApproximateSync needs cameras >= 1, timeout > 0, max_skew >= 0, '
-                             f'1 <= min_cameras <= cameras and queue_size >= 1, got {cameras}, {timeout}, '
-                             f'{max_skew}, {min_cameras}, {queue_size}')
+                             f'1 <= min_cameras <= cameras, queue_size >= 1 and first_wait > 0, got {cameras}, '
+                             f'{timeout}, {max_skew}, {min_cameras}, {queue_size}, {first_wait}')
         self.cameras = cameras
         self.timeout = float(timeout)
+        self.first_wait = self.timeout if first_wait is None else float(first_wait)
         self.max_skew_ns = round(max_skew * 1e9)
         self.grace = float(max_skew)  # s an absent camera is waited for once the others are in
         self.min_cameras = min_cameras
@@ -212,7 +218,8 @@ class ApproximateSync:
             undecided = [c for c in open_ if c not in self._absent]
             first_arrival = min(self._pending[c][0].arrival for c in members)
             last_arrival = max(self._pending[c][0].arrival for c in members)
-            if undecided and now - first_arrival < self.timeout:
+            heard = any(self._newest[c] is not None for c in undecided)
+            if undecided and now - first_arrival < self.timeout and (heard or now - last_arrival < self.first_wait):
                 break
             if open_ and not undecided and now - last_arrival < self.grace:
                 break  # an absent camera coming back: its image comes about with the others'
