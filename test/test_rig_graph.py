@@ -159,6 +159,7 @@ def test_rig_plan_nodes_and_parameter_files(rig_file, tmp_path, monkeypatch):
     args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=config, data_root=None, lockstep=False,
                            rate=None, qos=None, predictions=None, loops=2, overrides=[crowd])
     rig, run, settings, files, sets = rig_run_plan(args)
+    sets = sets.result()
     assert files == [package_path(RIG_TEMPLATE), config.resolve(), crowd.resolve()]
     # the template's frame_rate, and the bag's cameras' rate (40 ms apart), so nothing to say
     assert run.frame_rate == 25.0 and run.bag_rate == pytest.approx(25.0) and not run.rate_from_bag
@@ -216,7 +217,8 @@ def test_rig_plan_takes_the_bags_frame_rate_unless_a_file_of_the_users_sets_one(
     reads = []
     monkeypatch.setattr(session, 'read_bag', lambda *a: reads.append(a) or read_bag(*a))
     rig, run, settings, files, sets = rig_run_plan(args)
-    assert len(reads) == 1  # grouped again with the bag's max_skew from the stamps read once
+    sets = sets.result()
+    assert len(reads) == 2  # its first HEAD_S s for the rate, then all of it for the sets (in a thread)
     assert run.bag_rate == pytest.approx(15.0)
     detector, association, solver, player = (n.parameters for n in rig_graph_nodes(run))
     if mine is None:  # the template's 25 Hz is 10 % off: the bag's rate, for every node
@@ -350,3 +352,55 @@ def test_the_run_summary_lists_the_refusals_by_camera_and_cause():
     out = io.StringIO()
     print_refusals({'a': Counter()}, out)
     assert out.getvalue() == 'refused inputs: none\n'
+
+
+def test_the_rig_plan_reads_only_the_bags_first_seconds_before_the_graph_starts(rig_file, tmp_path, monkeypatch):
+    """A long recording starts at once: the plan reads HEAD_S s of it for the cameras' rate and
+    groups the whole bag's sets in a thread, whose future the run takes."""
+    from mvpose_ros.bags.io import write_bag
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import Header
+    import mvpose_ros.graph.session as session
+    monkeypatch.setenv('MVPOSE_DATA_ROOT', str(tmp_path / 'no-data'))
+    seconds, rate = 3 * session.HEAD_S, 5
+    items = []
+    for k in range(int(seconds * rate)):
+        for n in 'ab':
+            header = Header(frame_id=n)
+            header.stamp.sec, header.stamp.nanosec = divmod(S + k * S // rate, S)
+            items.append((f'/rig/{n}/image', CompressedImage(header=header), S + k * S // rate))
+    write_bag(tmp_path / 'bag', items)
+    taken: list[int] = []  # messages taken from each read, in the order the reads began
+    release = __import__('threading').Event()
+
+    def counted(*args):
+        index = len(taken)
+        taken.append(0)
+        if index:  # the sets' read waits until the plan has returned: it must not need it
+            release.wait(10)
+        for message in read_bag(*args):
+            taken[index] += 1
+            yield message
+    monkeypatch.setattr(session, 'read_bag', counted)
+    args = SimpleNamespace(rig=rig_file, bag=str(tmp_path / 'bag'), config=None, data_root=None, lockstep=False,
+                           rate=None, qos=None, predictions=None, loops=1, overrides=[])
+    rig, run, settings, files, sets = rig_run_plan(args)
+    assert not sets.done() and run.bag_rate == pytest.approx(rate)
+    assert taken[0] == 2 * session.HEAD_S * rate + 2 + 1  # up to the first message past HEAD_S
+    release.set()
+    assert [s.stamp_ns for s in sets.result(10)] == [S + k * S // rate for k in range(int(seconds * rate))]
+    assert taken[1] == len(items)
+
+
+def test_the_first_seconds_sets_are_shown_stage_by_stage():
+    import io
+    from mvpose_ros.graph.report import print_first_second
+    node = SimpleNamespace(info_at={S: 100 * MS, S + PERIOD: 140 * MS, 3 * S: 0},
+                           output_at={S: 400 * MS, S + PERIOD: 460 * MS})
+    out = io.StringIO()
+    stamps = [S, S + PERIOD, S + 2 * PERIOD, 3 * S]
+    print_first_second(stamps, [[S, S + 5 * MS], [S + PERIOD], [S + 2 * PERIOD], [3 * S]], node,
+                       {S: 300 * MS, S + 5 * MS: 310 * MS, S + PERIOD: 350 * MS}, {S: 390 * MS}, out)
+    lines = out.getvalue().splitlines()
+    # set 2 never reached detection; the set at 3 s is past the first second
+    assert lines[1:] == ['  set   0 (2 cameras): 210 / 290 / 300', '  set   1 (1 cameras): 210 / - / 320']

@@ -334,9 +334,10 @@ FIRST_SECOND_S = 1.0  # the start of a rig run whose sets' latency is shown stag
 
 def print_first_second(set_stamps: Sequence[int], members: Sequence[Sequence[int]], node: Recorded,
                        people_at: Mapping[int, int], bundles_at: Mapping[int, int], out: TextIO) -> None:
-    """Where the latency of the sets of the run's first FIRST_SECOND_S (by stamp) goes: per set, ms
-    from its first camera_info to its last camera's people2d (sync and detection), its bundles
-    (association) and its skeletons (the 3D stage); members: each set's member stamps (ns)."""
+    """Where the latency of the sets of the run's first FIRST_SECOND_S (by stamp) goes: per set that
+    reached detection, ms from its first camera_info to its last camera's people2d (sync and
+    detection), its bundles (association) and its skeletons (the 3D stage); members: each set's
+    member stamps (ns)."""
     if not set_stamps:
         return
     print(f'the first {FIRST_SECOND_S:g} s, ms from a set\'s first camera_info to: its last people2d '
@@ -347,7 +348,9 @@ def print_first_second(set_stamps: Sequence[int], members: Sequence[Sequence[int
         start = node.info_at.get(stamp)
         people = [people_at[m] for m in stamps if m in people_at]
         stages = [max(people) if people else None, bundles_at.get(stamp), node.output_at.get(stamp)]
-        shown = ' / '.join('-' if start is None or at is None else f'{(at - start) / 1e6:.0f}' for at in stages)
+        if start is None or all(at is None for at in stages):
+            continue  # dropped before detection (paced), or no camera_info timed
+        shown = ' / '.join('-' if at is None else f'{(at - start) / 1e6:.0f}' for at in stages)
         print(f'  set {k:3d} ({len(stamps)} cameras): {shown}', file=out)
 
 

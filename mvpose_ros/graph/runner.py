@@ -23,6 +23,7 @@ import os
 import subprocess
 import sys
 import time
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
@@ -57,6 +58,14 @@ LOG_TAIL = 15
 MEMORY_PERIOD_S = 1.0
 
 
+Stamps = Sequence[int] | Future  # the input stamps (ns), or a future of them: see run_graph
+
+
+def _known(stamps: Stamps) -> Sequence[int]:
+    """The stamps (a future's result: waited for, an exception raised)."""
+    return stamps.result() if isinstance(stamps, Future) else stamps
+
+
 class GraphFailure(Exception):
     """The graph cannot finish: `node` (a process name, or '' for the graph as a whole) and why."""
 
@@ -67,11 +76,10 @@ class GraphFailure(Exception):
 
 @dataclass
 class Outcome:
-    """How the run ended: the input stamps (ns, bag order), why it stopped early if it did (a
-    failure, a stall, or the signal that interrupted it), the end of the failed node's log, and
-    the nodes' memory, and every restart of a node (with a Respawner)."""
+    """How the run ended: why it stopped early if it did (a failure, a stall, or the signal that
+    interrupted it), the end of the failed node's log, and the nodes' memory, and every restart of
+    a node (with a Respawner)."""
 
-    stamps: list[int]
     memory: MemoryLog = field(default_factory=lambda: MemoryLog(0))
     failure: GraphFailure | None = None
     log_tail: str = ''
@@ -160,7 +168,7 @@ def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, grou
 
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
-          stamps: Sequence[int], memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
+          stamps: Stamps, memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
     """Spin until every stamp has an output or was dropped (skeletons/dropped: a set short of
     min_cameras, or bp_solver behind the input); True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
@@ -171,12 +179,14 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     has come, and those lost in the restart never will. GraphFailure, a line per camera with its
     cause, once a detector says a camera cannot work (core.health.refusals) and UNUSABLE_GRACE_S
     more have passed for the others that cannot either."""
-    wanted = set(stamps)
+    wanted: set[int] | None = None  # known once the stamps are (a future's: grouped meanwhile)
     started = time.monotonic()
     player_done: float | None = None
     unusable_since: float | None = None  # when a detector first said a camera cannot work
     sampled = 0.0
-    while not node.accounted(wanted):
+    while wanted is None or not node.accounted(wanted):
+        if wanted is None and not (isinstance(stamps, Future) and not stamps.done()):
+            wanted = set(_known(stamps))
         executor.spin_once(timeout_sec=SPIN_S)
         if time.monotonic() - sampled > MEMORY_PERIOD_S:
             sampled = time.monotonic()
@@ -191,7 +201,7 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
         limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S
         idle = time.monotonic() - max(started, player_done or 0.0, node.last_activity)
         restarted = bool(watch and watch.respawner and watch.respawner.restarts)
-        if restarted and player_done is not None and stamps and stamps[-1] in node.outputs:
+        if restarted and player_done is not None and wanted and max(wanted) in node.outputs:
             break
         if quiet > 0 and player_done is not None and idle > quiet:
             return False
@@ -204,6 +214,7 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
         executor.spin_once(timeout_sec=SPIN_S)
     # Camera infos and live estimates of the last frames may still be queued behind their outputs.
     deadline = time.monotonic() + DRAIN_S
+    wanted = set(_known(stamps))
     solved = wanted - node.dropped
     while not (wanted <= node.info_at.keys() and solved <= node.live_at.keys()) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=SPIN_S)
@@ -216,14 +227,15 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     return False
 
 
-def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Sequence[NodeSpec], stamps: list[int],
+def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Sequence[NodeSpec], stamps: Stamps,
               log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
               per_loop: int, expected: Mapping[str, Sequence[str]] | None = None,
               played: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0,
               watch: Supervision | None = None) -> Outcome:
     """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
     also after Ctrl-C (outcome.interrupted). config: the parameter file(s) every node gets, in
-    order; input_topic: what each detector reads in its camera namespace; per_loop: stamps in one
+    order; stamps: the input stamps (ns, in play order), or a future of them (worked out while the
+    graph runs); input_topic: what each detector reads in its camera namespace; per_loop: stamps in one
     pass of the bag (the memory baseline); expected: the endpoints to wait for before playing
     (default: the Shelf graph's, expected_connections); played: the player's links to wait for
     before it plays (default: the Shelf graph's, played_connections); quiet: see _play; watch: how
@@ -233,7 +245,7 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     if played is None:
         played = played_connections(settings.cameras, input_topic)
     watch = watch or Supervision()
-    outcome = Outcome(stamps, MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
+    outcome = Outcome(MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
     # nodes started together on a fresh install would each compile the same kernels at once

@@ -11,11 +11,13 @@ import os
 import shutil
 import signal
 import sys
+import threading
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from contextlib import contextmanager
-from typing import Any, Iterator, Mapping, Sequence, TextIO
+from concurrent.futures import Future
+from typing import Any, Callable, Iterator, Mapping, Sequence, TextIO, TypeVar
 
 import rclpy
 from rclpy.context import Context
@@ -53,6 +55,8 @@ DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 # rmw_fastrtps takes the history memory policy and publication mode from the profile only with this
 DDS_QOS_FROM_XML_ENV = 'RMW_FASTRTPS_USE_QOS_FROM_XML'
 RATE_QUIET_S = 5.0  # a rig run is over this long after the player's end without output
+HEAD_S = 10.0  # s of a rig bag read before the graph starts, for its cameras' rate
+T = TypeVar('T')
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
@@ -93,13 +97,13 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
                             per_loop, watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
-    effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
-    problems = report(outcome.stamps, node, settings, out, effects)
+    effects = restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
+    problems = report(stamps, node, settings, out, effects)
     print_refusals(node.refusals(), out)
     print_restarts(effects, _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
-        print_periods(outcome.stamps, node, outcome.memory, args.report_every, out)
-    n = save_predictions(outcome.stamps, node, settings.frame_rate, predictions)
+        print_periods(stamps, node, outcome.memory, args.report_every, out)
+    n = save_predictions(stamps, node, settings.frame_rate, predictions)
     print(f'wrote {n} frames to {predictions}', file=out)
     if outcome.interrupted is not None:
         print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped, '
@@ -154,9 +158,11 @@ def _environment(config_dir: Path, domain_id: int | None) -> None:
         os.environ['ROS_DOMAIN_ID'] = str(domain_id)
 
 
-def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, list[Path], list[SyncSet]]:
+def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, list[Path], Future[list[SyncSet]]]:
     """What a --rig run will do: the rig, the run, the runner settings, the parameter files (the
-    template, then --config) and the bag's synchronised sets. ValueError naming what is wrong."""
+    template, then --config) and the bag's synchronised sets, every pass's. Only the bag's first
+    HEAD_S s are read for the cameras' rate: the sets are grouped in a thread (a long recording
+    starts at once). ValueError naming what is wrong (a damaged bag: from the future's result)."""
     rig_path = args.rig.resolve()
     if not rig_path.is_file():
         raise FileNotFoundError(f'--rig: no such file: {args.rig}')
@@ -177,22 +183,19 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     if missing:
         raise ValueError(f'{bag}: no topic {", ".join(missing)} of the rig {args.rig} (the bag has '
                          f'{", ".join(topics)})')
-    stamps = _image_stamps(bag, images)
-    sets = _sets(stamps, images, max_skew, sync_timeout)
-    if not sets:
+    head = _image_stamps(bag, images, summary.first_ns + round(HEAD_S * 1e9))
+    if not head:
         raise ValueError(f'{bag}: no image messages on the rig\'s topics')
-    bag_rate = stamp_rate([[s.members[c.image] for s in sets if c.image in s.members] for c in rig.cameras])
+    bag_rate = stamp_rate([[s.members[c.image] for s in _sets(head, images, max_skew, sync_timeout)
+                            if c.image in s.members] for c in rig.cameras])
     frame_rate = rig_frame_rate(params_list)
     # --rig alone is enough: without a frame_rate of the user's, the bag's cameras give it
     from_bag = not sets_frame_rate(params_list[1:]) and rate_differs(bag_rate, frame_rate)
     if from_bag:
         frame_rate = round(bag_rate, 2)
         max_skew, sync_timeout = rig_sync(params_list, frame_rate)
-        sets = _sets(stamps, images, max_skew, sync_timeout)
-    # later passes: stamps moved on as the player moves them (by its sets in lockstep, else by log time)
-    first, last = (sets[0].stamp_ns, sets[-1].stamp_ns) if args.lockstep else (summary.first_ns, summary.last_ns)
-    n = len(sets)
-    sets += [s.moved(loop_offset_ns(k, first, last), k * n + s.index) for k in range(1, args.loops) for s in sets[:n]]
+    sets = _in_background(partial(_every_set, bag, images, max_skew, sync_timeout, args.loops,
+                                  None if args.lockstep else (summary.first_ns, summary.last_ns)))
     rate = 0.0 if args.lockstep else float(section['rate'] if args.rate is None else args.rate)
     if not (rate > 0 or args.lockstep):
         raise ValueError(f'--rate must be > 0 (or use --lockstep), got {rate:g}')
@@ -203,11 +206,48 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     return rig, run, settings, files, sets
 
 
-def _image_stamps(bag: Path, images: Sequence[str]) -> list[tuple[str, str, int, bytes]]:
-    """The bag's messages on the rig's image topics, each cut to the bytes of its header stamp (all
-    the grouping reads of an image): the bag is read once, however often its sets are grouped, and
-    no image is held meanwhile."""
-    return [(topic, msgtype, log_ns, cdr[:STAMP_END]) for topic, msgtype, log_ns, cdr in read_bag(bag, images)]
+def _image_stamps(bag: Path, images: Sequence[str], until_ns: int | None = None) -> list[tuple[str, str, int, bytes]]:
+    """The bag's messages on the rig's image topics (logged up to until_ns; None: all), each cut to
+    the bytes of its header stamp (all the grouping reads of an image): no image is held."""
+    out = []
+    for topic, msgtype, log_ns, cdr in read_bag(bag, images):
+        if until_ns is not None and log_ns > until_ns:
+            break
+        out.append((topic, msgtype, log_ns, cdr[:STAMP_END]))
+    return out
+
+
+def _every_set(bag: Path, images: Sequence[str], max_skew: float, sync_timeout: float, loops: int,
+               span: tuple[int, int] | None) -> list[SyncSet]:
+    """The bag's synchronised sets, then each later pass's, their stamps moved on as the player
+    moves them: by the bag's log span (span: first, last log ns), or in lockstep (span None) by its
+    sets' span."""
+    sets = _sets(_image_stamps(bag, images), images, max_skew, sync_timeout)
+    first, last = span or (sets[0].stamp_ns, sets[-1].stamp_ns)
+    n = len(sets)
+    return sets + [s.moved(loop_offset_ns(k, first, last), k * n + s.index) for k in range(1, loops) for s in sets]
+
+
+def _stamps_of(sets: Future[list[SyncSet]]) -> Future[list[int]]:
+    """The stamps (ns) of the future's sets, once they are known."""
+    stamps: Future[list[int]] = Future()
+    sets.add_done_callback(lambda done: stamps.set_exception(done.exception()) if done.exception()
+                           else stamps.set_result([s.stamp_ns for s in done.result()]))
+    return stamps
+
+
+def _in_background(work: Callable[[], T]) -> Future[T]:
+    """work() in a daemon thread (an interrupted run does not wait for it), as a future."""
+    future: Future[T] = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(work())
+        except BaseException as exc:  # handed to whoever asks for the result
+            future.set_exception(exc)
+
+    threading.Thread(target=run, name='rig_sets', daemon=True).start()
+    return future
 
 
 def _sets(messages: Sequence[tuple[str, str, int, bytes]], images: Sequence[str], max_skew: float,
@@ -257,7 +297,6 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         print(f'{PROG}: warning: {rate_note}', file=err)
     predictions = Path(settings.predictions)
     log_dir = args.log_dir or predictions.with_name(predictions.stem + '_logs')
-    stamps = [s.stamp_ns for s in sets]
     people = [camera_topic(c.name, PEOPLE2D) for c in rig.cameras]
     watch = _supervision(args, nodes, err, people[0])
     nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
@@ -269,13 +308,19 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
         rate = (f", frame_rate {run.frame_rate:g} Hz from the bag's cameras (no parameter file of yours sets it)"
                 if run.rate_from_bag else '')
-        print(f'{PROG}: {len(sets)} sets of {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, '
-              f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms{rate}, logs in {log_dir}', file=out)
-        outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
+        print(f'{PROG}: {len(rig.cameras)} cameras ({", ".join(rig.names)}) from {run.bag}, {mode}, qos '
+              f'{run.qos}, max_skew {1e3 * run.max_skew:g} ms{rate}, logs in {log_dir}', file=out)
+        # per_loop 0: a rig run prints no memory baseline, only its periods (--report-every)
+        outcome = run_graph(settings, files, nodes, _stamps_of(sets), log_dir, node, executor, '', 0,
                             expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
                             quiet=RATE_QUIET_S, watch=watch)
     if outcome.failure is not None:
         return _failed(outcome, err)
+    if outcome.interrupted is not None and not sets.done():  # no wait for the rest of a long bag's sets
+        print(f'{PROG}: interrupted by {signal.Signals(outcome.interrupted).name}; every node stopped', file=err)
+        return 128 + outcome.interrupted
+    sets = sets.result()
+    stamps = [s.stamp_ns for s in sets]
     moved = count_under_sets(node, {m: s.stamp_ns for s in sets for m in s.members.values()})
     if moved:
         print(f'{moved} sets came out under a later member\'s stamp (their earliest image never reached the '
