@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -51,10 +50,8 @@ def test_share_folder(prefix):
 
 def test_launcher_runs_the_node(prefix, tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(DOMAIN_ID))
-    t0 = time.monotonic()
     proc = subprocess.run([str(prefix / 'lib' / PACKAGE / 'bag_player'), '--ros-args', '-p', 'bag:=/nonexistent'],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=30)
     assert proc.returncode == 2, proc.stderr
-    assert time.monotonic() - t0 < 15
     assert '/nonexistent' in proc.stderr + proc.stdout
     assert 'Traceback' not in proc.stderr

@@ -104,7 +104,8 @@ def test_stop_leaves_nothing_alive(tmp_path):
 
     t0 = time.monotonic()
     codes = group.stop()
-    assert time.monotonic() - t0 < 5.0
+    # SIGINT, SIGTERM after 0.5 s, SIGKILL after 0.5 s more: bounded, whatever a child ignores
+    assert time.monotonic() - t0 < 30.0
     assert [n for n, p in pids.items() if alive(p)] == []
     assert codes['sleeper'] != 0  # ended by the SIGINT (KeyboardInterrupt)
     assert codes['ignores_sigint'] == -signal.SIGTERM
@@ -188,7 +189,7 @@ def _crash(tmp_path, monkeypatch, capsys, domain):
                        '--predictions', str(tmp_path / 'out' / 'p.jsonl'), '--domain-id', str(domain)])
     err = capsys.readouterr().err
     assert code == 1
-    assert time.monotonic() - t0 < 15
+    assert time.monotonic() - t0 < runner.STARTUP_TIMEOUT_S  # on the crash, not after waiting for the graph
     first = [line for line in err.splitlines() if 'error' in line][0]
     assert 'node cam2/heatmap_detector exited with code 1' in first
     assert 'calibration not found: /nowhere.json' in err  # the end of its log
