@@ -127,7 +127,7 @@ def test_a_flood_of_junk_leaves_real_frames_flowing_and_memory_bounded(domain, t
     # fragments, every one of its copies can be lost under load (so it was once in five full-suite
     # runs); test_detector_inputs checks its refusal
     for cause in ('header declares 30000x30000, expected 1032x776',
-                  "frame_id 'intruder' is not this camera", 'not a JPEG or PNG', 'jpeg header declares 16x16'):
+                  "frame_id 'intruder' is not 'cam_1_optical'", 'not a JPEG or PNG', 'jpeg header declares 16x16'):
         assert cause in run.log, cause
     assert 'Traceback' not in run.log
     base = max(run.rss_of('before'))

@@ -85,7 +85,7 @@ def test_onnx_detector_node_turns_images_into_people_and_logs_bad_frames(domain,
     for a, b in zip(mosaic, expected):
         np.testing.assert_allclose(a.keypoints[:, :2], b.keypoints[:, :2], atol=5.0)
     text = log.read_text()
-    assert "stamp 22920000000 ns dropped: frame_id 'cam7' is not this camera ('cam1')" in text
+    assert "stamp 22920000000 ns dropped: frame_id 'cam7' is not 'cam1'; set frame_id: cam7 in the rig file" in text
     assert 'stamp 22960000000 ns dropped: Image size: 320x240, expected 1032x776' in text
     assert "stamp 23000000000 ns dropped: Image encoding: expected one of" in text and "got 'xyz'" in text
 
