@@ -39,6 +39,7 @@ setup(
             'mvpose-graph = mvpose_ros.cli.graph:main',
             'mvpose-images = mvpose_ros.cli.images:main',
             'mvpose-make-bag = mvpose_ros.cli.make_bag:main',
+            'mvpose-record = mvpose_ros.graph.topic_recorder:main',
             'mvpose-render = mvpose_ros.cli.render:main',
         ],
     },

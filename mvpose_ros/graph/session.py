@@ -11,7 +11,8 @@ import os
 import shutil
 import signal
 import sys
-from dataclasses import replace
+import time
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from contextlib import contextmanager
@@ -25,6 +26,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import qos_profile_sensor_data
 
 from msg_adapters.cdr_header import STAMP_END
+from msg_adapters.definitions import message_class
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.association.approximate_sync import rate_differs, stamp_rate
@@ -42,7 +44,9 @@ from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
-from mvpose_ros.topics import OVERLAY, PEOPLE2D, camera_topic
+from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
+from mvpose_ros.nodes.runtime import DATA_QOS, VIEWER_QOS
+from mvpose_ros.topics import CAMERA_INFO, OVERLAY, PEOPLE2D, camera_namespace, camera_topic
 
 PROG = 'mvpose-graph'
 RECORDER_NAME = 'mvpose_graph'
@@ -53,6 +57,8 @@ DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 # rmw_fastrtps takes the history memory policy and publication mode from the profile only with this
 DDS_QOS_FROM_XML_ENV = 'RMW_FASTRTPS_USE_QOS_FROM_XML'
 RATE_QUIET_S = 5.0  # a rig run is over this long after the player's end without output
+RECORD_QUIET_S = 0.2  # --record: the recording is complete once nothing came for this long after the run
+RECORD_DRAIN_S = 2.0  # at most this long
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
@@ -87,10 +93,13 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     watch = _supervision(args, nodes, err)
     nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
     _environment(config.parent, args.domain_id)
-    with _recording(frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
+    cameras = [camera_namespace(c) for c in range(settings.cameras)]
+    record = _record_plan(args, cameras, bag, [camera_topic(c, t) for c in cameras for t in (input_topic, CAMERA_INFO)])
+    with _recording(record, frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, [config, *overrides], nodes, stamps, log_dir, node, executor, input_topic,
                             per_loop, watch=watch)
+    _print_recording(record, out)
     if outcome.failure is not None:
         return _failed(outcome, err)
     effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
@@ -263,7 +272,8 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     files = [*files, write_overrides(nodes, log_dir / 'runner_overrides.yaml')]
     _environment(files[0].parent, args.domain_id)
     overlays = {camera_topic(c.name, OVERLAY): args.overlay / c.name for c in rig.cameras} if args.overlay else {}
-    with _recording(timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
+    record = _record_plan(args, rig.names, Path(run.bag), [t for c in rig.cameras for t in (c.image, c.camera_info)])
+    with _recording(record, timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
                     people_topics=people, watch_topics=_watched(watch), overlay_files=overlays) as (node, executor):
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
         rate = (f", frame_rate {run.frame_rate:g} Hz from the bag's cameras (no parameter file of yours sets it)"
@@ -273,6 +283,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
                             expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
                             quiet=RATE_QUIET_S, watch=watch)
+    _print_recording(record, out)
     if outcome.failure is not None:
         return _failed(outcome, err)
     moved = count_under_sets(node, {m: s.stamp_ns for s in sets for m in s.members.values()})
@@ -303,19 +314,82 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     return _verdict(outcome, problems, settings.timeout, err)
 
 
+@dataclass
+class RecordPlan:
+    """--record: the folder, the topics to write, those among them the run waits for before
+    playing (outputs: with the skeletons reader; inputs: with the camera_info readers), and once
+    recorded, the messages written per topic."""
+
+    folder: Path
+    topics: dict[str, Recorded]
+    outputs: list[str]
+    inputs: list[str]
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+def _record_plan(args: argparse.Namespace, cameras: Sequence[str], bag: Path,
+                 inputs: Sequence[str]) -> RecordPlan | None:
+    """What --record writes: the graph's outputs (with --overlay the overlays) and, with
+    --record-inputs, those of `inputs` (relative or absolute names) that the bag holds, typed as
+    in the bag."""
+    if args.record is None:
+        return None
+    if args.record.exists():
+        raise ValueError(f'--record: {args.record} already exists (a recording goes to a new folder)')
+    topics = recorded_outputs(cameras, overlays=getattr(args, 'overlay', None) is not None)
+    outputs = [t for t, rec in topics.items() if rec.qos is DATA_QOS or rec.qos is VIEWER_QOS]
+    played: list[str] = []
+    if args.record_inputs:
+        held = bag_summary(bag).topics
+        played = [t for t in inputs if '/' + t.lstrip('/') in held]
+        topics |= recorded_inputs({t: message_class(held['/' + t.lstrip('/')][0]) for t in played})
+    return RecordPlan(args.record, topics, outputs, played)
+
+
+def _print_recording(record: RecordPlan | None, out: TextIO) -> None:
+    if record is not None:
+        total = sum(record.counts.values())
+        print(f'recorded {total} messages on {len(record.topics)} topics to {record.folder} (rosbag2, mcap)', file=out)
+
+
+def _drain(executor: SingleThreadedExecutor, writer: TopicRecorder) -> None:
+    """Write what the recorder's readers still hold (the last frames' messages, taken after the
+    run's own readers had theirs): spin until nothing came for RECORD_QUIET_S, RECORD_DRAIN_S at most."""
+    deadline = time.monotonic() + RECORD_DRAIN_S
+    last, quiet_since = -1, time.monotonic()
+    while time.monotonic() < deadline and time.monotonic() - quiet_since < RECORD_QUIET_S:
+        executor.spin_once(timeout_sec=RECORD_QUIET_S / 4)
+        total = sum(writer.counts.values())
+        if total != last:
+            last, quiet_since = total, time.monotonic()
+
+
 @contextmanager
-def _recording(**options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreadedExecutor]]:
+def _recording(record: RecordPlan | None = None,
+               **options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreadedExecutor]]:
     """The recorder node (SkeletonRecorder options) in an rclpy context of its own, with its
-    executor; node and context are destroyed on leaving, what it recorded stays readable."""
+    executor, and with `record` a TopicRecorder beside it whose readers the run waits for; nodes
+    and context are destroyed on leaving (the recording closed), what it recorded stays readable."""
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
+    node = writer = executor = None
     try:
+        if record is not None:
+            writer = TopicRecorder(record.folder, record.topics, context=context)
+            options['also_unmatched'] = lambda inputs: writer.unmatched(record.inputs if inputs else record.outputs)
         node = SkeletonRecorder(RECORDER_NAME, context=context, **options)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
+        if writer is not None:
+            executor.add_node(writer)
         yield node, executor
     finally:
+        if writer is not None:
+            if executor is not None:
+                _drain(executor, writer)
+            writer.close()
+            record.counts = dict(writer.counts)
+            writer.destroy_node()
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
