@@ -25,7 +25,7 @@ setup(
     # (rclpy and the message packages) are the extra 'ros': on a ROS install they come from the
     # distribution (package.xml), where a pip requirement on them could never be met.
     install_requires=['numpy>=1.26', 'scipy>=1.11', 'opencv-python-headless>=4.8', 'onnxruntime>=1.17',
-                      'rosbags~=0.11.9', 'PyYAML>=6', 'numba>=0.60'],
+                      'rosbags~=0.11.9', 'foxglove-sdk~=0.30.3', 'PyYAML>=6', 'numba>=0.60'],
     extras_require={'ros': ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces', 'ros-jazzy-rmw-fastrtps-cpp']},
     zip_safe=True,
     maintainer='mvpose_ros developers',
