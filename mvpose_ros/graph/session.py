@@ -41,7 +41,7 @@ from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, fr
                                      print_restarts, report, restart_effects, rig_prediction_lines,
                                      rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
-from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
+from mvpose_ros.graph.runner import PLAYER, Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
 from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
@@ -50,6 +50,7 @@ from mvpose_ros.topics import CAMERA_INFO, OVERLAY, PEOPLE2D, camera_namespace, 
 
 PROG = 'mvpose-graph'
 RECORDER_NAME = 'mvpose_graph'
+VIEW_NODE = 'foxglove_view'
 # Fast DDS settings beside the parameter file (config/fastdds.xml: a shared-memory segment large
 # enough for the heatmap messages), used by this process and every node unless already chosen.
 DDS_PROFILE = 'fastdds.xml'
@@ -88,6 +89,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     stamps = input_stamps(bag, '/' + camera_topic(0, input_topic), args.loops)
     per_loop = len(stamps) // args.loops
     nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root, args.loops, start_topic=START_TOPIC)
+    nodes = _with_view(nodes, args.foxglove_port)
     _warn_unknown([args.config, *overrides], nodes, err)
 
     watch = _supervision(args, nodes, err)
@@ -120,6 +122,14 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     if settings.dataset == 'shelf' and n:
         score(predictions, [frame_of(s, settings.frame_rate) for s in stamps[:per_loop]], root, out, args.loops)
     return _verdict(outcome, problems, settings.timeout, err)
+
+
+def _with_view(nodes: Sequence[NodeSpec], port: int | None) -> list[NodeSpec]:
+    """With a port, the nodes and the live view (nodes.foxglove_view on that port) before the player."""
+    if port is None:
+        return list(nodes)
+    view = NodeSpec(VIEW_NODE, '', {'port': port})
+    return [n for n in nodes if n.executable != PLAYER] + [view] + [n for n in nodes if n.executable == PLAYER]
 
 
 def _supervision(args: argparse.Namespace, nodes: Sequence[NodeSpec], err: TextIO,
@@ -259,6 +269,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     rig, run, settings, files, sets = rig_run_plan(args)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC, overlay=args.overlay is not None)
+    nodes = _with_view(nodes, args.foxglove_port)
     _warn_unknown(files[1:], nodes, err)
     rate_note = frame_rate_note(run.bag_rate, run.frame_rate)
     if rate_note:
