@@ -15,7 +15,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz')),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz')
+         + glob('config/*.json')),
         (f'share/{PACKAGE}/config/rigs', glob('config/rigs/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.py')),
         # Node launchers, where `ros2 run` looks for a package's executables.
