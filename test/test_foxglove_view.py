@@ -75,6 +75,9 @@ def test_the_view_serves_scene_frusta_images_and_diagnostics_to_clients(domain, 
                 ids = first.wait_channels({SCENE, FRUSTA, DIAG, OVERLAY})
                 assert first.channels[ids[SCENE]]['schemaName'] == 'foxglove.SceneUpdate'
                 assert first.channels[ids[OVERLAY]]['schemaName'] == 'sensor_msgs/msg/CompressedImage'
+                # read only: a client cannot publish into the graph, call services or set parameters
+                assert first.server_info['op'] == 'serverInfo'
+                assert not {'clientPublish', 'services', 'parameters'} & set(first.server_info['capabilities'])
                 # a client that subscribed to nothing costs the graph nothing: no ROS reader yet
                 time.sleep(0.5)  # several of the node's looks at its channels
                 assert [node.count_subscribers(t) for t in ROS_TOPIC.values()] == [0, 0, 0, 0]

@@ -36,6 +36,8 @@ def test_output_topics_name_every_output_and_the_overlays_only_when_asked():
     assert with_overlays['cam0/overlay/compressed'].msg_class is CompressedImage
     # the frusta are published once, transient local: read so, or a late recorder misses them
     assert with_overlays['cameras/markers'].qos is LATCHED_QOS
+    # a run waits for the volatile outputs' readers, not for those sent again or latched
+    assert {t for t, r in with_overlays.items() if not r.wait} == {'cameras/markers', '/diagnostics'}
 
 
 def test_every_message_is_written_and_decodes_to_what_was_sent(domain, tmp_path, shelf_rig):

@@ -45,7 +45,6 @@ from mvpose_ros.graph.runner import PLAYER, Outcome, Supervision, input_stamps, 
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
 from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
-from mvpose_ros.nodes.runtime import DATA_QOS, VIEWER_QOS
 from mvpose_ros.topics import CAMERA_INFO, OVERLAY, PEOPLE2D, camera_namespace, camera_topic
 
 PROG = 'mvpose-graph'
@@ -348,7 +347,7 @@ def _record_plan(args: argparse.Namespace, cameras: Sequence[str], bag: Path,
     if args.record.exists():
         raise ValueError(f'--record: {args.record} already exists (a recording goes to a new folder)')
     topics = recorded_outputs(cameras, overlays=getattr(args, 'overlay', None) is not None)
-    outputs = [t for t, rec in topics.items() if rec.qos is DATA_QOS or rec.qos is VIEWER_QOS]
+    outputs = [t for t, rec in topics.items() if rec.wait]
     played: list[str] = []
     if args.record_inputs:
         held = bag_summary(bag).topics

@@ -57,10 +57,13 @@ SPIN_S = 0.1
 
 @dataclass(frozen=True)
 class Recorded:
-    """One recorded topic: its message class and the QoS it is read with."""
+    """One recorded topic: its message class, the QoS it is read with, and whether a run waits
+    for its reader to have matched the topic's writers before playing (a volatile topic whose
+    first messages would be lost otherwise; not the latched frusta nor /diagnostics, sent again)."""
 
     msg_class: type
     qos: QoSProfile
+    wait: bool = True
 
 
 def recorded_outputs(cameras: Sequence[str], overlays: bool = False) -> dict[str, Recorded]:
@@ -69,8 +72,8 @@ def recorded_outputs(cameras: Sequence[str], overlays: bool = False) -> dict[str
     with `overlays`, each camera's overlay image (cameras: their namespaces, e.g. 'cam0')."""
     topics = {SKELETONS: Recorded(PointCloud2, DATA_QOS), SKELETONS_LIVE: Recorded(PointCloud2, DATA_QOS),
               SKELETONS_DROPPED: Recorded(Header, DATA_QOS), MARKERS: Recorded(MarkerArray, DATA_QOS),
-              CAMERA_MARKERS: Recorded(MarkerArray, LATCHED_QOS),
-              DIAGNOSTICS: Recorded(DiagnosticArray, DIAGNOSTICS_QOS)}
+              CAMERA_MARKERS: Recorded(MarkerArray, LATCHED_QOS, wait=False),
+              DIAGNOSTICS: Recorded(DiagnosticArray, DIAGNOSTICS_QOS, wait=False)}
     if overlays:
         topics |= {camera_topic(c, OVERLAY): Recorded(CompressedImage, VIEWER_QOS) for c in cameras}
     return topics
