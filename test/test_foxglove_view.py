@@ -8,9 +8,12 @@ import re
 import time
 
 import numpy as np
+import pytest
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CompressedImage, PointCloud2
 from std_msgs.msg import Header
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
 
 from msg_adapters.diagnostics_msg import statuses_to_msg
 from msg_adapters.markers import camera_markers
@@ -71,6 +74,9 @@ def test_the_view_serves_scene_frusta_images_and_diagnostics_to_clients(domain, 
             diagnostics = node.create_publisher(type(statuses_to_msg([], header.stamp)), '/diagnostics',
                                                 DIAGNOSTICS_QOS)
             send = Sender(node)
+            # the SDK's server speaks foxglove.sdk.v1 only (docs/visualize.md says so)
+            with pytest.raises(InvalidStatus, match='400'):
+                connect(url, subprotocols=['foxglove.websocket.v1'], open_timeout=10).close()
             with Client(url) as first:
                 ids = first.wait_channels({SCENE, FRUSTA, DIAG, OVERLAY})
                 assert first.channels[ids[SCENE]]['schemaName'] == 'foxglove.SceneUpdate'

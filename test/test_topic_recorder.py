@@ -3,6 +3,9 @@ definitions an independent reader (mcap + mcap-ros2-support) decodes; latched fr
 mvpose-record's command line."""
 from __future__ import annotations
 
+import re
+import signal
+
 import numpy as np
 import pytest
 import yaml
@@ -117,3 +120,15 @@ def test_mvpose_record_topics_of_a_rig_and_of_numbered_cameras(tmp_path, capsys)
     assert topic_recorder.main([str(tmp_path / 'r'), '--cameras', '0']) == 2
     assert '--cameras must be >= 1' in capsys.readouterr().err
     assert set(recorded_inputs({'cam0/camera_info': object})) == {'cam0/camera_info'}
+
+
+def test_mvpose_record_runs_for_its_duration_and_prints_the_counts(domain, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    handler = signal.getsignal(signal.SIGINT)
+    assert topic_recorder.main([str(tmp_path / 'rec'), '--cameras', '1', '--duration', '0.3']) == 0
+    assert signal.getsignal(signal.SIGINT) is handler  # Ctrl-C handling given back
+    out = capsys.readouterr().out
+    assert 'recording 6 topics' in out and re.search(r'\s0\s+/skeletons\n', out)
+    meta = yaml.safe_load((tmp_path / 'rec' / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert meta['storage_identifier'] == 'mcap' and meta['message_count'] == 0

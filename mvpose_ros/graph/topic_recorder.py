@@ -170,9 +170,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'mvpose-record: error: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    stop = []
-    signal.signal(signal.SIGINT, lambda *_: stop.append(1))
-    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    stop: list[int] = []
+    previous = {s: signal.signal(s, lambda *_: stop.append(1)) for s in (signal.SIGINT, signal.SIGTERM)}
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     end = time.monotonic() + args.duration if args.duration > 0 else float('inf')
@@ -189,6 +188,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     return 0
 
 
