@@ -15,7 +15,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz')),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz')
+         + glob('config/*.json')),
         (f'share/{PACKAGE}/config/rigs', glob('config/rigs/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.py')),
         # Node launchers, where `ros2 run` looks for a package's executables.
@@ -25,7 +26,7 @@ setup(
     # (rclpy and the message packages) are the extra 'ros': on a ROS install they come from the
     # distribution (package.xml), where a pip requirement on them could never be met.
     install_requires=['numpy>=1.26', 'scipy>=1.11', 'opencv-python-headless>=4.8', 'onnxruntime>=1.17',
-                      'rosbags~=0.11.9', 'PyYAML>=6', 'numba>=0.60'],
+                      'rosbags~=0.11.9', 'foxglove-sdk~=0.30.3', 'PyYAML>=6', 'numba>=0.60'],
     extras_require={'ros': ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces', 'ros-jazzy-rmw-fastrtps-cpp']},
     zip_safe=True,
     maintainer='mvpose_ros developers',
@@ -39,6 +40,7 @@ setup(
             'mvpose-graph = mvpose_ros.cli.graph:main',
             'mvpose-images = mvpose_ros.cli.images:main',
             'mvpose-make-bag = mvpose_ros.cli.make_bag:main',
+            'mvpose-record = mvpose_ros.graph.topic_recorder:main',
             'mvpose-render = mvpose_ros.cli.render:main',
         ],
     },

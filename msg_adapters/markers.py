@@ -12,19 +12,16 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.skeleton_msg import check_skeletons
-from mvpose_ros.core.evaluation.overlay import person_colour
+from mvpose_ros.core.evaluation.overlay import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
+                                                person_colour)
 from mvpose_ros.core.geometry.body import BONES
 from mvpose_ros.core.geometry.camera import Camera, image_corners
 
-JOINT_DIAMETER_M = 0.06
-BONE_WIDTH_M = 0.03
-MIN_ALPHA = 0.15  # a joint of confidence 0 stays faintly visible; confidence 1 is opaque
 MAX_MARKER_ID = (1 << 31) - 1  # Marker.id is INT32
 _BONE_ENDS = np.array(BONES).ravel()  # (2 * bones,) joint of each LINE_LIST point
 FRUSTUM_DEPTH_M = 0.5  # how far from its centre a camera's frustum is drawn
 MIN_AXIS_COSINE = 0.5  # corners further out than 60 degrees from the axis are drawn at that distance
 CAMERA_RGB = (0.85, 0.85, 0.85)
-TEXT_HEIGHT_M = 0.12
 
 
 def _points(xyz: np.ndarray) -> list[Point]:
@@ -34,11 +31,6 @@ def _points(xyz: np.ndarray) -> list[Point]:
 def _duration(seconds: float) -> Duration:
     ns = round(seconds * 1e9)
     return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def confidence_alpha(confidence: np.ndarray) -> np.ndarray:
-    """Marker alpha (...) in [MIN_ALPHA, 1] of confidences (...) in [0, 1]."""
-    return MIN_ALPHA + (1.0 - MIN_ALPHA) * np.asarray(confidence, dtype=np.float64)
 
 
 def skeleton_markers(ids: np.ndarray, joints: np.ndarray, header: Header, *, confidence: np.ndarray,

@@ -3,6 +3,7 @@
     mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
                  [--predictions FILE] [--domain-id N] [--log-dir DIR]
                  [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S]
+                 [--record DIR [--record-inputs]] [--foxglove-port PORT]
     mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--loops N] [--qos sensor|reliable] [--config FILE]
                  [--predictions FILE] [--ground-truth shelf --frame N] [--domain-id N] [--log-dir DIR]
 
@@ -40,6 +41,14 @@ skeletons), and writes one predictions line per processed set: {"frame": <set in
 "stamp": <ns>, "people": [...]}.
 With --ground-truth shelf --frame N (a bag repeating Shelf frame N, as shelf_rig), every set is
 scored against that frame.
+
+With --record DIR the run's outputs are also written to DIR, a rosbag2 MCAP recording with its
+message definitions (`ros2 bag info DIR`, or open DIR/*.mcap in Foxglove): skeletons,
+skeletons/live, skeletons/dropped, skeletons/markers, cameras/markers, /diagnostics, the overlays
+with --overlay, and with --record-inputs the inputs played; the player starts once the
+recorder's readers have matched, so the first frame is in it (graph.topic_recorder).
+With --foxglove-port PORT the live view node (nodes.foxglove_view) runs beside the graph and
+serves it to the Foxglove app on ws://127.0.0.1:PORT (docs/visualize.md).
 
 The work is done in mvpose_ros.graph: `session` (one run, either kind), `runner` (processes,
 waits, play, collect), `recorder` (the recorder node) and `report` (what is printed).
@@ -96,6 +105,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--respawn-limit', type=int,
                    help=f'--respawn: restarts of one node within {RESPAWN_WINDOW_S:g} s before the run ends '
                         f'(default {RESPAWN_LIMIT})')
+    p.add_argument('--record', type=Path, metavar='DIR',
+                   help='also write the run\'s outputs (skeletons, skeletons/live, markers, camera frusta, '
+                        'diagnostics; the overlays with --overlay) to DIR, a new rosbag2 MCAP recording')
+    p.add_argument('--record-inputs', action='store_true',
+                   help='--record: also the inputs played (each camera\'s detector input and camera_info)')
+    p.add_argument('--foxglove-port', type=int, metavar='PORT',
+                   help='also run the live view: the skeletons, frusta, overlays and diagnostics over Foxglove\'s '
+                        'WebSocket protocol on ws://127.0.0.1:PORT (docs/visualize.md)')
     p.add_argument('--report-every', type=float, metavar='SECONDS',
                    help='also print frames in / out, latency and memory per node by this many s of the run')
     return p
@@ -115,6 +132,10 @@ def _check_arguments(args: argparse.Namespace) -> None:
                          f'got {args.domain_id}')
     if args.report_every is not None and not args.report_every > 0:
         raise ValueError(f'--report-every must be > 0 s, got {args.report_every:g}')
+    if args.foxglove_port is not None and not 0 <= args.foxglove_port <= 65535:
+        raise ValueError(f'--foxglove-port must be in 0-65535, got {args.foxglove_port}')
+    if args.record_inputs and args.record is None:
+        raise ValueError('--record-inputs needs --record')
     if args.rig is None:
         if args.config is None:
             raise ValueError('one of --config (a graph parameter file) or --rig (a rig file) is required')

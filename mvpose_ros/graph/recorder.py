@@ -36,7 +36,7 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
-from typing import AbstractSet, Any, Mapping, Sequence, TextIO
+from typing import AbstractSet, Any, Callable, Mapping, Sequence, TextIO
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -100,7 +100,8 @@ class SkeletonRecorder(Node):
                  frame_rate: float = FRAME_RATE, stream: TextIO | None = None, measure_cameras: int = 0,
                  timing_topics: Sequence[str] = (TIMING_TOPIC,), timing_qos: QoSProfile = DATA_QOS,
                  people_topics: Sequence[str] = (), watch_topics: Sequence[str] = (),
-                 overlay_files: Mapping[str, Path] | None = None) -> None:
+                 overlay_files: Mapping[str, Path] | None = None,
+                 also_unmatched: Callable[[bool], list[str]] | None = None) -> None:
         """timing_topics: camera_info topics a stamp's latency is timed from (read with timing_qos:
         best effort for a player or driver publishing so); people_topics: people2d topics whose
         stamps are kept in `people_stamps` (by the topic as given), with when each stamp's last
@@ -110,7 +111,10 @@ class SkeletonRecorder(Node):
         overlay_files: overlay topic (CompressedImage, the overlay node's) -> folder each of its
         images is written to as <stamp ns>.jpg (their stamps in `overlay_stamps`, None without
         overlay_files; the monotonic s of the last in `last_overlay`); the run waits for these
-        readers to match as for the skeletons'."""
+        readers to match as for the skeletons'; also_unmatched(inputs): readers of another node
+        in this process (a TopicRecorder's) not yet matched, that the run waits for as for this
+        node's own: its output readers (False) with the skeletons', its input readers (True) with
+        the camera_info ones."""
         super().__init__(name, context=context, start_parameter_services=False)
         self.frame_rate = frame_rate
         self.stream = stream
@@ -127,6 +131,7 @@ class SkeletonRecorder(Node):
         self.last_output = 0.0  # monotonic s of the last skeletons message
         self.sizes: dict[str, list[tuple[int, int]]] = {}  # fully qualified topic -> (stamp ns, bytes)
         self._gate: Publisher | None = None
+        self._also_unmatched = also_unmatched or (lambda inputs: [])
         self._infos = [self.create_subscription(CameraInfo, t, self._on_info, timing_qos, raw=True,
                                                 event_callbacks=NO_EVENTS) for t in timing_topics]
         self.people_stamps: dict[str, list[int]] = {t: [] for t in people_topics}
@@ -310,11 +315,11 @@ class SkeletonRecorder(Node):
         """This node's readers of skeletons (and of every measured topic) that have not matched a
         writer yet (bp_solver's, ...), by fully qualified name: once matched, a reader drops
         nothing that writer sends."""
-        return [sub.topic_name for sub in self._outputs if sub.get_publisher_count() == 0]
+        return [sub.topic_name for sub in self._outputs if sub.get_publisher_count() == 0] + self._also_unmatched(False)
 
     def timing_matched(self) -> bool:
         """Whether every camera_info reader of this node has matched a writer (the player's)."""
-        return all(sub.get_publisher_count() > 0 for sub in self._infos)
+        return all(sub.get_publisher_count() > 0 for sub in self._infos) and not self._also_unmatched(True)
 
     def open_gate(self, topic: str = START_TOPIC) -> None:
         """Let a player waiting on `topic` (its start_topic) play: one latched message."""

@@ -12,7 +12,8 @@ import shutil
 import signal
 import sys
 import threading
-from dataclasses import replace
+import time
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from contextlib import contextmanager
@@ -27,6 +28,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import qos_profile_sensor_data
 
 from msg_adapters.cdr_header import STAMP_END
+from msg_adapters.definitions import message_class
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.association.approximate_sync import rate_differs, stamp_rate
@@ -41,13 +43,15 @@ from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, fr
                                      print_periods, print_refusals, print_restarts, report, restart_effects,
                                      rig_prediction_lines, rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
-from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
+from mvpose_ros.graph.runner import PLAYER, Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
-from mvpose_ros.topics import OVERLAY, PEOPLE2D, camera_topic
+from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
+from mvpose_ros.topics import CAMERA_INFO, OVERLAY, PEOPLE2D, camera_namespace, camera_topic
 
 PROG = 'mvpose-graph'
 RECORDER_NAME = 'mvpose_graph'
+VIEW_NODE = 'foxglove_view'
 # Fast DDS settings beside the parameter file (config/fastdds.xml: a shared-memory segment large
 # enough for the heatmap messages), used by this process and every node unless already chosen.
 DDS_PROFILE = 'fastdds.xml'
@@ -57,6 +61,8 @@ DDS_QOS_FROM_XML_ENV = 'RMW_FASTRTPS_USE_QOS_FROM_XML'
 RATE_QUIET_S = 5.0  # a rig run is over this long after the player's end without output
 HEAD_S = 10.0  # s of a rig bag read before the graph starts, for its cameras' rate
 T = TypeVar('T')
+RECORD_QUIET_S = 0.2  # --record: the recording is complete once nothing came for this long after the run
+RECORD_DRAIN_S = 2.0  # at most this long
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
@@ -86,15 +92,19 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     stamps = input_stamps(bag, '/' + camera_topic(0, input_topic), args.loops)
     per_loop = len(stamps) // args.loops
     nodes = graph_nodes(settings.cameras, str(bag), settings.rate, root, args.loops, start_topic=START_TOPIC)
+    nodes = _with_view(nodes, args.foxglove_port)
     _warn_unknown([args.config, *overrides], nodes, err)
 
     watch = _supervision(args, nodes, err)
     nodes = _keeping_ids(nodes, log_dir) if args.respawn else nodes
     _environment(config.parent, args.domain_id)
-    with _recording(frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
+    cameras = [camera_namespace(c) for c in range(settings.cameras)]
+    record = _record_plan(args, cameras, bag, [camera_topic(c, t) for c in cameras for t in (input_topic, CAMERA_INFO)])
+    with _recording(record, frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, [config, *overrides], nodes, stamps, log_dir, node, executor, input_topic,
                             per_loop, watch=watch)
+    _print_recording(record, out)
     if outcome.failure is not None:
         return _failed(outcome, err)
     effects = restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
@@ -116,6 +126,14 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     if settings.dataset == 'shelf' and n:
         score(predictions, [frame_of(s, settings.frame_rate) for s in stamps[:per_loop]], root, out, args.loops)
     return _verdict(outcome, problems, settings.timeout, err)
+
+
+def _with_view(nodes: Sequence[NodeSpec], port: int | None) -> list[NodeSpec]:
+    """With a port, the nodes and the live view (nodes.foxglove_view on that port) before the player."""
+    if port is None:
+        return list(nodes)
+    view = NodeSpec(VIEW_NODE, '', {'port': port})
+    return [n for n in nodes if n.executable != PLAYER] + [view] + [n for n in nodes if n.executable == PLAYER]
 
 
 def _supervision(args: argparse.Namespace, nodes: Sequence[NodeSpec], err: TextIO,
@@ -291,6 +309,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     rig, run, settings, files, sets = rig_run_plan(args)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC, overlay=args.overlay is not None)
+    nodes = _with_view(nodes, args.foxglove_port)
     _warn_unknown(files[1:], nodes, err)
     rate_note = frame_rate_note(run.bag_rate, run.frame_rate)
     if rate_note:
@@ -303,7 +322,8 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     files = [*files, write_overrides(nodes, log_dir / 'runner_overrides.yaml')]
     _environment(files[0].parent, args.domain_id)
     overlays = {camera_topic(c.name, OVERLAY): args.overlay / c.name for c in rig.cameras} if args.overlay else {}
-    with _recording(timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
+    record = _record_plan(args, rig.names, Path(run.bag), [t for c in rig.cameras for t in (c.image, c.camera_info)])
+    with _recording(record, timing_topics=[c.camera_info for c in rig.cameras], timing_qos=qos_profile_sensor_data,
                     people_topics=people, watch_topics=_watched(watch), overlay_files=overlays) as (node, executor):
         mode = 'lockstep' if run.lockstep else f'rate {run.rate:g}'
         rate = (f", frame_rate {run.frame_rate:g} Hz from the bag's cameras (no parameter file of yours sets it)"
@@ -314,6 +334,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         outcome = run_graph(settings, files, nodes, _stamps_of(sets), log_dir, node, executor, '', 0,
                             expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
                             quiet=RATE_QUIET_S, watch=watch)
+    _print_recording(record, out)
     if outcome.failure is not None:
         return _failed(outcome, err)
     if outcome.interrupted is not None and not sets.done():  # no wait for the rest of a long bag's sets
@@ -351,19 +372,82 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     return _verdict(outcome, problems, settings.timeout, err)
 
 
+@dataclass
+class RecordPlan:
+    """--record: the folder, the topics to write, those among them the run waits for before
+    playing (outputs: with the skeletons reader; inputs: with the camera_info readers), and once
+    recorded, the messages written per topic."""
+
+    folder: Path
+    topics: dict[str, Recorded]
+    outputs: list[str]
+    inputs: list[str]
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+def _record_plan(args: argparse.Namespace, cameras: Sequence[str], bag: Path,
+                 inputs: Sequence[str]) -> RecordPlan | None:
+    """What --record writes: the graph's outputs (with --overlay the overlays) and, with
+    --record-inputs, those of `inputs` (relative or absolute names) that the bag holds, typed as
+    in the bag."""
+    if args.record is None:
+        return None
+    if args.record.exists():
+        raise ValueError(f'--record: {args.record} already exists (a recording goes to a new folder)')
+    topics = recorded_outputs(cameras, overlays=getattr(args, 'overlay', None) is not None)
+    outputs = [t for t, rec in topics.items() if rec.wait]
+    played: list[str] = []
+    if args.record_inputs:
+        held = bag_summary(bag).topics
+        played = [t for t in inputs if '/' + t.lstrip('/') in held]
+        topics |= recorded_inputs({t: message_class(held['/' + t.lstrip('/')][0]) for t in played})
+    return RecordPlan(args.record, topics, outputs, played)
+
+
+def _print_recording(record: RecordPlan | None, out: TextIO) -> None:
+    if record is not None:
+        total = sum(record.counts.values())
+        print(f'recorded {total} messages on {len(record.topics)} topics to {record.folder} (rosbag2, mcap)', file=out)
+
+
+def _drain(executor: SingleThreadedExecutor, writer: TopicRecorder) -> None:
+    """Write what the recorder's readers still hold (the last frames' messages, taken after the
+    run's own readers had theirs): spin until nothing came for RECORD_QUIET_S, RECORD_DRAIN_S at most."""
+    deadline = time.monotonic() + RECORD_DRAIN_S
+    last, quiet_since = -1, time.monotonic()
+    while time.monotonic() < deadline and time.monotonic() - quiet_since < RECORD_QUIET_S:
+        executor.spin_once(timeout_sec=RECORD_QUIET_S / 4)
+        total = sum(writer.counts.values())
+        if total != last:
+            last, quiet_since = total, time.monotonic()
+
+
 @contextmanager
-def _recording(**options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreadedExecutor]]:
+def _recording(record: RecordPlan | None = None,
+               **options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreadedExecutor]]:
     """The recorder node (SkeletonRecorder options) in an rclpy context of its own, with its
-    executor; node and context are destroyed on leaving, what it recorded stays readable."""
+    executor, and with `record` a TopicRecorder beside it whose readers the run waits for; nodes
+    and context are destroyed on leaving (the recording closed), what it recorded stays readable."""
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
+    node = writer = executor = None
     try:
+        if record is not None:
+            writer = TopicRecorder(record.folder, record.topics, context=context)
+            options['also_unmatched'] = lambda inputs: writer.unmatched(record.inputs if inputs else record.outputs)
         node = SkeletonRecorder(RECORDER_NAME, context=context, **options)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
+        if writer is not None:
+            executor.add_node(writer)
         yield node, executor
     finally:
+        if writer is not None:
+            if executor is not None:
+                _drain(executor, writer)
+            writer.close()
+            record.counts = dict(writer.counts)
+            writer.destroy_node()
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
