@@ -57,10 +57,11 @@ from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
 from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
 from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
                                                    load_session)
+from mvpose_ros.core.detection.single_person import SINGLE_POSE, SinglePoseModel
 from mvpose_ros.core.detection.tracked_crops import carried_ears, people_region
 from mvpose_ros.core.types import Person2D
 
-MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
+MODELS = tuple(EFFICIENTPOSE) + tuple(SINGLE_POSE)  # 'rt', 'i', then the single-person keypoint models
 HEATMAP_SOURCES = ('efficientpose', 'multipose', 'fused')
 # EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])
 _MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
@@ -106,6 +107,7 @@ class OnnxDetectorConfig:
 
     model_dir: Path
     model: str = 'rt'
+    crop_workers: int = 1
     providers: tuple[str, ...] = DEFAULT_PROVIDERS
     threads: int = 0
     input_size: int = 384
@@ -133,8 +135,13 @@ class OnnxDetectorConfig:
             problems.append(f'input_size {self.input_size} is not a positive multiple of 32')
         if self.threads < 0 or self.max_batch < 0:
             problems.append(f'threads {self.threads} and max_batch {self.max_batch} must be >= 0')
+        if self.heatmaps == 'fused' and self.model in SINGLE_POSE:
+            problems.append(f"heatmaps 'fused' needs an EfficientPose model ({', '.join(EFFICIENTPOSE)}), "
+                            f'not {self.model!r}')
         if self.multipose_workers < 1:
             problems.append(f'multipose_workers {self.multipose_workers} must be >= 1')
+        if self.crop_workers < 1:
+            problems.append(f'crop_workers {self.crop_workers} must be >= 1')
         if not 0 <= self.tile_levels <= 4:
             problems.append(f'tile_levels {self.tile_levels} must lie in 0..4')
         if not (self.box_margin >= 0 and self.region_margin >= 0):
@@ -218,11 +225,16 @@ class OnnxPoseDetector:
         providers = check_providers(config.providers)
         model_dir = Path(config.model_dir)
         self._multipose = load_session(model_dir / MULTIPOSE.file, MULTIPOSE, providers, config.threads)
-        self._spec = EFFICIENTPOSE[config.model]
-        self._efficientpose = (None if config.heatmaps == 'multipose' else
-                               load_session(model_dir / self._spec.file, self._spec, providers, config.threads))
+        crops = config.heatmaps != 'multipose'
+        self._spec = EFFICIENTPOSE.get(config.model)
+        self._efficientpose = (load_session(model_dir / self._spec.file, self._spec, providers, config.threads)
+                               if crops and self._spec is not None else None)
+        self._single = (SinglePoseModel(model_dir, config.model, providers, config.threads, config.crop_workers)
+                        if crops and self._spec is None else None)
+        self._crop_side = self._spec.input_side if self._spec is not None else SINGLE_POSE[config.model].side
         # those onnxruntime actually uses
-        self.providers = tuple((self._efficientpose or self._multipose).get_providers())
+        crop_session = self._single.session if self._single is not None else self._efficientpose
+        self.providers = tuple((crop_session or self._multipose).get_providers())
         self.timing = DetectionTiming()
         self._pool = ThreadPoolExecutor(config.multipose_workers) if config.multipose_workers > 1 else None
         self._free_workers = threading.Semaphore(config.multipose_workers)
@@ -325,7 +337,7 @@ class OnnxPoseDetector:
         finds = iter(found_all)
         t0 = time.perf_counter()
         crops: list[_Crop] = []
-        side = self._spec.input_side
+        side = self._crop_side
         out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
         # heatmaps 'multipose': per camera its people's keypoints (P, 16, 3) and Gaussian stds (P,)
         alone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -342,17 +354,27 @@ class OnnxPoseDetector:
                 keypoints: list[np.ndarray | None] = list(inference)
                 given = found.boxes
             else:
-                keypoints, sigmas = [None] * len(given), np.zeros(len(given))
+                given = np.asarray(given, dtype=np.float64).reshape(-1, 4)
+                keypoints, sigmas = [None] * len(given), cfg.keypoint_sigma * np.hypot(*(given[:, 2:] - given[:, :2]).T)
             grown = _grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
             for box, kp, sigma in zip(grown, keypoints, sigmas):
                 crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side, pending.turns[c]), kp,
                                    float(sigma)))
         t1 = time.perf_counter()
-        maps = self._heatmaps(images, crops)
-        t2 = time.perf_counter()
+        if self._single is not None:
+            found = self._single.run(np.stack([c.box.apply(images[c.camera])[..., ::-1] for c in crops])
+                                     if crops else np.zeros((0, side, side, 3), dtype=np.uint8))
+            t2 = time.perf_counter()
+            for crop, coco in zip(crops, found.keypoints):
+                out[crop.camera] += keypoint_people(self._crop_keypoints(crop.box, coco)[None],
+                                                    np.array([crop.sigma]), cfg.stride)
+            maps = np.zeros((0,))
+        else:
+            maps = self._heatmaps(images, crops)
+            t2 = time.perf_counter()
         for c, (inference, sigmas) in alone.items():
             out[c] = keypoint_people(inference, sigmas, cfg.stride)
-        for crop, raw in zip(crops, maps):
+        for crop, raw in zip(crops if self._single is None else [], maps):
             before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
             person = self._person(crop, raw, before)
             if person is not None:
@@ -417,6 +439,17 @@ class OnnxPoseDetector:
         keep = ordered & ((boxes[:, 2:] > bounds[:2]) & (boxes[:, :2] < bounds[2:])).all(axis=1)
         return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), bounds,
                       time.perf_counter()), full
+
+    def _crop_keypoints(self, lb: Letterbox, coco: np.ndarray) -> np.ndarray:
+        """A single-person model's COCO-17 keypoints (17, 3) in its input's pixels as the inference
+        joints (16, 3) in the image's: those scoring below min_joint_score or outside the crop's
+        region (in its letterbox padding) missing, the ears too without `ears`."""
+        coco = np.concatenate([lb.to_image(coco[:, :2]), coco[:, 2:]], axis=1)
+        coco[(coco[:, 2] < self.config.min_joint_score) | ~lb.contains(coco[:, :2])] = (np.nan, np.nan, 0.0)
+        keypoints = to_inference(coco, 'coco17')
+        if not self.config.ears:
+            keypoints[list(_EARS)] = (np.nan, np.nan, 0.0)
+        return keypoints
 
     def _inference_keypoints(self, coco: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         """MultiPose's COCO keypoints (P, 17, 3) as inference joints (P, 16, 3): those scoring below
