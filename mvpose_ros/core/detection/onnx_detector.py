@@ -21,7 +21,14 @@ the dataset's bottom and top of the head. MPII has no ears: with `ears`, the r_e
 inference joints come from MultiPose's COCO ears (keypoint, and a Gaussian of std `sigma` px as
 their map), which the 'anatomical' head model needs.
 
-Heatmap source (`heatmaps`): 'efficientpose' as above. 'multipose', the default (on the Shelf
+Crop model (`model`): EfficientPose 'rt' or 'i' as above, or a single-person keypoint model
+(single_person.SINGLE_POSE: MoveNet 'lightning' / 'thunder', 'blazepose_full' / 'blazepose_heavy'):
+each crop's COCO-17 keypoints as inference joints (body.to_inference 'coco17', its own ears),
+each rendered as a Gaussian of std `keypoint_sigma` times the diagonal of the crop's box (MultiPose's
+or the given one) with its score as peak, as with heatmaps 'multipose'; their batch axis is fixed
+at 1, so crops run one per run, `crop_workers` at once.
+
+Heatmap source (`heatmaps`): 'efficientpose', the crop model as above. 'multipose', the default (on the Shelf
 frame-572 images closer for every annotated actor with all five cameras, and on average with four
 of them in 4 of 5 cases, in about a third of the time): EfficientPose is not loaded; each person's
 16 inference joints are MultiPose's own COCO keypoints (body.to_inference 'coco17': limbs
@@ -86,24 +93,26 @@ TILE_SHARE = 0.625
 
 @dataclass(frozen=True)
 class OnnxDetectorConfig:
-    """model_dir: folder of the .onnx files (<data root>/models). model: EfficientPose 'rt'
-    (224 px crops) or 'i' (256 px). providers: onnxruntime execution providers in order of
-    preference; threads: intra-op threads per session (0 = one per core). input_size: MultiPose's
-    square input side (a multiple of 32). box_margin: each side of a MultiPose box grows by this
-    fraction of the box's width (height) before the crop. min_person_score: MultiPose people below
-    it are dropped. min_joint_score, heatmap_floor, stride: see the module docstring. ears: fill the
-    ear joints from MultiPose's COCO ears, rendered as Gaussians of std sigma px. max_batch:
-    EfficientPose crops per run (0 = all crops of a set in one run): on two CPU cores runs of 1 to 4
-    crops were as fast as one run of a set's 19 (the larger batch's tensors leave the cache); a GPU
-    gains from 0. heatmaps: one of HEATMAP_SOURCES, see the module docstring; keypoint_sigma: the
-    std of the Gaussians of MultiPose's keypoints there, as a fraction of the person's box
-    diagonal. multipose_workers: images of a set MultiPose runs on at once, each run with `threads`
-    intra-op threads: on two CPU cores two workers of threads 1 took 0.8x the time of one worker of
-    threads 0 (one run keeps both cores busy only part of the time). region_margin: with heatmaps
-    'multipose' and given boxes, each box grows by this fraction of its size before MultiPose
-    searches the region holding them all (tracked_crops.people_region). tile_levels: a MultiPose run
-    that comes back full (6 people, all scoring min_person_score) is repeated on two overlapping
-    halves of the part it searched, down to this many levels (0: never; see the module docstring)."""
+    """model_dir: folder of the .onnx files (<data root>/models). model: the crop model, one of MODELS:
+    EfficientPose 'rt' (224 px crops) or 'i' (256 px), or a single-person keypoint model (see the
+    module docstring); crop_workers: crops those run at once. providers: onnxruntime execution
+    providers in order of preference; threads: intra-op threads per session (0 = one per core).
+    input_size: MultiPose's square input side (a multiple of 32). box_margin: each side of a
+    MultiPose box grows by this fraction of the box's width (height) before the crop.
+    min_person_score: MultiPose people below it are dropped. min_joint_score, heatmap_floor, stride:
+    see the module docstring. ears: fill the ear joints from MultiPose's COCO ears, rendered as
+    Gaussians of std sigma px. max_batch: EfficientPose crops per run (0 = all crops of a set in one
+    run): on two CPU cores runs of 1 to 4 crops were as fast as one run of a set's 19 (the larger
+    batch's tensors leave the cache); a GPU gains from 0. heatmaps: one of HEATMAP_SOURCES, see the
+    module docstring; keypoint_sigma: the std of the Gaussians of MultiPose's keypoints there, as a
+    fraction of the person's box diagonal. multipose_workers: images of a set MultiPose runs on at
+    once, each run with `threads` intra-op threads: on two CPU cores two workers of threads 1 took
+    0.8x the time of one worker of threads 0 (one run keeps both cores busy only part of the time).
+    region_margin: with heatmaps 'multipose' and given boxes, each box grows by this fraction of its
+    size before MultiPose searches the region holding them all (tracked_crops.people_region).
+    tile_levels: a MultiPose run that comes back full (6 people, all scoring min_person_score) is
+    repeated on two overlapping halves of the part it searched, down to this many levels (0: never;
+    see the module docstring)."""
 
     model_dir: Path
     model: str = 'rt'
@@ -361,24 +370,23 @@ class OnnxPoseDetector:
                 crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side, pending.turns[c]), kp,
                                    float(sigma)))
         t1 = time.perf_counter()
-        if self._single is not None:
+        if self._single is not None:  # a single-person keypoint model: its keypoints as Gaussians
             found = self._single.run(np.stack([c.box.apply(images[c.camera])[..., ::-1] for c in crops])
                                      if crops else np.zeros((0, side, side, 3), dtype=np.uint8))
             t2 = time.perf_counter()
             for crop, coco in zip(crops, found.keypoints):
                 out[crop.camera] += keypoint_people(self._crop_keypoints(crop.box, coco)[None],
                                                     np.array([crop.sigma]), cfg.stride)
-            maps = np.zeros((0,))
         else:
             maps = self._heatmaps(images, crops)
             t2 = time.perf_counter()
+            for crop, raw in zip(crops, maps):
+                before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
+                person = self._person(crop, raw, before)
+                if person is not None:
+                    out[crop.camera].append(person)
         for c, (inference, sigmas) in alone.items():
             out[c] = keypoint_people(inference, sigmas, cfg.stride)
-        for crop, raw in zip(crops if self._single is None else [], maps):
-            before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
-            person = self._person(crop, raw, before)
-            if person is not None:
-                out[crop.camera].append(person)
         for c in {crop.camera for crop in crops}:
             out[c] = without_duplicates(out[c])
         end = time.perf_counter()
