@@ -1,7 +1,8 @@
 """`mvpose-images`: 3D skeletons from one synchronised set of camera images of a calibrated rig.
 
     mvpose-images (--rig FILE | --calibration FILE) --images CAM0 CAM1 ... [--output DIR] [--frame N]
-                  [--model rt|i] [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
+                  [--model rt|i|lightning|thunder|blazepose_full|blazepose_heavy] [--crop-workers W]
+                  [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
                   [--sets N] [--person-detector-every K] [--max-batch B] [--threads T]
                   [--heatmaps efficientpose|multipose|fused] [--keypoint-sigma F] [--multipose-workers W]
 
@@ -26,7 +27,9 @@ first). With --person-detector-every K, MultiPose searches the whole image of ev
 in the sets between, the previous set's 3D skeletons projected into each camera say where its
 people are (core.tracked_crops; a set then starts once the one before is solved): with --heatmaps
 multipose MultiPose searches only the region around them, with a smaller input at the same scale;
-with efficientpose they are EfficientPose's crops and MultiPose does not run. The files written and
+with efficientpose they are the crops of the crop model (--model: EfficientPose, or a
+single-person keypoint model; docs/crop_models.md) and MultiPose does not run (but on a camera
+where it last found someone the skeletons do not explain). The files written and
 the score are those of the last set.
 
 --heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
