@@ -37,7 +37,7 @@ def test_frame_572_finds_the_three_annotated_actors(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0
     # the set's line: each stage's time, each camera's people
-    assert re.search(r'set 0: MultiPose on 5 images +[0-9.]+ ms, EfficientPose \d+ people +[0-9.]+ ms, heatmaps '
+    assert re.search(r'set 0: MultiPose on 5 images +[0-9.]+ ms, crop model \d+ people +[0-9.]+ ms, heatmaps '
                      r'+[0-9.]+ ms, association and 3D +[0-9.]+ ms, total +[0-9.]+ ms; people cam0:\d cam1:\d cam2:\d '
                      r'cam3:\d cam4:\d; \d in 3D', out), out
     found = re.findall(r'Actor (\d): found, MPJPE ([0-9.]+) mm, PCP strict ([0-9.]+)%', out)
@@ -64,7 +64,7 @@ def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
                         '--output', str(tmp_path), '--sets', '3', '--person-detector-every', '3',
                         '--heatmaps', 'efficientpose']) == 0
     out = capsys.readouterr().out
-    sets = re.findall(r'set (\d): MultiPose on (\d) images +([0-9.]+) ms, EfficientPose (\d+) people +([0-9.]+) ms.*'
+    sets = re.findall(r'set (\d): MultiPose on (\d) images +([0-9.]+) ms, crop model (\d+) people +([0-9.]+) ms.*'
                       r'MPJPE actor 1 ([0-9.]+) mm, actor 3 ([0-9.]+) mm, actor 4 ([0-9.]+) mm', out)
     assert [(s[0], s[1]) for s in sets] == [('0', '5'), ('1', '0'), ('2', '0')], out
     # the four people of the scene in every set: no crop's duplicate of a person kept (it came back
@@ -73,7 +73,7 @@ def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
     for s in sets[1:]:
         assert float(s[2]) < 0.1 * float(s[4])  # no MultiPose: a small fraction of EfficientPose's time
         assert int(s[3]) >= 12 and all(float(m) < MPJPE_BOUND_MM for m in s[5:])
-    assert re.search(r'median of 3 sets: MultiPose [0-9.]+ ms, EfficientPose [0-9.]+ ms, heatmaps [0-9.]+ ms, '
+    assert re.search(r'median of 3 sets: MultiPose [0-9.]+ ms, crop model [0-9.]+ ms, heatmaps [0-9.]+ ms, '
                      r'association and 3D [0-9.]+ ms, total [0-9.]+ ms; [0-9.]+ sets/s', out), out
 
 
@@ -100,7 +100,7 @@ def test_the_default_heatmaps_multipose_keypoints_score_frame_572_without_effici
                         '--output', str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert 'heatmaps MultiPose keypoints' in out
-    (line,) = re.findall(r'set 0: MultiPose on 5 images +([0-9.]+) ms, EfficientPose (\d+) people +([0-9.]+) ms.*'
+    (line,) = re.findall(r'set 0: MultiPose on 5 images +([0-9.]+) ms, crop model (\d+) people +([0-9.]+) ms.*'
                          r'MPJPE actor 1 ([0-9.]+) mm, actor 3 ([0-9.]+) mm, actor 4 ([0-9.]+) mm', out)
     assert int(line[1]) >= 12 and float(line[2]) < 0.05 * float(line[0]), out  # EfficientPose does not run
     assert all(float(m) < b for m, b in zip(line[3:], (60.0, 60.0, 125.0))), out

@@ -303,9 +303,11 @@ def test_the_first_set_waits_for_a_camera_info_taken_just_after_its_images(domai
 
 
 def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_project(domain, tmp_path):
-    """person_detector_every 2: the first set is searched whole (no skeletons yet); then a skeleton
-    on skeletons/live standing where nobody is (2.5 m, 0 m: shelves in all three cameras) makes the
-    next set search only around it, where MultiPose finds no one; the set after is whole again."""
+    """person_detector_every 3: the first set is searched whole (no skeletons yet); then a skeleton
+    on skeletons/live standing where nobody is (2.5 m, 0 m: shelves in all three cameras) explains
+    none of the people the first set found, so the next set searches the whole images again
+    (tracked_crops: a camera holding someone no skeleton explains) and finds them again, as does
+    the third. Without that rule the second set searched only around the skeleton and found no one."""
     names = ['left', 'middle', 'right']
     rig = tmp_path / 'rig.yaml'
     _explicit_rig(rig, names, [True] * 3, [True] * 3)
@@ -320,7 +322,7 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
         live = node.create_publisher(PointCloud2, '/rig/skeletons/live', DATA_QOS)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
                           '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', '-p', 'sync_timeout:=20.0',
-                          '-p', 'person_detector_every:=2', *overrides)
+                          '-p', 'person_detector_every:=3', *overrides)
         try:
             assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs + [live]), 30.0)
             for k, stamp in enumerate(stamps):
@@ -335,7 +337,7 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
         finally:
             stop(proc)
     people = [[len(msg_to_people(o[s][0])) for o in out] for s in stamps]
-    assert min(people[0]) >= 2 and people[1] == [0, 0, 0] and people[2] == people[0], people
+    assert min(people[0]) >= 2 and people[1] == people[0] and people[2] == people[0], people
     assert 'Traceback' not in log.read_text()
 
 

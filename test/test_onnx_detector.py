@@ -304,13 +304,16 @@ def test_a_file_that_is_not_onnx_is_a_clear_error(tmp_path):
 
 
 @pytest.mark.parametrize('changes, message', [
-    ({'model': 'xl'}, "model 'xl' is not one of rt, i"),
+    ({'model': 'xl'}, "model 'xl' is not one of rt, i, lightning, thunder, blazepose_full, blazepose_heavy"),
     ({'input_size': 100}, 'input_size 100 is not a positive multiple of 32'),
     ({'stride': 0.0}, 'stride 0.0 and sigma 6.0 must be > 0'),
     ({'heatmap_floor': 1.0}, r'heatmap_floor 1.0 in \[0, 1\)'),
     ({'heatmaps': 'openpose'}, "heatmaps 'openpose' is not one of efficientpose, multipose, fused"),
     ({'keypoint_sigma': 0.0}, 'keypoint_sigma 0.0 must be > 0'),
     ({'multipose_workers': 0}, 'multipose_workers 0 must be >= 1'),
+    ({'crop_workers': 0}, 'crop_workers 0 must be >= 1'),
+    ({'heatmaps': 'fused', 'model': 'thunder'},
+     r"heatmaps 'fused' needs an EfficientPose model \(rt, i\), not 'thunder'"),
     ({'region_margin': -0.1}, 'box_margin 0.1 and region_margin -0.1 must be >= 0'),
     ({'tile_levels': 5}, 'tile_levels 5 must lie in 0..4'),
 ])

@@ -1,7 +1,8 @@
 """`mvpose-images`: 3D skeletons from one synchronised set of camera images of a calibrated rig.
 
     mvpose-images (--rig FILE | --calibration FILE) --images CAM0 CAM1 ... [--output DIR] [--frame N]
-                  [--model rt|i] [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
+                  [--model rt|i|lightning|thunder|blazepose_full|blazepose_heavy] [--crop-workers W]
+                  [--head-model anatomical|direct] [--ground-truth shelf] [--data-root DIR]
                   [--sets N] [--person-detector-every K] [--max-batch B] [--threads T]
                   [--heatmaps efficientpose|multipose|fused] [--keypoint-sigma F] [--multipose-workers W]
 
@@ -26,7 +27,9 @@ first). With --person-detector-every K, MultiPose searches the whole image of ev
 in the sets between, the previous set's 3D skeletons projected into each camera say where its
 people are (core.tracked_crops; a set then starts once the one before is solved): with --heatmaps
 multipose MultiPose searches only the region around them, with a smaller input at the same scale;
-with efficientpose they are EfficientPose's crops and MultiPose does not run. The files written and
+with efficientpose they are the crops of the crop model (--model: EfficientPose, or a
+single-person keypoint model; docs/crop_models.md) and MultiPose does not run (but on a camera
+where it last found someone the skeletons do not explain). The files written and
 the score are those of the last set.
 
 --heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
@@ -85,7 +88,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--frame', type=int, default=0, help='frame number written with the skeletons (default: 0)')
     p.add_argument('--data-root', help='folder holding data/ and models/ (default: $MVPOSE_DATA_ROOT or ../shared)')
     p.add_argument('--models', type=Path, help='folder of the .onnx files (default: <data root>/models)')
-    p.add_argument('--model', choices=MODELS, default=DEFAULTS.model, help='EfficientPose variant (default: rt)')
+    p.add_argument('--model', choices=MODELS, default=DEFAULTS.model,
+                   help='the model on each person crop (--heatmaps efficientpose or fused): EfficientPose rt or i '
+                        '(heatmaps), or a single-person keypoint model, MoveNet lightning or thunder, BlazePose '
+                        f'blazepose_full or blazepose_heavy (keypoints as Gaussians; docs/crop_models.md) '
+                        f'(default: {DEFAULTS.model})')
+    p.add_argument('--crop-workers', type=int, default=DEFAULTS.crop_workers,
+                   help='single-person keypoint models: crops run at once, each with --threads intra-op threads '
+                        f'(default: {DEFAULTS.crop_workers})')
     p.add_argument('--providers', nargs='+', default=list(DEFAULTS.providers),
                    help='onnxruntime execution providers (default: CPUExecutionProvider)')
     p.add_argument('--input-size', type=int, default=DEFAULTS.input_size,
@@ -203,6 +213,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     models = args.models or data_root(args.data_root) / 'models'
     detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
                                                    threads=args.threads, input_size=args.input_size,
+                                                   crop_workers=args.crop_workers,
                                                    stride=args.stride, ears=args.ears, max_batch=args.max_batch,
                                                    keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps,
                                                    multipose_workers=args.multipose_workers,
@@ -231,7 +242,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         results = stage.push(args.frame + n, people) + stage.flush()
         result = replace(results[0], frame=args.frame) if results else nobody
         planner.update(plan, people)
-        planner.skeletons(result.joints)
+        planner.skeletons(result.joints, np.asarray(result.person_ids))
         end = time.perf_counter()
         t = detector.timing
         times.append((t.multipose, t.efficientpose, t.heatmaps, end - detected, end - pending.started))
@@ -239,13 +250,13 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         scored = f'; MPJPE {_mpjpe(result, gt)}' if gt is not None else ''
         regions = f' ({t.multipose_regions} regions)' if t.multipose_regions else ''
         regions += f' (+{t.crowd_tiles} crowd tiles)' if t.crowd_tiles else ''
-        print(f'set {n}: MultiPose on {t.multipose_runs} images{regions} {1e3 * t.multipose:6.1f} ms, EfficientPose '
+        print(f'set {n}: MultiPose on {t.multipose_runs} images{regions} {1e3 * t.multipose:6.1f} ms, crop model '
               f'{t.people} people {1e3 * t.efficientpose:6.1f} ms, heatmaps {1e3 * t.heatmaps:5.1f} ms, '
               f'association and 3D {1e3 * (end - detected):5.1f} ms, total {1e3 * times[-1][4]:6.1f} ms; people '
               f'{found}; {len(result.person_ids)} in 3D{scored}', file=out)
     if args.sets > 1:
         median = 1e3 * np.median(np.array(times), axis=0)
-        print(f'median of {args.sets} sets: MultiPose {median[0]:.1f} ms, EfficientPose {median[1]:.1f} ms, heatmaps '
+        print(f'median of {args.sets} sets: MultiPose {median[0]:.1f} ms, crop model {median[1]:.1f} ms, heatmaps '
               f'{median[2]:.1f} ms, association and 3D {median[3]:.1f} ms, total {median[4]:.1f} ms; '
               f'{args.sets / (time.perf_counter() - first):.2f} sets/s', file=out)
 

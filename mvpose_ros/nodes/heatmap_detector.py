@@ -219,8 +219,10 @@ class HeatmapDetectorNode(Node):
                   'fused per limb joint'),
             Param('keypoint_sigma', onnx.keypoint_sigma, "onnx, heatmaps multipose or fused: std of the Gaussians of "
                   "MultiPose's keypoints, as a fraction of the person's box diagonal", 0.001, 1.0),
-            Param('model', onnx.model, f'onnx: EfficientPose variant, {" or ".join(MODELS)} (<data_root>/models/'
-                  'efficientpose_<model>.onnx)'),
+            Param('model', onnx.model, f'onnx: the model on each person crop, {" or ".join(MODELS)}: EfficientPose '
+                  '(rt, i: heatmaps) or a single-person keypoint model (MoveNet, BlazePose; docs/crop_models.md)'),
+            Param('crop_workers', onnx.crop_workers, 'onnx, single-person keypoint models: crops run at once, each '
+                  'with `threads` intra-op threads', 1, 64),
             Param('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
             Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
             Param('max_batch', onnx.max_batch, 'onnx: EfficientPose crops per run (0 = all crops of a set in one run, '
@@ -299,7 +301,8 @@ class HeatmapDetectorNode(Node):
             self._cameras.append(cam)
         if self._whole_rig:
             self._planner: CropPlanner | None = None
-            self._tracked: tuple[int, np.ndarray] | None = None  # (stamp ns, joints (P, 14, 3)) of the newest skeletons
+            # (stamp ns, joints (P, 14, 3), ids (P,)) of the newest skeletons
+            self._tracked: tuple[int, np.ndarray, np.ndarray] | None = None
             if self._backend == 'onnx' and p['person_detector_every'] > 1:
                 self._planner = CropPlanner([c.camera for c in self._cameras], p['person_detector_every'])
                 self.create_subscription(PointCloud2, in_namespace(namespace, SKELETONS_LIVE), self._on_skeletons,
@@ -382,6 +385,7 @@ class HeatmapDetectorNode(Node):
                 min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
                 ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'], heatmaps=p['heatmaps'],
                 keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'],
+                crop_workers=p['crop_workers'],
                 region_margin=p['region_margin'], tile_levels=p['tile_levels'])
             return OnnxPoseDetector(config)
         except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
@@ -699,7 +703,7 @@ class HeatmapDetectorNode(Node):
             self._log.log(('skeletons', 'malformed'), f'skeletons/live stamp {stamp_ns(msg.header.stamp)} ns: {exc}; '
                           f'not used to plan the next regions', 'error')
             return
-        self._tracked = (stamp_ns(msg.header.stamp), skeletons.joints)
+        self._tracked = (stamp_ns(msg.header.stamp), skeletons.joints, skeletons.ids)
 
     def _plan(self, stamp: int) -> list[np.ndarray | None] | None:
         """With person_detector_every > 1, per camera None (MultiPose on the whole image) or where
@@ -710,7 +714,7 @@ class HeatmapDetectorNode(Node):
         tracked = self._tracked
         fresh = tracked is not None and (stamp - tracked[0]) / 1e9 <= TRACK_MAX_AGE_S
         self._planner.cameras = [cam.camera for cam in self._cameras]
-        self._planner.skeletons(tracked[1] if fresh else np.zeros((0, NUM_JOINTS, 3)))
+        self._planner.skeletons(*(tracked[1:] if fresh else (np.zeros((0, NUM_JOINTS, 3)), None)))
         return self._planner.plan()
 
     def destroy_node(self) -> None:

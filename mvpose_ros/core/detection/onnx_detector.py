@@ -21,7 +21,14 @@ the dataset's bottom and top of the head. MPII has no ears: with `ears`, the r_e
 inference joints come from MultiPose's COCO ears (keypoint, and a Gaussian of std `sigma` px as
 their map), which the 'anatomical' head model needs.
 
-Heatmap source (`heatmaps`): 'efficientpose' as above. 'multipose', the default (on the Shelf
+Crop model (`model`): EfficientPose 'rt' or 'i' as above, or a single-person keypoint model
+(single_person.SINGLE_POSE: MoveNet 'lightning' / 'thunder', 'blazepose_full' / 'blazepose_heavy'):
+each crop's COCO-17 keypoints as inference joints (body.to_inference 'coco17', its own ears),
+each rendered as a Gaussian of std `keypoint_sigma` times the diagonal of the crop's box (MultiPose's
+or the given one) with its score as peak, as with heatmaps 'multipose'; their batch axis is fixed
+at 1, so crops run one per run, `crop_workers` at once.
+
+Heatmap source (`heatmaps`): 'efficientpose', the crop model as above. 'multipose', the default (on the Shelf
 frame-572 images closer for every annotated actor with all five cameras, and on average with four
 of them in 4 of 5 cases, in about a third of the time): EfficientPose is not loaded; each person's
 16 inference joints are MultiPose's own COCO keypoints (body.to_inference 'coco17': limbs
@@ -57,10 +64,11 @@ from mvpose_ros.core.heatmap import MARGIN_SIGMAS, PersonHeatmap, render_heatmap
 from mvpose_ros.core.detection.letterbox import Letterbox, letterbox, whole_image
 from mvpose_ros.core.detection.onnx_models import (DEFAULT_PROVIDERS, EFFICIENTPOSE, MULTIPOSE, check_providers,
                                                    load_session)
+from mvpose_ros.core.detection.single_person import SINGLE_POSE, SinglePoseModel
 from mvpose_ros.core.detection.tracked_crops import carried_ears, people_region
 from mvpose_ros.core.types import Person2D
 
-MODELS = tuple(EFFICIENTPOSE)  # 'rt', 'i'
+MODELS = tuple(EFFICIENTPOSE) + tuple(SINGLE_POSE)  # 'rt', 'i', then the single-person keypoint models
 HEATMAP_SOURCES = ('efficientpose', 'multipose', 'fused')
 # EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])
 _MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
@@ -85,27 +93,30 @@ TILE_SHARE = 0.625
 
 @dataclass(frozen=True)
 class OnnxDetectorConfig:
-    """model_dir: folder of the .onnx files (<data root>/models). model: EfficientPose 'rt'
-    (224 px crops) or 'i' (256 px). providers: onnxruntime execution providers in order of
-    preference; threads: intra-op threads per session (0 = one per core). input_size: MultiPose's
-    square input side (a multiple of 32). box_margin: each side of a MultiPose box grows by this
-    fraction of the box's width (height) before the crop. min_person_score: MultiPose people below
-    it are dropped. min_joint_score, heatmap_floor, stride: see the module docstring. ears: fill the
-    ear joints from MultiPose's COCO ears, rendered as Gaussians of std sigma px. max_batch:
-    EfficientPose crops per run (0 = all crops of a set in one run): on two CPU cores runs of 1 to 4
-    crops were as fast as one run of a set's 19 (the larger batch's tensors leave the cache); a GPU
-    gains from 0. heatmaps: one of HEATMAP_SOURCES, see the module docstring; keypoint_sigma: the
-    std of the Gaussians of MultiPose's keypoints there, as a fraction of the person's box
-    diagonal. multipose_workers: images of a set MultiPose runs on at once, each run with `threads`
-    intra-op threads: on two CPU cores two workers of threads 1 took 0.8x the time of one worker of
-    threads 0 (one run keeps both cores busy only part of the time). region_margin: with heatmaps
-    'multipose' and given boxes, each box grows by this fraction of its size before MultiPose
-    searches the region holding them all (tracked_crops.people_region). tile_levels: a MultiPose run
-    that comes back full (6 people, all scoring min_person_score) is repeated on two overlapping
-    halves of the part it searched, down to this many levels (0: never; see the module docstring)."""
+    """model_dir: folder of the .onnx files (<data root>/models). model: the crop model, one of MODELS:
+    EfficientPose 'rt' (224 px crops) or 'i' (256 px), or a single-person keypoint model (see the
+    module docstring); crop_workers: crops those run at once. providers: onnxruntime execution
+    providers in order of preference; threads: intra-op threads per session (0 = one per core).
+    input_size: MultiPose's square input side (a multiple of 32). box_margin: each side of a
+    MultiPose box grows by this fraction of the box's width (height) before the crop.
+    min_person_score: MultiPose people below it are dropped. min_joint_score, heatmap_floor, stride:
+    see the module docstring. ears: fill the ear joints from MultiPose's COCO ears, rendered as
+    Gaussians of std sigma px. max_batch: EfficientPose crops per run (0 = all crops of a set in one
+    run): on two CPU cores runs of 1 to 4 crops were as fast as one run of a set's 19 (the larger
+    batch's tensors leave the cache); a GPU gains from 0. heatmaps: one of HEATMAP_SOURCES, see the
+    module docstring; keypoint_sigma: the std of the Gaussians of MultiPose's keypoints there, as a
+    fraction of the person's box diagonal. multipose_workers: images of a set MultiPose runs on at
+    once, each run with `threads` intra-op threads: on two CPU cores two workers of threads 1 took
+    0.8x the time of one worker of threads 0 (one run keeps both cores busy only part of the time).
+    region_margin: with heatmaps 'multipose' and given boxes, each box grows by this fraction of its
+    size before MultiPose searches the region holding them all (tracked_crops.people_region).
+    tile_levels: a MultiPose run that comes back full (6 people, all scoring min_person_score) is
+    repeated on two overlapping halves of the part it searched, down to this many levels (0: never;
+    see the module docstring)."""
 
     model_dir: Path
     model: str = 'rt'
+    crop_workers: int = 1
     providers: tuple[str, ...] = DEFAULT_PROVIDERS
     threads: int = 0
     input_size: int = 384
@@ -133,8 +144,13 @@ class OnnxDetectorConfig:
             problems.append(f'input_size {self.input_size} is not a positive multiple of 32')
         if self.threads < 0 or self.max_batch < 0:
             problems.append(f'threads {self.threads} and max_batch {self.max_batch} must be >= 0')
+        if self.heatmaps == 'fused' and self.model in SINGLE_POSE:
+            problems.append(f"heatmaps 'fused' needs an EfficientPose model ({', '.join(EFFICIENTPOSE)}), "
+                            f'not {self.model!r}')
         if self.multipose_workers < 1:
             problems.append(f'multipose_workers {self.multipose_workers} must be >= 1')
+        if self.crop_workers < 1:
+            problems.append(f'crop_workers {self.crop_workers} must be >= 1')
         if not 0 <= self.tile_levels <= 4:
             problems.append(f'tile_levels {self.tile_levels} must lie in 0..4')
         if not (self.box_margin >= 0 and self.region_margin >= 0):
@@ -218,11 +234,16 @@ class OnnxPoseDetector:
         providers = check_providers(config.providers)
         model_dir = Path(config.model_dir)
         self._multipose = load_session(model_dir / MULTIPOSE.file, MULTIPOSE, providers, config.threads)
-        self._spec = EFFICIENTPOSE[config.model]
-        self._efficientpose = (None if config.heatmaps == 'multipose' else
-                               load_session(model_dir / self._spec.file, self._spec, providers, config.threads))
+        crops = config.heatmaps != 'multipose'
+        self._spec = EFFICIENTPOSE.get(config.model)
+        self._efficientpose = (load_session(model_dir / self._spec.file, self._spec, providers, config.threads)
+                               if crops and self._spec is not None else None)
+        self._single = (SinglePoseModel(model_dir, config.model, providers, config.threads, config.crop_workers)
+                        if crops and self._spec is None else None)
+        self._crop_side = self._spec.input_side if self._spec is not None else SINGLE_POSE[config.model].side
         # those onnxruntime actually uses
-        self.providers = tuple((self._efficientpose or self._multipose).get_providers())
+        crop_session = self._single.session if self._single is not None else self._efficientpose
+        self.providers = tuple((crop_session or self._multipose).get_providers())
         self.timing = DetectionTiming()
         self._pool = ThreadPoolExecutor(config.multipose_workers) if config.multipose_workers > 1 else None
         self._free_workers = threading.Semaphore(config.multipose_workers)
@@ -325,7 +346,7 @@ class OnnxPoseDetector:
         finds = iter(found_all)
         t0 = time.perf_counter()
         crops: list[_Crop] = []
-        side = self._spec.input_side
+        side = self._crop_side
         out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
         # heatmaps 'multipose': per camera its people's keypoints (P, 16, 3) and Gaussian stds (P,)
         alone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -342,21 +363,30 @@ class OnnxPoseDetector:
                 keypoints: list[np.ndarray | None] = list(inference)
                 given = found.boxes
             else:
-                keypoints, sigmas = [None] * len(given), np.zeros(len(given))
+                given = np.asarray(given, dtype=np.float64).reshape(-1, 4)
+                keypoints, sigmas = [None] * len(given), cfg.keypoint_sigma * np.hypot(*(given[:, 2:] - given[:, :2]).T)
             grown = _grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
             for box, kp, sigma in zip(grown, keypoints, sigmas):
                 crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side, pending.turns[c]), kp,
                                    float(sigma)))
         t1 = time.perf_counter()
-        maps = self._heatmaps(images, crops)
-        t2 = time.perf_counter()
+        if self._single is not None:  # a single-person keypoint model: its keypoints as Gaussians
+            found = self._single.run(np.stack([c.box.apply(images[c.camera])[..., ::-1] for c in crops])
+                                     if crops else np.zeros((0, side, side, 3), dtype=np.uint8))
+            t2 = time.perf_counter()
+            for crop, coco in zip(crops, found.keypoints):
+                out[crop.camera] += keypoint_people(self._crop_keypoints(crop.box, coco)[None],
+                                                    np.array([crop.sigma]), cfg.stride)
+        else:
+            maps = self._heatmaps(images, crops)
+            t2 = time.perf_counter()
+            for crop, raw in zip(crops, maps):
+                before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
+                person = self._person(crop, raw, before)
+                if person is not None:
+                    out[crop.camera].append(person)
         for c, (inference, sigmas) in alone.items():
             out[c] = keypoint_people(inference, sigmas, cfg.stride)
-        for crop, raw in zip(crops, maps):
-            before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
-            person = self._person(crop, raw, before)
-            if person is not None:
-                out[crop.camera].append(person)
         for c in {crop.camera for crop in crops}:
             out[c] = without_duplicates(out[c])
         end = time.perf_counter()
@@ -417,6 +447,17 @@ class OnnxPoseDetector:
         keep = ordered & ((boxes[:, 2:] > bounds[:2]) & (boxes[:, :2] < bounds[2:])).all(axis=1)
         return _Found(keypoints[keep].astype(np.float64), boxes[keep].astype(np.float64), bounds,
                       time.perf_counter()), full
+
+    def _crop_keypoints(self, lb: Letterbox, coco: np.ndarray) -> np.ndarray:
+        """A single-person model's COCO-17 keypoints (17, 3) in its input's pixels as the inference
+        joints (16, 3) in the image's: those scoring below min_joint_score or outside the crop's
+        region (in its letterbox padding) missing, the ears too without `ears`."""
+        coco = np.concatenate([lb.to_image(coco[:, :2]), coco[:, 2:]], axis=1)
+        coco[(coco[:, 2] < self.config.min_joint_score) | ~lb.contains(coco[:, :2])] = (np.nan, np.nan, 0.0)
+        keypoints = to_inference(coco, 'coco17')
+        if not self.config.ears:
+            keypoints[list(_EARS)] = (np.nan, np.nan, 0.0)
+        return keypoints
 
     def _inference_keypoints(self, coco: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         """MultiPose's COCO keypoints (P, 17, 3) as inference joints (P, 16, 3): those scoring below

@@ -1,11 +1,16 @@
 """Where people are expected, from the previous set's 3D skeletons projected into each camera: a
-box around each person's joints, and the ears (which only MoveNet MultiPose gives) carried from
-the camera's previous people along with their neck.
+box around each person's joints where they are and where his motion since the skeletons before
+takes them by the next set (predicted_joints), and the ears (which only MoveNet MultiPose gives)
+carried from the camera's previous people along with their neck.
 
-Between two runs of MultiPose on the whole image (every `person_detector_every`-th set),
-EfficientPose works on these boxes as its crops, or, with heatmaps 'multipose', MultiPose searches
-only the region around them (people_region); someone who enters the view elsewhere is found at the
-next whole-image run.
+Between two runs of MultiPose on the whole image (every `person_detector_every`-th set), the crop
+model (EfficientPose, or a single-person keypoint model) works on these boxes as its crops, or,
+with heatmaps 'multipose', MultiPose searches only the region around them (people_region).
+Someone who enters the view is found at the next whole-image run, within K sets. A camera where
+that run found someone no skeleton explains (unexplained: his limb joints far from every
+projected skeleton's) runs MultiPose on its whole image at every set until
+a run there finds only people the skeletons explain: a new person is kept in view while the 3D
+stage takes him up.
 """
 from __future__ import annotations
 
@@ -24,6 +29,64 @@ JOINT_BOX_MARGIN = 0.1
 MIN_JOINTS_IN_VIEW = 4  # fewer projected joints in the image: the person is left to MultiPose
 # a previous person's ears follow the nearest previous neck within this fraction of the crop's size
 EAR_GATE = 0.25
+# a MultiPose person of a camera is explained by the skeleton matched to him (unexplained) when the
+# median distance of their limb joints in the image is at most this fraction of his size
+UNEXPLAINED_GAP = 0.5
+LIMB_JOINTS = 12  # the first joints of the inference and the dataset joint orders alike
+
+
+def predicted_joints(joints: np.ndarray, ids: np.ndarray, before: np.ndarray, before_ids: np.ndarray) -> np.ndarray:
+    """(P, J, 3) each person's joints (P, J, 3) (world metres, NaN where missing) moved on by his
+    motion since the skeletons before, before (R, J, 3) with ids before_ids (R,): joints +
+    (joints - before) of the same id, per joint; unmoved where the id or the joint is not in
+    before (ids (P,))."""
+    joints = np.asarray(joints, dtype=np.float64)
+    out = joints.copy()
+    index = {int(i): r for r, i in enumerate(np.asarray(before_ids).tolist())}
+    for p, i in enumerate(np.asarray(ids).tolist()):
+        r = index.get(int(i))
+        if r is None:
+            continue
+        step = joints[p] - before[r]
+        moved = np.isfinite(step).all(axis=-1)
+        out[p, moved] += step[moved]
+    return out
+
+
+def unexplained(keypoints: np.ndarray, projected: np.ndarray, gap: float = UNEXPLAINED_GAP,
+                min_joints: int = MIN_JOINTS_IN_VIEW) -> np.ndarray:
+    """(P,) whether each of a camera's people, inference keypoints (P, 16, 3) u, v, score, with at
+    least min_joints limb joints detected, is no skeleton's. The people and the skeletons projected
+    into the camera, projected (Q, J >= 12, 2) pixels (NaN where missing), are matched one to one,
+    closest pair first, by the median distance over the 12 limb joints both have (at least
+    min_joints) as a fraction of the person's size (the diagonal of his limb keypoints' box): a
+    person is explained by a match within gap. One to one, since neighbours in a crowd overlap in
+    the image (on Shelf frame 572 a neighbour's skeleton lay as close as 0.15, a person's own as
+    far as 0.21)."""
+    keypoints = np.asarray(keypoints, dtype=np.float64)
+    if len(keypoints) == 0:
+        return np.zeros(0, dtype=bool)
+    limbs = keypoints[:, :LIMB_JOINTS]
+    seen = limbs[..., 2] > 0  # (P, 12)
+    enough = seen.sum(axis=1) >= min_joints
+    uv = np.where(seen[..., None], limbs[..., :2], np.nan)
+    lo = np.where(seen[..., None], uv, np.inf).min(axis=1)
+    hi = np.where(seen[..., None], uv, -np.inf).max(axis=1)
+    size = np.where(enough, np.hypot(*(hi - lo).T), np.nan)  # (P,)
+    projected = np.asarray(projected, dtype=np.float64)[:, :LIMB_JOINTS]
+    distance = np.linalg.norm(uv[:, None] - projected[None], axis=-1)  # (P, Q, 12), NaN where either lacks it
+    shared = np.isfinite(distance).sum(axis=-1) >= min_joints
+    median = np.full(shared.shape, np.inf)
+    if shared.any():
+        median[shared] = np.nanmedian(distance[shared], axis=-1)
+    gaps = median / size[:, None]  # NaN (no match) for a person with too few joints
+    gaps[~np.isfinite(gaps)] = np.inf
+    matched = np.zeros(len(keypoints), dtype=bool)
+    while gaps.size and gaps.min() <= gap:
+        p, q = np.unravel_index(np.argmin(gaps), gaps.shape)
+        matched[p] = True
+        gaps[p, :] = gaps[:, q] = np.inf
+    return enough & ~matched
 
 
 def projected_boxes(joints: np.ndarray, camera: Camera, margin: float = JOINT_BOX_MARGIN,
@@ -83,7 +146,9 @@ def carried_ears(neck: np.ndarray, previous: np.ndarray, size: float, gate: floa
 class CropPlanner:
     """Which cameras of the next set run MultiPose and which get crops from skeletons: MultiPose
     runs on every camera of every `every`-th set, and of any set while no skeletons are known
-    (or the last ones held nobody); in between, every camera gets its projected_boxes (a camera
+    (or the last ones held nobody), and on a camera whose last MultiPose run found someone the
+    skeletons do not explain (see the module docstring); in between, every camera gets the
+    projected_boxes of the skeletons where they are and where their motion takes them (a camera
     whose intrinsics are not known yet, None in `cameras`, runs MultiPose)."""
 
     def __init__(self, cameras: Sequence[Camera | None], every: int = 1) -> None:
@@ -92,6 +157,10 @@ class CropPlanner:
         self.cameras = list(cameras)
         self.every = every
         self._joints = np.zeros((0, 0, 3))
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._predicted = self._joints  # where the skeletons' motion takes them by the next set
+        self._found: list[np.ndarray | None] = [None] * len(self.cameras)  # MultiPose's people, not yet checked
+        self.unexplained = [False] * len(self.cameras)
         self._since = 0  # sets detected since MultiPose last ran, that one included (0: never ran)
         self.previous = [np.zeros((0, NUM_INFERENCE_JOINTS, 3)) for _ in self.cameras]
 
@@ -99,7 +168,9 @@ class CropPlanner:
         """Per camera, None (run MultiPose) or the boxes (Q, 4) of the next set's crops."""
         if self._since == 0 or self._since >= self.every or len(self._joints) == 0:
             return [None] * len(self.cameras)
-        return [None if camera is None else projected_boxes(self._joints, camera) for camera in self.cameras]
+        both = np.concatenate([self._joints, self._predicted], axis=1)  # (P, 2J, 3): a box holds where he goes
+        return [None if camera is None or self.unexplained[c] else projected_boxes(both, camera)
+                for c, camera in enumerate(self.cameras)]
 
     def update(self, plan: Sequence[np.ndarray | None], people: Sequence[Sequence[Person2D] | None]) -> None:
         """After a set was detected with `plan`: its people per camera (None: no image), whose
@@ -108,7 +179,27 @@ class CropPlanner:
         for c, found in enumerate(people):
             if found is not None:
                 self.previous[c] = np.array([p.keypoints for p in found]).reshape(-1, NUM_INFERENCE_JOINTS, 3)
+                if plan[c] is None:
+                    self._found[c] = self.previous[c]
 
-    def skeletons(self, joints: np.ndarray) -> None:
-        """The latest 3D skeletons (P, J, 3), world metres (NaN where missing)."""
-        self._joints = np.asarray(joints, dtype=np.float64)
+    def skeletons(self, joints: np.ndarray, ids: np.ndarray | None = None) -> None:
+        """The latest 3D skeletons (P, J, 3), world metres (NaN where missing), with their ids (P,)
+        (None: no motion is predicted). The same skeletons given again keep the motion of the ones
+        before. Each camera's people of its last MultiPose run are checked against them."""
+        joints = np.asarray(joints, dtype=np.float64)
+        ids = np.asarray(ids if ids is not None else [], dtype=np.int64)
+        if ids.size and len(ids) != len(joints):
+            raise ValueError(f'skeletons: {len(ids)} ids for {len(joints)} people')
+        if not (joints.shape == self._joints.shape and np.array_equal(joints, self._joints, equal_nan=True)
+                and np.array_equal(ids, self._ids)):
+            self._predicted = (predicted_joints(joints, ids, self._joints, self._ids)
+                               if ids.size and self._ids.size and joints.shape[1:] == self._joints.shape[1:]
+                               else joints)
+            self._joints, self._ids = joints, ids
+        for c, found in enumerate(self._found):
+            camera = self.cameras[c]
+            if found is None or camera is None:
+                continue
+            projected = camera.project(self._joints) if len(self._joints) else np.zeros((0, LIMB_JOINTS, 2))
+            self.unexplained[c] = bool(unexplained(found, projected).any())
+            self._found[c] = None

@@ -1,0 +1,156 @@
+"""Single-person keypoint models on square person crops: MoveNet SinglePose Lightning (192 px) and
+Thunder (256 px), BlazePose GHUM Full and Heavy (256 px). Each gives one person's COCO-17
+keypoints (u, v, score) in its input's pixels (pixel-centre coordinates, as letterbox.Letterbox's)
+from its own decoding, and its raw heatmap, whose read-out (heatmap_keypoints) is checked against
+that decoding.
+
+MoveNet: `keypoints` (y, x, score), y and x normalised to the input (1.0 is its far edge); the
+heatmap (sigmoid) and offsets: joint k at ((row + dy) / n, (col + dx) / n) of the map's argmax
+cell, dy, dx in offsets' channels (2k, 2k + 1). BlazePose: 33 of its 39 landmarks are BlazePose-33
+(x, y in input pixel edges, visibility a logit); COCO-17 takes its nose, eye centres (2, 5),
+ears and 12 limb joints, with sigmoid(visibility) as score. Its heatmap (64 x 64, raw) has channel k's peak
+within a few input pixels of landmark k.
+
+The four files have a batch axis fixed at 1: a set's crops run one per run, on `workers` threads
+at once (onnxruntime's run is thread-safe on one session).
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from mvpose_ros.core.detection.onnx_models import DEFAULT_PROVIDERS, ModelSpec, load_session
+
+COCO_KEYPOINTS = 17
+
+
+@dataclass(frozen=True)
+class SinglePoseSpec:
+    """A single-person model: its ModelSpec (input, and the keypoint output checked at load),
+    the heatmap output, and for BlazePose the landmark of each COCO-17 joint."""
+
+    spec: ModelSpec
+    heatmap_name: str
+    offsets_name: str | None  # MoveNet's offsets; None for BlazePose
+    landmarks: tuple[int, ...] | None  # BlazePose-33 index of each COCO-17 joint; None for MoveNet
+
+    @property
+    def side(self) -> int:
+        return int(self.spec.input_shape[1])
+
+    @property
+    def movenet(self) -> bool:
+        return self.landmarks is None
+
+
+def _movenet(name: str, side: int) -> SinglePoseSpec:
+    spec = ModelSpec(f'MoveNet SinglePose {name.capitalize()}', f'movenet_{name}.onnx', 'input', 'tensor(int32)',
+                     (1, side, side, 3), 'keypoints', (1, 1, COCO_KEYPOINTS, 3))
+    return SinglePoseSpec(spec, 'heatmap', 'offsets', None)
+
+
+def _blazepose(name: str) -> SinglePoseSpec:
+    spec = ModelSpec(f'BlazePose {name.capitalize()}', f'blazepose_{name}.onnx', 'input', 'tensor(float)',
+                     (1, 256, 256, 3), 'landmarks', (1, 195))
+    # COCO-17: nose, l/r eye (BlazePose's eye centres), l/r ear, shoulders, elbows, wrists, hips, knees, ankles
+    return SinglePoseSpec(spec, 'heatmap', None, (0, 2, 5, 7, 8, 11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28))
+
+
+SINGLE_POSE = {
+    'lightning': _movenet('lightning', 192),
+    'thunder': _movenet('thunder', 256),
+    'blazepose_full': _blazepose('full'),
+    'blazepose_heavy': _blazepose('heavy'),
+}
+
+
+@dataclass
+class SinglePoseOutput:
+    """The runs on N crops: keypoints (N, 17, 3) COCO-17 u, v (input pixels) and score in [0, 1];
+    heatmap (N, h, w, C) raw, channel last; offsets (N, h, w, 2C) (MoveNet) or None."""
+
+    keypoints: np.ndarray
+    heatmap: np.ndarray
+    offsets: np.ndarray | None
+
+
+class SinglePoseModel:
+    """One session of a single-person model (SINGLE_POSE[name]), checked at load."""
+
+    def __init__(self, model_dir: str | Path, name: str, providers: Sequence[str] = DEFAULT_PROVIDERS,
+                 threads: int = 0, workers: int = 1) -> None:
+        if name not in SINGLE_POSE:
+            raise ValueError(f'single-person model {name!r} is not one of {", ".join(SINGLE_POSE)}')
+        if workers < 1:
+            raise ValueError(f'crop workers {workers} must be >= 1')
+        self.model = SINGLE_POSE[name]
+        self.session = load_session(Path(model_dir) / self.model.spec.file, self.model.spec, providers, threads)
+        self._outputs = [self.model.spec.output_name, self.model.heatmap_name] + (
+            [self.model.offsets_name] if self.model.offsets_name else [])
+        self._pool = ThreadPoolExecutor(workers) if workers > 1 else None
+
+    @property
+    def side(self) -> int:
+        return self.model.side
+
+    def run(self, rgb: np.ndarray) -> SinglePoseOutput:
+        """The model on crops rgb (N, side, side, 3) uint8 RGB, one run per crop."""
+        rgb = np.asarray(rgb)
+        if rgb.ndim != 4 or rgb.shape[1:] != (self.side, self.side, 3) or rgb.dtype != np.uint8:
+            raise ValueError(f'{self.model.spec.kind}: expected crops (N, {self.side}, {self.side}, 3) uint8 RGB, '
+                             f'got {rgb.dtype} {rgb.shape}')
+        runs = (self._pool.map(self._one, rgb) if self._pool is not None and len(rgb) > 1 else map(self._one, rgb))
+        outs = list(runs)
+        if not outs:
+            c = 17 if self.model.movenet else 39
+            n = self.side // 4
+            empty = np.zeros((0, n, n, c), dtype=np.float32)
+            return SinglePoseOutput(np.zeros((0, COCO_KEYPOINTS, 3)), empty,
+                                    np.zeros((0, n, n, 2 * c), dtype=np.float32) if self.model.movenet else None)
+        keypoints = np.stack([o[0] for o in outs])
+        heatmap = np.concatenate([o[1] for o in outs])
+        offsets = np.concatenate([o[2] for o in outs]) if self.model.movenet else None
+        return SinglePoseOutput(keypoints, heatmap, offsets)
+
+    def _one(self, rgb: np.ndarray) -> tuple[np.ndarray, ...]:
+        """One crop (side, side, 3): its COCO-17 keypoints (17, 3) and the raw maps (1, h, w, C)."""
+        if self.model.movenet:
+            x = rgb[None].astype(np.int32)
+        else:
+            x = rgb[None].astype(np.float32) * np.float32(1 / 255.0)
+        outs = self.session.run(self._outputs, {self.model.spec.input_name: x})
+        return (self.decode(outs[0]),) + tuple(outs[1:])
+
+    def decode(self, raw: np.ndarray) -> np.ndarray:
+        """(17, 3) COCO-17 u, v (input pixels) and score of one run's keypoint output."""
+        if self.model.movenet:
+            yx = np.asarray(raw, dtype=np.float64).reshape(COCO_KEYPOINTS, 3)
+            return np.concatenate([yx[:, 1::-1] * self.side - 0.5, yx[:, 2:]], axis=1)
+        landmarks = np.asarray(raw, dtype=np.float64).reshape(-1, 5)[list(self.model.landmarks)]
+        # x, y are pixel edges (0 = the input's left edge); visibility is a logit
+        return np.concatenate([landmarks[:, :2] - 0.5, 1.0 / (1.0 + np.exp(-landmarks[:, 3:4]))], axis=1)
+
+    def heatmap_keypoints(self, heatmap: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
+        """(17, 3) COCO-17 u, v (input pixels) and map value at each joint's heatmap argmax, for one
+        crop's heatmap (h, w, C) (and MoveNet's offsets (h, w, 2C), which place the joint inside the
+        cell; BlazePose: the argmax cell's centre). MoveNet's value is its sigmoid score; BlazePose's
+        raw."""
+        heatmap = np.asarray(heatmap)
+        h, w, _ = heatmap.shape
+        channels = np.arange(COCO_KEYPOINTS) if self.model.movenet else np.array(self.model.landmarks)
+        flat = heatmap[..., channels].reshape(-1, len(channels))
+        row, col = np.divmod(flat.argmax(axis=0), w)
+        value = flat[row * w + col, np.arange(len(channels))]
+        if self.model.movenet:
+            if offsets is None:
+                raise ValueError('MoveNet heatmap read-out needs its offsets')
+            dy = offsets[row, col, 2 * channels]
+            dx = offsets[row, col, 2 * channels + 1]
+            y, x = (row + dy) / h * self.side - 0.5, (col + dx) / w * self.side - 0.5
+        else:
+            y, x = (row + 0.5) * self.side / h - 0.5, (col + 0.5) * self.side / w - 0.5
+        return np.stack([x, y, value], axis=1).astype(np.float64)
