@@ -20,9 +20,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from mvpose_ros.bags.io import write_bag
-from mvpose_ros.bags.recipes import make_recipe
+from mvpose_ros.bags.recipes import ForeignRig, make_recipe, rig_file_text
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.evaluation.datasets import calibration_file, data_root
 from mvpose_ros.nodes.runtime import DEFAULT_RIG
 from mvpose_ros.package_files import package_path
 
@@ -39,7 +39,7 @@ class Configuration:
     module: str
     cls: str
     title: str
-    args: tuple[str, ...] = ()
+    args: tuple[str, ...] = ()  # {bag} and {rig}: the bag and the rig file collect() writes
 
 
 CONFIGURATIONS = (
@@ -50,8 +50,13 @@ CONFIGURATIONS = (
     Configuration('heatmap_detector', 'HeatmapDetectorNode', 'whole rig, onnx backend, person_detector_every 3',
                   ('-p', 'camera:=all', '-p', 'backend:=onnx', '-p', 'person_detector_every:=3')),
     Configuration('association', 'AssociationNode', 'the Shelf rig'),
+    Configuration('association', 'AssociationNode', 'a rig file without intrinsics: the shelf_rig bag\'s, under '
+                  'its driver names', ('-p', 'rig:={rig}')),
     Configuration('bp_solver', 'BpSolverNode', 'the Shelf rig'),
+    Configuration('bp_solver', 'BpSolverNode', 'the shelf_rig bag\'s rig file, without intrinsics',
+                  ('-p', 'rig:={rig}')),
     Configuration('overlay', 'OverlayNode', 'the Shelf rig'),
+    Configuration('overlay', 'OverlayNode', 'the shelf_rig bag\'s rig file, without intrinsics', ('-p', 'rig:={rig}')),
     Configuration('skeleton_echo', 'SkeletonEcho', 'as it comes'),
 )
 
@@ -169,24 +174,23 @@ def _shelf_first_frame_bag(folder: Path) -> Path:
 
 
 def _camera_names() -> list[str]:
-    return [c.name for c in load_rig_file(package_path(DEFAULT_RIG), data_root=data_root).cameras]
+    """The names the page writes as <camera>: the Shelf rig's and the shelf_rig bag's."""
+    shelf = load_rig_file(package_path(DEFAULT_RIG), data_root=data_root)
+    return [c.name for c in shelf.cameras] + list(ForeignRig.NAMES)
 
 
 def _generalised(topic: str, cameras: list[str]) -> str:
-    """The topic as the page writes it: relative unless absolute by design, a camera's name as <camera>."""
-    if topic in ('/diagnostics', '/clock'):
-        return topic
-    parts = topic.lstrip('/').split('/')
-    return '/'.join('<camera>' if p in cameras else p for p in parts)
+    """The topic as the page writes it: a camera's name as <camera>."""
+    return '/'.join('<camera>' if p in cameras else p for p in topic.split('/'))
 
 
 Declared = list[tuple[str, Any, ParameterDescriptor]]  # (name, declared default, descriptor)
 Endpoints = list[tuple[str, str, type, QoSProfile]]  # (publishes or subscribes, topic, message class, QoS)
 
 
-def _started(configuration: Configuration, bag: Path) -> tuple[Declared, Endpoints]:
+def _started(configuration: Configuration, bag: Path, rig: Path) -> tuple[Declared, Endpoints]:
     """Start the node of `configuration` in a context of its own; its declarations and endpoints."""
-    args = ['--ros-args', *(a.format(bag=bag) for a in configuration.args)]
+    args = ['--ros-args', *(a.format(bag=bag, rig=rig) for a in configuration.args)]
     context = rclpy.Context()
     rclpy.init(args=args, context=context)  # ROS_DOMAIN_ID's domain; discovery kept on this host
     node = None
@@ -226,11 +230,14 @@ def collect() -> list[NodeReference]:
     nodes: dict[str, NodeReference] = {}
     with tempfile.TemporaryDirectory() as tmp:
         bag = _shelf_first_frame_bag(Path(tmp))
+        rig = Path(tmp) / 'shelf_rig.yaml'
+        rig.write_text(rig_file_text(calibration_file('shelf')))
         for configuration in CONFIGURATIONS:
-            declared, endpoints = _started(configuration, bag)
+            declared, endpoints = _started(configuration, bag, rig)
             module = importlib.import_module(f'mvpose_ros.nodes.{configuration.module}')
-            ref = nodes.setdefault(configuration.module, NodeReference(
-                configuration.module, ' '.join((module.__doc__ or '').split('\n\n')[0].split())))
+            summary = ' '.join((module.__doc__ or '').split('\n\n')[0].split())
+            summary = summary[:-1] + '.' if summary.endswith(':') else summary
+            ref = nodes.setdefault(configuration.module, NodeReference(configuration.module, summary))
             if not ref.parameters:
                 ref.parameters = [Parameter(name, _type_name(value, d), _default(value),
                                             ' '.join(d.description.split()), _range(d), not d.read_only)
@@ -260,8 +267,11 @@ def render(nodes: list[NodeReference]) -> str:
         'and subscriptions it made are read back from rclpy. Do not edit by hand; `test/test_docs.py`',
         'fails when this page is stale.',
         '',
-        'Topics are relative (a namespace moves them all); `<camera>` is a rig camera\'s name (the',
-        "Shelf rig's `cam0` .. `cam4`), and image and CameraInfo topics are the rig file's. A",
+        'Topic names are shown as they resolve with the node in the root namespace (the one-camera',
+        'detector: in its camera\'s); the code names every topic but `/diagnostics` relative, so a',
+        'namespace (`-r __ns:=/rig1`, `namespace:=` of the launch files) moves them all. `<camera>` is',
+        "a rig camera's name; image and CameraInfo topics are the rig file's (the Shelf rig's relative,",
+        "the shelf_rig bag's absolute, under `/rig`). A",
         'parameter marked *live* takes a change at once (`ros2 param set`); the others are read-only',
         '(a change needs a restart). A numeric value outside its range is refused at start-up and',
         'when set. `diagnostics.*` are described in [operations](operations.md#health-and-diagnostics).',
