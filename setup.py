@@ -36,6 +36,7 @@ setup(
     entry_points={
         'console_scripts': [
             'mvpose-bench = mvpose_ros.cli.bench:main',
+            'mvpose-docs = mvpose_ros.cli.docs:main',
             'mvpose-eval = mvpose_ros.cli.evaluate:main',
             'mvpose-graph = mvpose_ros.cli.graph:main',
             'mvpose-images = mvpose_ros.cli.images:main',

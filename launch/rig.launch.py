@@ -54,7 +54,8 @@ def generate_launch_description():
                    condition=IfCondition(LaunchConfiguration('overlay')))
     ros_home = os.environ.get('ROS_HOME', os.path.join(os.path.expanduser('~'), '.ros'))
     return LaunchDescription([
-        DeclareLaunchArgument('rig', description='rig file (YAML): cameras, topics, extrinsics; see README'),
+        DeclareLaunchArgument('rig', description='rig file (YAML): cameras, topics, extrinsics; '
+                                                 'see docs/own_cameras.md'),
         DeclareLaunchArgument('params', default_value=os.path.join(config, 'rig_template.yaml'),
                               description='parameter file (a copy of config/rig_template.yaml)'),
         DeclareLaunchArgument('namespace', default_value='',

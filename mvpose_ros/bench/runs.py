@@ -212,7 +212,7 @@ def run_in_process(config: RunConfig, data_root: str | None) -> dict:
     cmd = [sys.executable, '-m', 'mvpose_ros.cli.bench', '--one', json.dumps(asdict(config))]
     if data_root:
         cmd += ['--data-root', data_root]
-    # one BLAS thread per process, as the graph runs its nodes (see README)
+    # one BLAS thread per process, as the graph runs its nodes (see docs/benchmarks.md)
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ}
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     for line in reversed(proc.stdout.splitlines()):

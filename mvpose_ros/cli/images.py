@@ -25,7 +25,7 @@ set costs what it would there. MultiPose's runs of a set start while the set bef
 (OnnxPoseDetector.start_set: a worker the set's last image leaves idle takes the next set's
 first). With --person-detector-every K, MultiPose searches the whole image of every K-th set only;
 in the sets between, the previous set's 3D skeletons projected into each camera say where its
-people are (core.tracked_crops; a set then starts once the one before is solved): with --heatmaps
+people are (core.detection.tracked_crops; a set then starts once the one before is solved): with --heatmaps
 multipose MultiPose searches only the region around them, with a smaller input at the same scale;
 with efficientpose they are the crops of the crop model (--model: EfficientPose, or a
 single-person keypoint model; docs/crop_models.md) and MultiPose does not run (but on a camera
@@ -34,7 +34,7 @@ the score are those of the last set.
 
 --heatmaps multipose (the default) renders MultiPose's own keypoints as Gaussians (std
 --keypoint-sigma times the person's box diagonal) and runs no EfficientPose (fused takes both;
-core.onnx_detector).
+core.detection.onnx_detector).
 """
 from __future__ import annotations
 
@@ -76,8 +76,8 @@ DEFAULTS = OnnxDetectorConfig(model_dir=Path())
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=PROG, description=__doc__.split('\n')[0])
     rig = p.add_mutually_exclusive_group(required=True)
-    rig.add_argument('--rig', type=Path, help='rig file (YAML, with every camera\'s intrinsics; see README "Your own '
-                                              'cameras"): the images must have the sizes it gives')
+    rig.add_argument('--rig', type=Path, help='rig file (YAML, with every camera\'s intrinsics; see '
+                                              'docs/own_cameras.md): the images must have the sizes it gives')
     rig.add_argument('--calibration', type=Path, help='calibration json (Shelf layout): each camera at the size of '
                                                       'its image')
     p.add_argument('--images', required=True, nargs='+', type=Path,

@@ -69,7 +69,7 @@ def frame_rate_note(bag_hz: float | None, frame_rate: float) -> str | None:
         return None
     return (f"the bag's cameras run at {bag_hz:.1f} Hz, the parameters' frame_rate is {frame_rate:g} Hz: "
             f'{FRAME_RATE_EFFECT}; set it to {bag_hz:.1f} in your parameter file, or leave it out there to take the '
-            f"bag's (README, Your own cameras, step 2)")
+            f"bag's (docs/own_cameras.md, step 2)")
 
 
 def latency_ms(info_at: Mapping[int, int], output_at: Mapping[int, int]) -> np.ndarray:

@@ -268,7 +268,7 @@ class BpSolverNode(Node):
         self._inputs[frame] = (bundles, arrival)
         self._stamps[frame] = msg.header.stamp
         due = [(result, self._stamps.pop(result.frame)) for result in results]
-        # the lagged frame first: its budget past the lag is the tighter one (README, the lag dial)
+        # the lagged frame first: its budget past the lag is the tighter one (docs/results.md, the lag dial)
         for result, stamp in due:
             self._publish_skeletons(result, stamp)
         # with no lag the output is the causal estimate itself

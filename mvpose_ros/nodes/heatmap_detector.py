@@ -3,15 +3,16 @@
 Backends: 'openpose' turns each camera's raw OpenPose output (`<camera>/openpose`, PointCloud2
 encoding A, reliable keep-last as the recorded data it is) into people; 'onnx' detects them in the
 camera image (MoveNet MultiPose, and EfficientPose when `heatmaps` is efficientpose or fused, on
-onnxruntime, core.onnx_detector). People go out on `<camera>/people2d` (PointCloud2 encoding B)
-with the input's stamp and frame_id, one message per used input, empty when nobody is seen.
+onnxruntime, core.detection.onnx_detector). People go out on `<camera>/people2d` (PointCloud2
+encoding B) with the input's stamp and frame_id, one message per used input, empty when nobody is
+seen.
 
 Modes, by the parameter `camera`:
 
 - one camera: its name in the rig file ('cam2', 'left') or its index in the rig (2 or '2'). Run
   one node per camera; each input is detected in its callback.
 - the whole rig: '' or 'all'. One node takes every camera. Inputs are grouped into synchronised
-  sets (core.approximate_sync: stamps within `max_skew`, a missing camera waited for at most
+  sets (core.association.approximate_sync: stamps within `max_skew`, a missing camera waited for at most
   `sync_timeout`); a worker thread detects one set at a time and publishes every camera's people of the set
   together, each with that camera's own stamp and frame_id. While it is busy only the newest
   released set waits: an older waiting set is dropped whole and counted (a throttled warning, and
@@ -23,7 +24,7 @@ Modes, by the parameter `camera`:
   and bp_solver announce the frames they drop. With the onnx backend and `person_detector_every`
   K > 1, MultiPose searches the whole images of every K-th set only; in the sets between, where the
   newest skeletons on `skeletons/live` (of the rig's namespace) project: MultiPose searches only
-  that region (heatmaps multipose, core.tracked_crops.people_region) or EfficientPose takes those
+  that region (heatmaps multipose, core.detection.tracked_crops.people_region) or EfficientPose takes those
   crops.
 
 Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace)
@@ -123,8 +124,8 @@ from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog, short_cause
 from mvpose_ros.nodes.health import NodeHealth
 from mvpose_ros.nodes.image_topics import ImageInput, ImageTypes
-from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, StartupError,
-                                      camera_subscription, declare, live_parameters, load_rig_parameter,
+from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INPUT_QOS, RESTART,
+                                      StartupError, camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
 from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic
 
@@ -199,7 +200,7 @@ class HeatmapDetectorNode(Node):
         onnx = OnnxDetectorConfig(model_dir=Path())  # its defaults
         try:
             self.declare_parameter('camera', 0, ParameterDescriptor(
-                dynamic_typing=True,
+                dynamic_typing=True, read_only=True, additional_constraints=RESTART,
                 description="this node's camera: its name in the rig, or its index there (an integer, or a string "
                             f"of digits); {' or '.join(repr(w) for w in WHOLE_RIG)}: every camera of the rig, "
                             'detected in synchronised sets'))

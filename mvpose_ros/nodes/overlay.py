@@ -16,7 +16,7 @@ set, is not drawn (counted in the diagnostics). At most `max_rate` images per se
 are drawn, each decoded at 1/`reduce` of its size; a dropped set only when a camera has had no
 image for a second (core.overlay_sets.due: under overload most sets are dropped). It still
 receives every image, held serialised and deserialised only when drawn: at 5 cameras x 25 Hz
-about 15% of a core with the drawing (README, "Your own cameras"). Bytes whose header stamp
+about 15% of a core with the drawing (docs/own_cameras.md). Bytes whose header stamp
 cannot be read are not held (logged once per camera).
 Every input is best effort, so this node never slows the graph's reliable publishers down, and a
 lost message only costs a picture. An image topic's type (Image or CompressedImage) is the
@@ -139,7 +139,7 @@ class OverlayNode(Node):
 
     def _on_image(self, camera: int, kind: type, cdr: bytes) -> None:
         # kept serialised, with its type: most are never drawn, and deserialising each cost about
-        # as much as the rest of receiving it for raw images (README, "Your own cameras")
+        # as much as the rest of receiving it for raw images (docs/own_cameras.md)
         try:
             stamp = header_stamp_ns(cdr)
         except ValueError as exc:

@@ -3,7 +3,7 @@ MultiPose finds the people (boxes and COCO-17 keypoints) in the whole letterboxe
 EfficientPose (RT or I) gives each person's MPII-16 heatmaps on a letterboxed crop around its
 box. detect_set() takes a synchronised set of the rig's images: MultiPose runs once per image
 (its batch dimension is fixed at 1), EfficientPose on the crops of every camera in runs of at most
-`max_batch` crops. A camera can be given crops instead (core.tracked_crops: the previous set's
+`max_batch` crops. A camera can be given crops instead (core.detection.tracked_crops: the previous set's
 3D skeletons projected into it): MultiPose does not run on its image, and its people's ears are
 carried from the camera's previous people.
 

@@ -1,6 +1,6 @@
 """The thresholds that turn a node's figures into OK / WARN / ERROR, defined once: their defaults,
-ranges and descriptions are the `diagnostics.*` parameters every node declares (the README's
-"Health and diagnostics" table lists them). Every one but `period` and `residual_frames` can be
+ranges and descriptions are the `diagnostics.*` parameters every node declares (docs/operations.md,
+"Health and diagnostics", lists them). Every one but `period` and `residual_frames` can be
 changed while the node runs."""
 from __future__ import annotations
 

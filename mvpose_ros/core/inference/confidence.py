@@ -8,7 +8,7 @@
   samples and several of them often lie within centimetres of one another, so the belief of the
   decoded hypothesis alone (or the marginal's entropy) says little; its spread in metres does.
 
-Chosen on Shelf (README, "Subscribing to the skeletons") against the belief of the decoded hypothesis,
+Chosen on Shelf (docs/results.md, "Confidence against error") against the belief of the decoded hypothesis,
 the marginal's entropy, its mass within 5, 10, 20 cm, the number of views and the spread of the
 data term, each alone: the product ranked errors and wrong limbs best.
 """
