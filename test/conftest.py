@@ -1,14 +1,62 @@
-"""Fixtures shared by the suite: the Shelf rig and its OpenPose output, read once per session."""
+"""Fixtures shared by the suite (the Shelf rig and its OpenPose output, read once per session) and
+its markers, for selections with -m (docs/development.md):
+
+- ros: the test starts nodes or an rclpy context (the `domain` fixture, test/ros_harness.py, or
+  marked so by hand where it runs a node's process another way);
+- data: it needs the data root (../shared or MVPOSE_DATA_ROOT): every module not in NO_DATA;
+- slow: a test that is not `ros` and takes seconds (marked by hand).
+
+`-m "not ros and not slow"` is the fast subset; `-m "not data"` runs without the data root.
+"""
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Iterator
 
 import pytest
 
+import ros_harness
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.camera import Camera
 from ros_harness import STARTED, acquire_domain, release_domain, stop
+
+# Modules whose tests read nothing under the data root; a new module needs it until listed here.
+NO_DATA = {
+    'test_bp', 'test_cdr_header', 'test_compiled', 'test_confidence', 'test_diagnostics_recorder',
+    'test_error_sources', 'test_factors', 'test_frame_id', 'test_heatmap', 'test_identities', 'test_letterbox',
+    'test_lint', 'test_memory', 'test_msg_records', 'test_newest_queue', 'test_overlay',
+    'test_overlay_node', 'test_overlay_sets', 'test_refusals', 'test_replay', 'test_skeleton_echo',
+    'test_stamp_sync', 'test_throttled_log', 'test_view_scene', 'test_workers',
+}
+MARKERS = {'ros': 'starts nodes or an rclpy context', 'data': 'needs the data root (../shared)',
+           'slow': 'takes seconds without starting nodes'}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    for name, description in MARKERS.items():
+        config.addinivalue_line('markers', f'{name}: {description}')
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    """With -m "not data", the modules that need the data root are not even imported (some read it
+    at import), so that selection runs without one."""
+    if 'not data' in (config.option.markexpr or '') and collection_path.suffix == '.py' \
+            and collection_path.stem.startswith('test_') and collection_path.stem not in NO_DATA:
+        return True
+    return None
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """ros and data, marked from what each test uses (see the module)."""
+    for item in items:
+        module = item.module
+        harness = any(value is ros_harness or getattr(value, '__module__', None) == ros_harness.__name__
+                      for value in vars(module).values())
+        if 'domain' in item.fixturenames or harness:
+            item.add_marker(pytest.mark.ros)
+        if module.__name__.rpartition('.')[2] not in NO_DATA:
+            item.add_marker(pytest.mark.data)
 
 
 @pytest.fixture(scope='session')

@@ -48,6 +48,7 @@ def test_share_folder(prefix):
     assert f'<name>{PACKAGE}</name>' in (share / 'package.xml').read_text()
 
 
+@pytest.mark.ros
 def test_launcher_runs_the_node(prefix, tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(DOMAIN_ID))
     proc = subprocess.run([str(prefix / 'lib' / PACKAGE / 'bag_player'), '--ros-args', '-p', 'bag:=/nonexistent'],

@@ -516,6 +516,7 @@ def _seen_points(camera) -> np.ndarray:
     return origins + 3.0 * dirs
 
 
+@pytest.mark.slow
 def test_through_lens_puts_a_point_where_the_lens_projects_it(shelf_rig):
     """A dot drawn where a pinhole camera sees a point lands where each of ForeignRig.LENSES,
     at the same pose, projects it."""
@@ -533,6 +534,7 @@ def test_through_lens_puts_a_point_where_the_lens_projects_it(shelf_rig):
             assert np.abs(centre - lensed.project(point)).max() < 1.0, (model, point)
 
 
+@pytest.mark.slow
 def test_shelf_rig_lenses_recipe_gives_each_camera_its_lens(tmp_path):
     """shelf_rig_lenses: each CameraInfo carries its camera's lens of ForeignRig.LENSES, the rig
     file is shelf_rig's extrinsics, and a world point's pixel in the lensed image shows what its
@@ -561,6 +563,7 @@ def test_shelf_rig_lenses_recipe_gives_each_camera_its_lens(tmp_path):
                           - before[v0 - 2:v0 + 3, u0 - 2:u0 + 3].mean(axis=(0, 1))).max() < 8, name
 
 
+@pytest.mark.slow
 def test_shelf_bag_with_a_bumped_or_an_unplugged_camera():
     """--rotate-camera: camera 2's candidates move (about fx tan 2 degrees) from frame 450 on, the
     others and earlier frames are the real ones; --unplug-camera: camera 3 sends nothing from then."""

@@ -241,6 +241,7 @@ def test_one_camera_gives_no_people_and_no_crash():
     assert result['people_3d'] == 0 and result['frames_out'] == 3 and result['pcp']['strict_frame_weighted'] == 0
 
 
+@pytest.mark.slow
 def test_smoke_prints_every_stage_and_the_frame_rates(tmp_path, capsys):
     assert bench.main(['--frames', '5', '--scaling', 'none', '--output', str(tmp_path)]) == 0
     out = capsys.readouterr().out

@@ -54,6 +54,7 @@ def test_campus_subset_oracle_is_nearly_perfect(capsys):
     assert 'oracle' in out and 'lenient 100.00' in out
 
 
+@pytest.mark.slow
 def test_a_ring_of_eight_cameras_scores_the_oracle_within_a_few_centimetres(capsys):
     assert main(['ring', '--ring-cameras', '8', '--no-ablation']) == 0
     out = capsys.readouterr().out
@@ -69,6 +70,7 @@ def _ring_summary(capsys, args):
     return float(summary[1]), float(summary[2])
 
 
+@pytest.mark.slow
 def test_joints_three_cameras_miss_are_put_on_the_body(capsys):
     """Three cameras whose detector misses 30 % of the keypoints leave about 3 % of the joints seen
     by none: placed on the body (arms hang, the head above the neck) they score better than at the
@@ -152,6 +154,7 @@ def test_confidence_report_on_shelf_error_falls_as_confidence_rises(shelf_run, t
     assert (tmp_path / 'confidence_joints.png').is_file() and (tmp_path / 'confidence_limbs.png').is_file()
 
 
+@pytest.mark.slow
 def test_the_secondary_radius_reaches_the_detector(shelf_run, tmp_path):
     """--secondary-radius 0 leaves other candidates out of the heatmaps, so the skeletons move."""
     path = tmp_path / 'r0.jsonl'

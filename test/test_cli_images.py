@@ -30,6 +30,7 @@ CALIBRATION = str(calibration_file('shelf'))
 MPJPE_BOUND_MM = 200.0
 
 
+@pytest.mark.slow
 def test_frame_572_finds_the_three_annotated_actors(tmp_path, capsys):
     out_dir = tmp_path / 'out'
     code = images.main(['--calibration', CALIBRATION, '--images', *FRAMES, '--frame', '572',
@@ -55,6 +56,7 @@ def test_frame_572_finds_the_three_annotated_actors(tmp_path, capsys):
         assert (overlay != original).any(axis=2).mean() > 0.005  # skeletons were drawn
 
 
+@pytest.mark.slow
 def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
     """Frame 572 three times with --person-detector-every 3: MultiPose on the first set only, the
     other two take their crops from the previous set's skeletons, cost no MultiPose time, and
@@ -77,6 +79,7 @@ def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
                      r'association and 3D [0-9.]+ ms, total [0-9.]+ ms; [0-9.]+ sets/s', out), out
 
 
+@pytest.mark.slow
 def test_a_sequence_with_multipose_on_every_set_starts_each_set_while_the_last_finishes(tmp_path, capsys):
     """Frame 572 four times, MultiPose on two workers: the sets overlap (a set's runs start while
     the one before finishes) and each set still gets all five images' people and the actors."""
@@ -119,6 +122,7 @@ def test_the_default_heatmaps_multipose_keypoints_score_frame_572_without_effici
         assert (np.abs(patch - GROUND_TRUTH_BGR).sum(axis=1) < 60).any(), c
 
 
+@pytest.mark.slow
 def test_a_multipose_sequence_searches_regions_around_the_previous_skeletons_between_whole_images(tmp_path, capsys):
     """Frame 572 three times with --person-detector-every 3 and the default heatmaps: MultiPose
     searches the whole images of the first set, then only the region around the previous set's
@@ -192,6 +196,7 @@ def test_a_rig_file_of_its_own_and_the_models_need_no_data_root(tmp_path, capsys
     assert re.search(r'set 0: .*; 4 in 3D', capsys.readouterr().out)
 
 
+@pytest.mark.slow
 def test_a_fisheye_rig_scores_frame_572_as_the_pinhole_one(tmp_path, capsys):
     """The frame-572 images as equidistant (fisheye) cameras at the same poses would take them (each
     pixel's ray looked up in the real image), with a rig file giving that lens: the default bounds

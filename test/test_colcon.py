@@ -26,6 +26,9 @@ def _colcon() -> str:
     return found
 
 
+pytestmark = pytest.mark.slow  # a colcon build (its launcher test starts a node: ros too)
+
+
 @pytest.fixture(scope='module')
 def workspace(tmp_path_factory) -> Path:
     colcon = _colcon()

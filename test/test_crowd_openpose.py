@@ -105,6 +105,7 @@ def test_the_crowd_brings_the_scene_near_the_target_and_keeps_the_originals(shel
     assert np.mean(found) >= 2 * crowd.original
 
 
+@pytest.mark.slow
 def test_shelf_crowd_recipe_has_every_frame_with_the_crowd():
     recipe = make_recipe('shelf_crowd')
     assert recipe.variant == 'people 20'

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ['mvpose_ros', 'msg_adapters', 'test', 'launch', 'setup.py']
 
@@ -14,11 +16,13 @@ def _run(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, '-m', *args], cwd=REPO, capture_output=True, text=True, check=False)
 
 
+@pytest.mark.slow
 def test_flake8():
     proc = _run('flake8', *SOURCES)
     assert proc.returncode == 0, f'flake8 found problems:\n{proc.stdout}{proc.stderr}'
 
 
+@pytest.mark.slow
 def test_pep257_public_modules_and_packages_have_docstrings():
     proc = _run('pydocstyle', 'mvpose_ros', 'msg_adapters')
     assert proc.returncode == 0, f'pydocstyle found problems:\n{proc.stdout}{proc.stderr}'

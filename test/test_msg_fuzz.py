@@ -11,6 +11,7 @@ import dataclasses
 import struct
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -160,6 +161,7 @@ def openpose_records(draw):
     return records
 
 
+@pytest.mark.slow
 @FUZZ
 @given(openpose_records())
 def test_openpose_decoder_on_plausible_records(records):
@@ -168,6 +170,7 @@ def test_openpose_decoder_on_plausible_records(records):
         _check_frame(frame)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(st.data())
 def test_skeleton_decoder_on_plausible_records(data):
@@ -233,12 +236,14 @@ def people(draw, max_people: int = 3):
     return out
 
 
+@pytest.mark.slow
 @FUZZ
 @given(frames())
 def test_openpose_round_trip(frame):
     assert _same_frame(frame, msg_to_openpose(openpose_to_msg(frame, HEADER)))
 
 
+@pytest.mark.slow
 @FUZZ
 @given(people())
 def test_people_round_trip(people_in):
@@ -264,6 +269,7 @@ def test_bundles_round_trip(layout, one):
     assert all(_same_people([p], decoded) for _, views in back for p in views.values())
 
 
+@pytest.mark.slow
 @FUZZ
 @given(st.lists(st.integers(0, 2 ** 32 - 1), max_size=4, unique=True), st.data())
 def test_skeleton_round_trip(ids, data):
@@ -321,6 +327,7 @@ def _small_encoded(kind: str) -> bytes:
     return bytes(image_to_compressed_msg(np.full((SMALL[1], SMALL[0], 3), 90, np.uint8), HEADER, kind).data)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(st.sampled_from(['jpeg', 'png']), st.integers(0, 2 ** 16 - 1), st.integers(0, 2 ** 16 - 1),
        st.booleans(), st.binary(max_size=32))

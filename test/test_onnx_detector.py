@@ -168,6 +168,7 @@ def test_multipose_workers_find_the_same_people_in_each_image_of_a_set(shelf_ima
         np.testing.assert_array_equal(a.heatmap.maps, b.heatmap.maps)
 
 
+@pytest.mark.slow
 def test_sets_started_while_the_one_before_finishes_find_what_each_set_alone_finds(shelf_image):
     """start_set / finish with a second set started before the first is finished (as the whole-rig
     detector and mvpose-images --sets run a sequence): every set's people are those detect_set

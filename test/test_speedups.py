@@ -72,6 +72,7 @@ def reference() -> dict[str, np.ndarray]:
         return dict(f)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('name', CASES)
 def test_the_stage_gives_the_reference_results(shelf_openpose, reference, name):
     out = run_case(shelf_openpose, name)
