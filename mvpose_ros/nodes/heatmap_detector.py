@@ -80,7 +80,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rclpy.logging
@@ -102,7 +102,7 @@ from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew, stamp_rate)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
-from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_config import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
@@ -122,6 +122,9 @@ from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INP
                                       camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
 from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic
+
+if TYPE_CHECKING:
+    from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
@@ -365,6 +368,8 @@ class HeatmapDetectorNode(Node):
     @staticmethod
     def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:
         """The ONNX sessions, created once; a bad value or model file is a StartupError."""
+        # the one entry to the onnx backend: an openpose node never loads onnxruntime
+        from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
         try:
             config = OnnxDetectorConfig(
                 model_dir=data_root(p['data_root'] or None) / 'models', model=p['model'],

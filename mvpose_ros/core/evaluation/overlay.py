@@ -4,7 +4,6 @@ ground truth in one fixed colour, so an annotation and an estimate that disagree
 at a glance."""
 from __future__ import annotations
 
-import colorsys
 from typing import Sequence
 
 import cv2
@@ -16,16 +15,8 @@ from mvpose_ros.core.types import Person2D
 
 DETECTION_BGR = (255, 255, 255)
 GROUND_TRUTH_BGR = (0, 255, 255)  # yellow, and drawn thinner than the estimates and with open joints
-GOLDEN_RATIO_CONJUGATE = (5.0 ** 0.5 - 1.0) / 2.0
 _SHIFT = 4  # cv2 sub-pixel drawing: coordinates in 1/16 px
 _BONES = np.array(BONES)  # (B, 2) joints of each bone, the 14 dataset joints
-
-
-def person_colour(person_id: int) -> tuple[float, float, float]:
-    """(r, g, b) in [0, 1] for a person id, the same in RViz markers, overlays and videos: hues
-    step by the golden ratio, so consecutive ids get far-apart hues and any few ids stay distinct."""
-    r, g, b = colorsys.hsv_to_rgb((int(person_id) * GOLDEN_RATIO_CONJUGATE) % 1.0, 0.85, 0.95)
-    return r, g, b
 
 
 def _segments(uv: np.ndarray) -> np.ndarray:
