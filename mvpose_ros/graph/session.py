@@ -40,6 +40,7 @@ from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, fr
                                      rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import Outcome, Supervision, input_stamps, run_graph, save_predictions
+from mvpose_ros.graph.startup import process_start_ns, startup_line
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
 from mvpose_ros.topics import OVERLAY, PEOPLE2D, camera_topic
@@ -58,8 +59,9 @@ RATE_QUIET_S = 5.0  # a rig run is over this long after the player's end without
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
     """Run the graph as the command line's `args` say (checked); returns the exit code."""
     out, err = out or sys.stdout, err or sys.stderr
+    started_ns = process_start_ns()
     if args.rig is not None:
-        return run_rig(args, out, err)
+        return run_rig(args, out, err, started_ns)
     settings = graph_settings(args.config)
     settings = replace(settings, bag=args.bag or settings.bag, predictions=args.predictions or settings.predictions,
                        rate=settings.rate if args.rate is None else args.rate)
@@ -95,6 +97,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
         return _failed(outcome, err)
     effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
     problems = report(outcome.stamps, node, settings, out, effects)
+    _print_footprint(outcome, node, started_ns, out)
     print_restarts(effects, _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
         print_periods(outcome.stamps, node, outcome.memory, args.report_every, out)
@@ -245,8 +248,9 @@ def _stamps_only(s: SyncSet) -> SyncSet:
     return s
 
 
-def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    """mvpose-graph --rig: the graph on a recorded rig; returns the exit code."""
+def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO, started_ns: int) -> int:
+    """mvpose-graph --rig: the graph on a recorded rig; returns the exit code. started_ns: the
+    command's start (system clock ns), for the start-up time."""
     rig, run, settings, files, sets = rig_run_plan(args)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC, overlay=args.overlay is not None)
@@ -281,6 +285,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
               f'graph): counted as those sets', file=out)
     problems = rig_report(stamps, [s.skew_ns for s in sets], node, node.people_stamps,
                           round(run.max_skew * 1e9), run.lockstep, out)
+    _print_footprint(outcome, node, started_ns, out)
     print_restarts(restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate),
                    _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
@@ -319,6 +324,15 @@ def _recording(**options: Any) -> Iterator[tuple[SkeletonRecorder, SingleThreade
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
+
+
+def _print_footprint(outcome: Outcome, node: SkeletonRecorder, started_ns: int, out: TextIO) -> None:
+    """The start-up time to the first skeleton and the nodes' resident memory."""
+    line = startup_line(started_ns, node.info_at, node.output_at)
+    if line:
+        print(line, file=out)
+    if outcome.memory.peak:
+        print(outcome.memory.total_line(), file=out)
 
 
 def _verdict(outcome, problems: list[str], timeout: float, err: TextIO) -> int:
