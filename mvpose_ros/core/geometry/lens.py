@@ -10,8 +10,8 @@ their coefficients in D's order, between normalised coordinates (x/z, y/z) and d
   theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8). Never the identity: zero
   coefficients still map angles, not tangents, to radii.
 
-Kernels (core.geometry.projection) take a lens as KERNEL_SIZE numbers (kernel_form): the coefficients in KERNEL_SLOTS slots,
-then its kind (NONE, RADIAL_TANGENTIAL, FISHEYE).
+Kernels (core.geometry.projection) take a lens as KERNEL_SIZE numbers (kernel_form): the
+coefficients in KERNEL_SLOTS slots, then its kind (NONE, RADIAL_TANGENTIAL, FISHEYE).
 """
 from __future__ import annotations
 
