@@ -2,7 +2,7 @@
 
     mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
                  [--predictions FILE] [--domain-id N] [--log-dir DIR]
-                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S]
+                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S] [--compose detectors|all]
     mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--loops N] [--qos sensor|reliable] [--config FILE]
                  [--predictions FILE] [--ground-truth shelf --frame N] [--domain-id N] [--log-dir DIR]
 
@@ -51,6 +51,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from mvpose_ros.graph.config import COMPOSED
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, RESPAWN_WINDOW_S
 from mvpose_ros.graph.session import PROG, run
 
@@ -96,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--respawn-limit', type=int,
                    help=f'--respawn: restarts of one node within {RESPAWN_WINDOW_S:g} s before the run ends '
                         f'(default {RESPAWN_LIMIT})')
+    p.add_argument('--compose', choices=sorted(COMPOSED),
+                   help='run nodes in one process (ROS composition): detectors, every heatmap_detector; all, every '
+                        'node but the player (default: each node its own process; docs/footprint.md)')
     p.add_argument('--report-every', type=float, metavar='SECONDS',
                    help='also print frames in / out, latency and memory per node by this many s of the run')
     return p
@@ -106,6 +110,8 @@ def _check_arguments(args: argparse.Namespace) -> None:
     for name in ('respawn_delay', 'respawn_limit'):
         if getattr(args, name) is not None and not args.respawn:
             raise ValueError(f'--{name.replace("_", "-")} needs --respawn')
+    if args.compose and args.respawn:
+        raise ValueError('--respawn restarts one node, not a process of composed nodes: not with --compose')
     if args.respawn_delay is not None and not args.respawn_delay >= 0:
         raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
     if args.respawn_limit is not None and args.respawn_limit < 1:

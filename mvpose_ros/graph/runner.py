@@ -34,7 +34,7 @@ from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, expected_connections, node_command,
-                                     played_connections)
+                                     played_connections, process_command, processes)
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
@@ -203,14 +203,15 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
               log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
               per_loop: int, expected: Mapping[str, Sequence[str]] | None = None,
               played: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0,
-              watch: Supervision | None = None) -> Outcome:
+              watch: Supervision | None = None, compose: str | None = None) -> Outcome:
     """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
     also after Ctrl-C (outcome.interrupted). config: the parameter file(s) every node gets, in
     order; input_topic: what each detector reads in its camera namespace; per_loop: stamps in one
     pass of the bag (the memory baseline); expected: the endpoints to wait for before playing
     (default: the Shelf graph's, expected_connections); played: the player's links to wait for
     before it plays (default: the Shelf graph's, played_connections); quiet: see _play; watch: how
-    node exits are handled (default: the first ends the run)."""
+    node exits are handled (default: the first ends the run); compose: which nodes share a process
+    (a key of config.COMPOSED; default none)."""
     if expected is None:
         expected = expected_connections(settings.cameras, input_topic)
     if played is None:
@@ -223,12 +224,12 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
     with ProcessGroup(log_dir, env) as group:
         try:
-            for spec in nodes:
-                if spec.executable == PLAYER:
+            for name, specs in processes(nodes, compose):
+                if specs[0].executable == PLAYER:
                     _wait_connected(node, executor, group, expected, watch)
-                    _start_player(node, executor, group, spec, config, played, watch)
+                    _start_player(node, executor, group, specs[0], config, played, watch)
                 else:
-                    group.start(spec.name, node_command(spec, config))
+                    group.start(name, process_command(name, specs, config))
             outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)
         except GraphFailure as failure:
             outcome.failure = failure

@@ -92,7 +92,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     with _recording(frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, [config, *overrides], nodes, stamps, log_dir, node, executor, input_topic,
-                            per_loop, watch=watch)
+                            per_loop, watch=watch, compose=args.compose)
     if outcome.failure is not None:
         return _failed(outcome, err)
     effects = restart_effects(outcome.stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
@@ -276,7 +276,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO, started_ns: int)
               f'{mode}, qos {run.qos}, max_skew {1e3 * run.max_skew:g} ms{rate}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, files, nodes, stamps, log_dir, node, executor, '', len(stamps),
                             expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
-                            quiet=RATE_QUIET_S, watch=watch)
+                            quiet=RATE_QUIET_S, watch=watch, compose=args.compose)
     if outcome.failure is not None:
         return _failed(outcome, err)
     moved = count_under_sets(node, {m: s.stamp_ns for s in sets for m in s.members.values()})

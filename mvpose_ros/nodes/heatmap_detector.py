@@ -192,8 +192,9 @@ def _check_frame_id(cam: _Camera, frame_id: str) -> None:
 class HeatmapDetectorNode(Node):
     """Raw detections or images of one camera, or of every rig camera, in; 2D people out."""
 
-    def __init__(self) -> None:
-        super().__init__('heatmap_detector')
+    def __init__(self, **options: Any) -> None:
+        """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
+        super().__init__('heatmap_detector', **options)
         defaults = OpenPoseDetectorConfig()
         onnx = OnnxDetectorConfig(model_dir=Path())  # its defaults
         try:
