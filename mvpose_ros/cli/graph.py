@@ -24,6 +24,10 @@ dies more than --respawn-limit times within a minute ends the run (exit 1). The 
 line per restart: when the node's output and the graph's came back, the frames lost (not counted
 as missing), the person ids before and after. --report-every S adds a table by S s of the run:
 frames in / out, latency p50 / p95 and each process's resident memory.
+Every run also prints the start-up time (the command to the first skeleton) and each node
+process's largest resident memory, RSS and PSS, with their totals. --compose detectors runs the
+heatmap detectors in one process, --compose all every node but the player (nodes.composed;
+docs/footprint.md); by default each node has its own.
 
 With --rig (any recorded rig: the bag's own topics, sqlite3 or mcap), the graph is ONE
 heatmap_detector for the whole rig (camera 'all', onnx backend), association and bp_solver, with
