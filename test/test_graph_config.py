@@ -18,7 +18,7 @@ from sensor_msgs.msg import PointCloud2
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.graph.config import (ALL_NODES, RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections,
                                      graph_nodes, graph_settings, load_params, node_command, played_connections,
-                                     process_command, processes, unknown_nodes)
+                                     composed_command, processes, unknown_nodes)
 from mvpose_ros.nodes import composed
 from mvpose_ros.graph.report import frame_ranges, latency_ms, print_latency, report
 from ros_harness import ros_domain
@@ -106,7 +106,7 @@ def test_composed_nodes_take_their_own_arguments_in_one_process(monkeypatch):
     (name, specs), player = processes(nodes, 'all')
     assert (name, player[0]) == ('composed', 'bag_player')
     assert [s.name for s in specs] == [n.name for n in nodes[:-1]]
-    cmd = process_command(name, specs, CONFIG, python='python')
+    cmd = composed_command(specs, CONFIG, python='python')
     assert cmd[:3] == ['python', '-m', 'mvpose_ros.nodes.composed']
     parsed = composed.parse(cmd[3:])
     assert [exe for exe, _ in parsed] == [s.executable for s in specs]

@@ -194,12 +194,10 @@ def processes(nodes: Sequence[NodeSpec], compose: str | None = None) -> list[tup
     return out
 
 
-def process_command(name: str, specs: Sequence[NodeSpec], params_file: str | Path | Sequence[str | Path],
-                    python: str = sys.executable) -> list[str]:
-    """The command of process `name` (processes): its node's own, or for composed nodes
-    nodes.composed with each node's arguments after `--node <executable>`."""
-    if len(specs) == 1 and name == specs[0].name:
-        return node_command(specs[0], params_file, python)
+def composed_command(specs: Sequence[NodeSpec], params_file: str | Path | Sequence[str | Path],
+                     python: str = sys.executable) -> list[str]:
+    """The command of one process running the nodes `specs` (nodes.composed): each node's
+    arguments, as node_command gives them, after `--node <executable>`."""
     cmd = [python, '-m', f'{NODE_PACKAGE}.composed']
     for spec in specs:
         cmd += ['--node', spec.executable, *node_command(spec, params_file, python)[3:]]

@@ -32,8 +32,8 @@ from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.compiled import compile_all
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.inference.window import FrameResult
-from mvpose_ros.graph.config import (GraphSettings, NodeSpec, expected_connections, node_command,
-                                     played_connections, process_command, processes)
+from mvpose_ros.graph.config import (GraphSettings, NodeSpec, composed_command, expected_connections, node_command,
+                                     played_connections, processes)
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
@@ -229,7 +229,8 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
                     _wait_connected(node, executor, group, expected, watch)
                     _start_player(node, executor, group, specs[0], config, played, watch)
                 else:
-                    group.start(name, process_command(name, specs, config))
+                    group.start(name, node_command(specs[0], config) if len(specs) == 1
+                                else composed_command(specs, config))
             outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)
         except GraphFailure as failure:
             outcome.failure = failure
