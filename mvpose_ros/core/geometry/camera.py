@@ -96,7 +96,7 @@ class Camera:
         X = np.asarray(X, dtype=np.float64)
         x, y, z = X[..., 0], X[..., 1], X[..., 2]
         R, t, K = self.R, self.t, self.K
-        # the arithmetic of projection.project_point, in its order: the same bits
+        # the arithmetic of projection.project_point, in its order: the same bits (a fisheye's arctan: 1e-13 px)
         depth = R[2, 0] * x + R[2, 1] * y + R[2, 2] * z + t[2]
         with np.errstate(divide='ignore'):
             inv = np.where(depth > 0, 1.0 / depth, np.nan)
