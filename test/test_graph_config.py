@@ -18,7 +18,8 @@ from sensor_msgs.msg import PointCloud2
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.graph.config import (ALL_NODES, RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections,
                                      graph_nodes, graph_settings, load_params, node_command, played_connections,
-                                     unknown_nodes)
+                                     composed_command, processes, unknown_nodes)
+from mvpose_ros.nodes import composed
 from mvpose_ros.graph.report import frame_ranges, latency_ms, print_latency, report
 from ros_harness import ros_domain
 
@@ -93,6 +94,48 @@ def _check_nodes(nodes, params):
         assert got == expected, spec.name
         assert {k: type(v) for k, v in got.items()} == {k: type(v) for k, v in expected.items()}, spec.name
         assert fqn == f'/{spec.name}'
+
+
+def test_composed_nodes_take_their_own_arguments_in_one_process(monkeypatch):
+    """--compose all: one process with every node but the player, each node with its own namespace,
+    the file's values and its own per-process overrides (a camera index each), as if alone."""
+    nodes = graph_nodes(5, 'b', 1.0)
+    assert [name for name, _ in processes(nodes, 'detectors')] == ['heatmap_detectors', 'association', 'bp_solver',
+                                                                   'bag_player']
+    assert [name for name, _ in processes(nodes)] == [n.name for n in nodes]
+    (name, specs), player = processes(nodes, 'all')
+    assert (name, player[0]) == ('composed', 'bag_player')
+    assert [s.name for s in specs] == [n.name for n in nodes[:-1]]
+    cmd = composed_command(specs, CONFIG, python='python')
+    assert cmd[:3] == ['python', '-m', 'mvpose_ros.nodes.composed']
+    parsed = composed.parse(cmd[3:])
+    assert [exe for exe, _ in parsed] == [s.executable for s in specs]
+    factories, events = composed.factories(parsed)
+    assert not events  # bp_solver needs rclpy's single-threaded executor
+    params = load_params(CONFIG)
+    with ros_domain(monkeypatch):
+        rclpy.init(args=['prog'], signal_handler_options=SignalHandlerOptions.NO)
+        made = []
+        try:
+            for factory in factories:
+                made.append(factory())
+            for spec, node in zip(specs, made):
+                assert node.get_fully_qualified_name() == f'/{spec.name}'
+                section = params[SECTIONS[spec.executable]]
+                expected = {**section, **spec.parameters}
+                assert {k: node.get_parameter(k).value for k in expected} == expected, spec.name
+        finally:
+            for node in made:
+                node.destroy_node()
+            rclpy.try_shutdown()
+
+
+@pytest.mark.parametrize('argv, message', [([], 'expected --node'),
+                                           (['--node', 'bag_player'], 'not a node that can be composed'),
+                                           (['--node'], 'without an executable')])
+def test_a_composed_command_line_is_checked(argv, message):
+    with pytest.raises(ValueError, match=message):
+        composed.parse(argv)
 
 
 def _started_parameters(executable: str, module: str, cls: str, files: list, names: tuple, monkeypatch) -> dict:

@@ -12,7 +12,8 @@ from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_
                                            PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_FROM_SEEN, UNSEEN_RISE, UP)
 from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
-from mvpose_ros.core.geometry.camera import line_terms, rig_directions, solve_line_terms
+from mvpose_ros.core.geometry.projection import rig_directions
+from mvpose_ros.core.geometry.rays import line_terms, solve_line_terms
 from mvpose_ros.core.evaluation.video import look_at
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _depth, _plan, bone_scales,
                                                   camera_subsets, own_bone_lengths, sample_people, split_draws,

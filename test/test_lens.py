@@ -16,7 +16,8 @@ from std_msgs.msg import Header
 from msg_adapters.camera_info_msg import camera_to_info, check_info, info_to_intrinsics
 from msg_adapters.markers import frustum
 from mvpose_ros.core.geometry import lens
-from mvpose_ros.core.geometry.camera import Camera, rig_directions, rig_project
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.projection import rig_directions, rig_project
 from mvpose_ros.core.geometry.rig import load_rig_file, matrix_to_quaternion
 
 # the magnitudes of an Azure Kinect colour camera's rational_polynomial and a wide fisheye's equidistant

@@ -12,7 +12,8 @@ import pytest
 
 from mvpose_ros.core.association.associator import AssociationConfig, Associator, rough_centres
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, TOP_HEAD
-from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, ray_ray_distance
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rays import closest_point_to_rays, ray_ray_distance
 from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
 from mvpose_ros.core.association.identity import IdentityKeeper
@@ -142,7 +143,7 @@ def _random_rays(rng: np.random.Generator, per_camera: list[int], n_joints: int 
 
 
 def _view_distances_by_pairs(rays: ViewRays, config: MatchingConfig) -> np.ndarray:
-    """all_view_distances written pair by pair with camera.ray_ray_distance."""
+    """all_view_distances written pair by pair with rays.ray_ray_distance."""
     n = len(rays.owner)
     out = np.full((n, n), np.inf)
     seen = rays.keypoints[..., 2] > config.min_score

@@ -1,15 +1,18 @@
-"""The soak run's memory log: resident sizes from /proc and growth after the first loop."""
+"""The soak run's memory log: resident sizes from /proc and growth after the first loop; the total of a
+run and its start-up time."""
 from __future__ import annotations
 
 import os
 import resource
 import subprocess
 import sys
+import time
 
 import pytest
 
 from mvpose_ros.graph import memory
-from mvpose_ros.graph.memory import MemoryLog, rss_kib
+from mvpose_ros.graph.memory import MemoryLog, pss_kib, rss_kib
+from mvpose_ros.graph.startup import process_start_ns, startup_line
 
 GONE = 2 ** 22 + 12345  # beyond pid_max: no such process
 
@@ -56,3 +59,26 @@ def test_growth_is_measured_from_the_first_loop():
     assert log.lines()[0].startswith('a: ') and log.lines()[0].endswith('+5.0%')
     log.sample({'gone': GONE}, outputs=200)
     assert 'gone' not in log.baseline
+
+
+def test_the_total_adds_every_process_largest_size_resident_and_proportional():
+    log = MemoryLog(baseline_after=0)
+    log.sample({'me': os.getpid()}, 1)
+    mib = 2 ** 20
+    log.peak, log.peak_pss = {'a': 100 * mib, 'b': 50 * mib}, {'a': 60 * mib, 'b': 20 * mib}
+    line = log.total_line()
+    assert line.startswith('resident memory: 150.0 MiB in 2 processes')
+    assert '80.0 MiB proportional' in line and 'a 100.0 / 60.0, b 50.0 / 20.0' in line
+
+
+def test_pss_of_a_live_process_is_at_most_its_rss():
+    assert 0 < pss_kib(os.getpid()) <= rss_kib(os.getpid())
+
+
+def test_startup_counts_from_the_command_to_the_first_skeleton():
+    started = process_start_ns()
+    assert started <= time.time_ns()
+    s = 1_000_000_000
+    line = startup_line(started, {1: started + 9 * s, 2: started + 10 * s}, {2: started + 12 * s, 1: started + 11 * s})
+    assert line == 'start-up: 11.0 s from the command to the first skeleton (first frame played at 9.0 s)'
+    assert startup_line(started, {}, {}) is None

@@ -12,7 +12,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.markers import camera_markers, frustum, person_colour, skeleton_markers
-from mvpose_ros.core.evaluation.overlay import MIN_ALPHA
+from mvpose_ros.core.evaluation.colours import MIN_ALPHA
 from msg_adapters.records import from_cloud, to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
 from mvpose_ros.core.geometry.body import BONES

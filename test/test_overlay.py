@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR, overlay, person_colour
+from mvpose_ros.core.evaluation.colours import person_colour
+from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR, overlay
 from mvpose_ros.core.evaluation.video import look_at
 
 

@@ -16,7 +16,8 @@ from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.association.matching import ViewRays
 from mvpose_ros.core.association.view_consistency import consistent_views, leave_one_out_residuals
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
-from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays, line_terms, solve_line_terms
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rays import closest_point_to_rays, line_terms, solve_line_terms
 from mvpose_ros.core.stage import Stage3D, StageConfig
 from mvpose_ros.core.types import Person2D
 from test_matching import _inference_points, _skeleton

@@ -2,7 +2,7 @@
 
     mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
                  [--predictions FILE] [--domain-id N] [--log-dir DIR]
-                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S]
+                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S] [--compose detectors|all]
                  [--record DIR [--record-inputs]] [--foxglove-port PORT]
     mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--loops N] [--qos sensor|reliable] [--config FILE]
                  [--predictions FILE] [--ground-truth shelf --frame N] [--domain-id N] [--log-dir DIR]
@@ -25,6 +25,10 @@ dies more than --respawn-limit times within a minute ends the run (exit 1). The 
 line per restart: when the node's output and the graph's came back, the frames lost (not counted
 as missing), the person ids before and after. --report-every S adds a table by S s of the run:
 frames in / out, latency p50 / p95 and each process's resident memory.
+Every run also prints the start-up time (the command to the first skeleton) and each node
+process's largest resident memory, RSS and PSS, with their totals. --compose detectors runs the
+heatmap detectors in one process, --compose all every node but the player (nodes.composed;
+docs/footprint.md); by default each node has its own.
 
 With --rig (any recorded rig: the bag's own topics, sqlite3 or mcap), the graph is ONE
 heatmap_detector for the whole rig (camera 'all', onnx backend), association and bp_solver, with
@@ -60,6 +64,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from mvpose_ros.graph.config import COMPOSED
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, RESPAWN_WINDOW_S
 from mvpose_ros.graph.session import PROG, run
 
@@ -113,6 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--foxglove-port', type=int, metavar='PORT',
                    help='also run the live view: the skeletons, frusta, overlays and diagnostics over Foxglove\'s '
                         'WebSocket protocol on ws://127.0.0.1:PORT (docs/visualize.md)')
+    p.add_argument('--compose', choices=sorted(COMPOSED),
+                   help='run nodes in one process (ROS composition): detectors, every heatmap_detector; all, every '
+                        'node but the player (default: each node its own process; docs/footprint.md)')
     p.add_argument('--report-every', type=float, metavar='SECONDS',
                    help='also print frames in / out, latency and memory per node by this many s of the run')
     return p
@@ -123,6 +131,8 @@ def _check_arguments(args: argparse.Namespace) -> None:
     for name in ('respawn_delay', 'respawn_limit'):
         if getattr(args, name) is not None and not args.respawn:
             raise ValueError(f'--{name.replace("_", "-")} needs --respawn')
+    if args.compose and args.respawn:
+        raise ValueError('--respawn restarts one node, not a process of composed nodes: not with --compose')
     if args.respawn_delay is not None and not args.respawn_delay >= 0:
         raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
     if args.respawn_limit is not None and args.respawn_limit < 1:

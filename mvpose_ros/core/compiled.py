@@ -6,8 +6,8 @@ Every kernel of the package is compiled the same way, by `kernel`:
 - cached on disk beside its module: the first import after an install compiles (about a minute
   for all of them on 2 cores), later processes load the machine code. numba renews a kernel's
   cache only when its own file changes, and a kernel holds the code of the kernels it calls from
-  other modules: after editing such a kernel (camera's `*_into`, `project_point` and the
-  `lens.distort_point` it inlines, `line_distance`, `pairwise_sum`), delete the caches
+  other modules: after editing such a kernel (rays' `*_into` and `line_distance`, projection's
+  `project_point` and the `distort_point` it inlines, `pairwise_sum`), delete the caches
   (`find mvpose_ros -name '*.nbi' -delete`); an install rewrites every file, so it renews them all;
 - without the GIL, so a node's worker thread and its executor run side by side;
 - without fast-math and with numpy's error model (x / 0 is inf, not an exception): the same
@@ -36,7 +36,8 @@ KERNEL_MODULES: tuple[str, ...] = (
     'mvpose_ros.core.association.view_consistency',
     'mvpose_ros.core.detection.grouping',
     'mvpose_ros.core.detection.openpose_detector',
-    'mvpose_ros.core.geometry.camera',
+    'mvpose_ros.core.geometry.projection',
+    'mvpose_ros.core.geometry.rays',
     'mvpose_ros.core.heatmap',
     'mvpose_ros.core.inference.bp',
     'mvpose_ros.core.inference.confidence',

@@ -173,6 +173,37 @@ def node_command(spec: NodeSpec, params_file: str | Path | Sequence[str | Path],
     return cmd
 
 
+# --compose: which nodes share a process (nodes.composed); the player always has its own, as its
+# exit ends the bag
+COMPOSED = {'detectors': ('heatmap_detectors', ('heatmap_detector',)),
+            'all': ('composed', ('heatmap_detector', 'association', 'bp_solver'))}
+
+
+def processes(nodes: Sequence[NodeSpec], compose: str | None = None) -> list[tuple[str, list[NodeSpec]]]:
+    """The graph's processes in the nodes' order: (process name, its nodes); with `compose` (a key
+    of COMPOSED), the nodes it names in one process, at the place of the first of them."""
+    name, executables = COMPOSED[compose] if compose else ('', ())
+    out: list[tuple[str, list[NodeSpec]]] = []
+    for spec in nodes:
+        if spec.executable not in executables:
+            out.append((spec.name, [spec]))
+        elif out and any(n == name for n, _ in out):
+            next(specs for n, specs in out if n == name).append(spec)
+        else:
+            out.append((name, [spec]))
+    return out
+
+
+def composed_command(specs: Sequence[NodeSpec], params_file: str | Path | Sequence[str | Path],
+                     python: str = sys.executable) -> list[str]:
+    """The command of one process running the nodes `specs` (nodes.composed): each node's
+    arguments, as node_command gives them, after `--node <executable>`."""
+    cmd = [python, '-m', f'{NODE_PACKAGE}.composed']
+    for spec in specs:
+        cmd += ['--node', spec.executable, *node_command(spec, params_file, python)[3:]]
+    return cmd
+
+
 def detector_backend(params: Mapping[str, Mapping[str, object]]) -> str:
     """The `backend` the file gives the heatmap detectors ('openpose', the node's default, when
     none does); ValueError when its heatmap_detector sections disagree."""

@@ -26,6 +26,20 @@ def rss_kib(pid: int | None = None) -> int:
     raise ProcessLookupError(f'no resident size for process {pid}')
 
 
+def pss_kib(pid: int) -> int | None:
+    """Proportional set size in KiB of process `pid`: its resident pages, each shared page divided
+    by the processes sharing it (libraries, the DDS shared-memory segments), so that the sizes of
+    a graph's processes add up to the memory they take together; None where /proc cannot tell."""
+    try:
+        with open(f'/proc/{int(pid)}/smaps_rollup', encoding='ascii') as f:
+            for line in f:
+                if line.startswith('Pss:'):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 @dataclass
 class MemoryLog:
     """Per process, its resident size (bytes) when the first `baseline_after` outputs had arrived
@@ -37,6 +51,7 @@ class MemoryLog:
     peak: dict[str, int] = field(default_factory=dict)
     last: dict[str, int] = field(default_factory=dict)
     history: list[tuple[int, dict[str, int]]] = field(default_factory=list)
+    peak_pss: dict[str, int] = field(default_factory=dict)
 
     def sample(self, pids: Mapping[str, int], outputs: int) -> None:
         """Record every live process's size; outputs: frames output so far."""
@@ -49,6 +64,9 @@ class MemoryLog:
                 continue
             sizes[name] = self.last[name] = rss
             self.peak[name] = max(rss, self.peak.get(name, 0))
+            pss = pss_kib(pid)
+            if pss is not None:
+                self.peak_pss[name] = max(pss * 1024, self.peak_pss.get(name, 0))
             if outputs >= self.baseline_after and name not in self.baseline:
                 self.baseline[name] = rss
 
@@ -63,3 +81,13 @@ class MemoryLog:
         return [f'{name}: {base * mib:.1f} MiB after loop 1 -> {self.last[name] * mib:.1f} MiB at the end '
                 f'(max {self.peak[name] * mib:.1f}), {100 * growth[name]:+.1f}%'
                 for name, base in sorted(self.baseline.items())]
+
+    def total_line(self) -> str:
+        """'resident memory: 1234.5 MiB in 8 processes (the sum of each one's largest RSS), 801.2 MiB
+        proportional (PSS: shared pages counted once); per process RSS / PSS, MiB: a 301.2 / 180.3, ...'."""
+        mib = 1 / 2 ** 20
+        per = ', '.join(f'{name} {size * mib:.1f} / {self.peak_pss.get(name, 0) * mib:.1f}'
+                        for name, size in sorted(self.peak.items()))
+        return (f'resident memory: {sum(self.peak.values()) * mib:.1f} MiB in {len(self.peak)} processes (the sum of '
+                f'each one\'s largest RSS), {sum(self.peak_pss.values()) * mib:.1f} MiB proportional (PSS: shared '
+                f'pages counted once); per process RSS / PSS, MiB: {per}')

@@ -20,8 +20,6 @@ the last frame's output is in (the frames lost in the restart never come).
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import time
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -32,11 +30,12 @@ from rclpy.executors import SingleThreadedExecutor
 
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import loop_offset_ns
+from mvpose_ros.core.compiled import compile_all
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.window import FrameResult
-from mvpose_ros.graph.config import (GraphSettings, NodeSpec, expected_connections, node_command,
-                                     played_connections)
+from mvpose_ros.graph.config import (GraphSettings, NodeSpec, composed_command, expected_connections, node_command,
+                                     played_connections, processes)
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
@@ -231,7 +230,7 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
               log_dir: Path, node: SkeletonRecorder, executor: SingleThreadedExecutor, input_topic: str,
               per_loop: int, expected: Mapping[str, Sequence[str]] | None = None,
               played: Mapping[str, Sequence[str]] | None = None, quiet: float = 0.0,
-              watch: Supervision | None = None) -> Outcome:
+              watch: Supervision | None = None, compose: str | None = None) -> Outcome:
     """Start the nodes, wait for the connections, play, collect; every process is stopped on return,
     also after Ctrl-C (outcome.interrupted). config: the parameter file(s) every node gets, in
     order; stamps: the input stamps (ns, in play order), or a future of them (worked out while the
@@ -239,7 +238,8 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     pass of the bag (the memory baseline); expected: the endpoints to wait for before playing
     (default: the Shelf graph's, expected_connections); played: the player's links to wait for
     before it plays (default: the Shelf graph's, played_connections); quiet: see _play; watch: how
-    node exits are handled (default: the first ends the run)."""
+    node exits are handled (default: the first ends the run); compose: which nodes share a process
+    (a key of config.COMPOSED; default none)."""
     if expected is None:
         expected = expected_connections(settings.cameras, input_topic)
     if played is None:
@@ -248,16 +248,18 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     outcome = Outcome(MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
-    # nodes started together on a fresh install would each compile the same kernels at once
-    subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
+    # nodes started together on a fresh install would each compile the same kernels at once; this
+    # process holds most of them already (the recorder's results), so loading the rest here is quick
+    compile_all()
     with ProcessGroup(log_dir, env) as group:
         try:
-            for spec in nodes:
-                if spec.executable == PLAYER:
+            for name, specs in processes(nodes, compose):
+                if specs[0].executable == PLAYER:
                     _wait_connected(node, executor, group, expected, watch)
-                    _start_player(node, executor, group, spec, config, played, watch)
+                    _start_player(node, executor, group, specs[0], config, played, watch)
                 else:
-                    group.start(spec.name, node_command(spec, config))
+                    group.start(name, node_command(specs[0], config) if len(specs) == 1
+                                else composed_command(specs, config))
             outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)
         except GraphFailure as failure:
             outcome.failure = failure

@@ -44,6 +44,7 @@ from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, fr
                                      rig_prediction_lines, rig_report, score, score_sets)
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import PLAYER, Outcome, Supervision, input_stamps, run_graph, save_predictions
+from mvpose_ros.graph.startup import process_start_ns, startup_line
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
 from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
@@ -68,8 +69,9 @@ RECORD_DRAIN_S = 2.0  # at most this long
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
     """Run the graph as the command line's `args` say (checked); returns the exit code."""
     out, err = out or sys.stdout, err or sys.stderr
+    started_ns = process_start_ns()
     if args.rig is not None:
-        return run_rig(args, out, err)
+        return run_rig(args, out, err, started_ns)
     settings = graph_settings(args.config)
     settings = replace(settings, bag=args.bag or settings.bag, predictions=args.predictions or settings.predictions,
                        rate=settings.rate if args.rate is None else args.rate)
@@ -103,13 +105,14 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
     with _recording(record, frame_rate=settings.frame_rate, watch_topics=_watched(watch)) as (node, executor):
         print(f'{PROG}: {len(stamps)} frames from {bag}, rate {settings.rate:g}, logs in {log_dir}', file=out)
         outcome = run_graph(settings, [config, *overrides], nodes, stamps, log_dir, node, executor, input_topic,
-                            per_loop, watch=watch)
+                            per_loop, watch=watch, compose=args.compose)
     _print_recording(record, out)
     if outcome.failure is not None:
         return _failed(outcome, err)
     effects = restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate)
     problems = report(stamps, node, settings, out, effects)
     print_refusals(node.refusals(), out)
+    _print_footprint(outcome, node, started_ns, out)
     print_restarts(effects, _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
         print_periods(stamps, node, outcome.memory, args.report_every, out)
@@ -304,8 +307,9 @@ def _stamps_only(s: SyncSet) -> SyncSet:
     return s
 
 
-def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
-    """mvpose-graph --rig: the graph on a recorded rig; returns the exit code."""
+def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO, started_ns: int) -> int:
+    """mvpose-graph --rig: the graph on a recorded rig; returns the exit code. started_ns: the
+    command's start (system clock ns), for the start-up time."""
     rig, run, settings, files, sets = rig_run_plan(args)
     root = None if args.data_root is None else str(data_root(args.data_root).resolve())
     nodes = rig_graph_nodes(run, root, start_topic=START_TOPIC, overlay=args.overlay is not None)
@@ -333,7 +337,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
         # per_loop 0: a rig run prints no memory baseline, only its periods (--report-every)
         outcome = run_graph(settings, files, nodes, _stamps_of(sets), log_dir, node, executor, '', 0,
                             expected=rig_connections(rig), played=rig_played_connections(rig, run.lockstep),
-                            quiet=RATE_QUIET_S, watch=watch)
+                            quiet=RATE_QUIET_S, watch=watch, compose=args.compose)
     _print_recording(record, out)
     if outcome.failure is not None:
         return _failed(outcome, err)
@@ -350,6 +354,7 @@ def run_rig(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
                           round(run.max_skew * 1e9), run.lockstep, out)
     print_first_second(stamps, [list(s.members.values()) for s in sets], node, node.people_at, node.bundles_at, out)
     print_refusals(node.refusals(), out)
+    _print_footprint(outcome, node, started_ns, out)
     print_restarts(restart_effects(stamps, node, outcome.restarts, watch.outputs, settings.frame_rate),
                    _start_ns(node, outcome), watch.outputs, settings.frame_rate, out)
     if args.report_every:
@@ -451,6 +456,15 @@ def _recording(record: RecordPlan | None = None,
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
+
+
+def _print_footprint(outcome: Outcome, node: SkeletonRecorder, started_ns: int, out: TextIO) -> None:
+    """The start-up time to the first skeleton and the nodes' resident memory."""
+    line = startup_line(started_ns, node.info_at, node.output_at)
+    if line:
+        print(line, file=out)
+    if outcome.memory.peak:
+        print(outcome.memory.total_line(), file=out)
 
 
 def _verdict(outcome, problems: list[str], timeout: float, err: TextIO) -> int:

@@ -74,8 +74,9 @@ STATE_PERIOD_S = 0.2  # s between two writes of the identity state (a person mov
 class AssociationNode(Node):
     """<camera>/people2d of every rig camera in, people/bundles out (names relative: see topics)."""
 
-    def __init__(self) -> None:
-        super().__init__('association')
+    def __init__(self, **options: Any) -> None:
+        """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
+        super().__init__('association', **options)
         p = declare(self, [
             *rig_parameters(),
             Param('sync_timeout', SYNC_TIMEOUT_S, 's to wait for a camera missing from a set before going on without '

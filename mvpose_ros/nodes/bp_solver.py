@@ -87,11 +87,16 @@ class _NotReady(ValueError):
     """A bundle with a camera whose CameraInfo has not come yet (logged throttled)."""
 
 
+# its skeletons callback takes the message info (the DDS receipt time), which the events executor cannot give
+EVENTS_EXECUTOR = False
+
+
 class BpSolverNode(Node):
     """people/bundles in; skeletons, skeletons/live and skeletons/markers out (names relative: see topics)."""
 
-    def __init__(self) -> None:
-        super().__init__('bp_solver')
+    def __init__(self, **options: Any) -> None:
+        """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
+        super().__init__('bp_solver', **options)
         p = declare(self, [
             *rig_parameters(),
             *parameter_specs(SOLVER_PARAMETERS),
@@ -383,7 +388,7 @@ class BpSolverNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    run(BpSolverNode, args, events=False)
+    run(BpSolverNode, args, events=EVENTS_EXECUTOR)
 
 
 if __name__ == '__main__':

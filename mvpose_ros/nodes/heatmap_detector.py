@@ -84,7 +84,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rclpy.logging
@@ -106,7 +106,7 @@ from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew, stamp_rate)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
-from mvpose_ros.core.detection.onnx_detector import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig, OnnxPoseDetector
+from mvpose_ros.core.detection.onnx_config import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
@@ -128,6 +128,9 @@ from mvpose_ros.nodes.runtime import (CAMERA_QUEUE_DEPTH, DATA_QOS, RECORDED_INP
                                       StartupError, camera_subscription, declare, live_parameters, load_rig_parameter,
                                       rig_parameters, run)
 from mvpose_ros.topics import OPENPOSE, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic
+
+if TYPE_CHECKING:
+    from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
@@ -194,8 +197,9 @@ class _Camera:
 class HeatmapDetectorNode(Node):
     """Raw detections or images of one camera, or of every rig camera, in; 2D people out."""
 
-    def __init__(self) -> None:
-        super().__init__('heatmap_detector')
+    def __init__(self, **options: Any) -> None:
+        """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
+        super().__init__('heatmap_detector', **options)
         defaults = OpenPoseDetectorConfig()
         onnx = OnnxDetectorConfig(model_dir=Path())  # its defaults
         try:
@@ -378,6 +382,8 @@ class HeatmapDetectorNode(Node):
     @staticmethod
     def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:
         """The ONNX sessions, created once; a bad value or model file is a StartupError."""
+        # the one entry to the onnx backend: an openpose node never loads onnxruntime
+        from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
         try:
             config = OnnxDetectorConfig(
                 model_dir=data_root(p['data_root'] or None) / 'models', model=p['model'],

@@ -49,7 +49,8 @@ from msg_adapters.stamp import stamp_ns
 from mvpose_ros import topics
 from mvpose_ros.core.association.approximate_sync import default_max_skew
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
-from mvpose_ros.core.evaluation.overlay import draw_caption, overlay, person_colour
+from mvpose_ros.core.evaluation.colours import person_colour
+from mvpose_ros.core.evaluation.overlay import draw_caption, overlay
 from mvpose_ros.core.health.monitor import NodeMonitor, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds

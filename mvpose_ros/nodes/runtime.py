@@ -234,10 +234,15 @@ def params_files(args: Sequence[str]) -> list[str]:
 
 
 def run(factory: Callable[[], Node], args: list[str] | None = None, events: bool = True) -> None:
-    """rclpy main: spin the node until SIGINT (Ctrl-C) or SIGTERM, or, for a node with a `finished`
-    future, until it completes (its result is the exit code). A bad parameter, parameter file or
-    data file (StartupError, or a parameter file rcl cannot parse) exits with code 2 after one
-    fatal log line naming the parameter files, not a traceback.
+    """rclpy main of one node: run_nodes with its factory."""
+    run_nodes([factory], args, events)
+
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None, events: bool = True) -> None:
+    """rclpy main: spin the nodes (one executor, in this thread) until SIGINT (Ctrl-C) or SIGTERM,
+    or, for a node with a `finished` future, until it completes (its result is the exit code). A
+    bad parameter, parameter file or data file (StartupError, or a parameter file rcl cannot
+    parse) exits with code 2 after one fatal log line naming the parameter files, not a traceback.
 
     The executor is rclpy's C++ events executor: about half the CPU per message of the default
     one (241 against 495 us for a PointCloud2 at 1000/s), which a flooded node, or a graph near
@@ -256,24 +261,24 @@ def run(factory: Callable[[], Node], args: list[str] | None = None, events: bool
         raise SystemExit(2) from None
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    node = None
+    nodes: list[Node] = []
     code = 0
     try:
-        node = factory()
-        finished = getattr(node, 'finished', None)
         executor = EventsExecutor() if events else SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok() and not (finished is not None and finished.done()):
+        for factory in factories:
+            nodes.append(factory())
+            executor.add_node(nodes[-1])
+        finished = [f for node in nodes if (f := getattr(node, 'finished', None)) is not None]
+        while not stop.is_set() and rclpy.ok() and not any(f.done() for f in finished):
             executor.spin_once(timeout_sec=SPIN_ONCE_S)
-        if finished is not None and finished.done():
-            code = finished.result() or 0
+        code = next((f.result() or 0 for f in finished if f.done()), 0)
     except StartupError as exc:
         rclpy.logging.get_logger('mvpose_ros').fatal(f'{where}{exc}')
         code = 2
     except ExternalShutdownException:
         pass
     finally:
-        if node is not None:
+        for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
     if code:

@@ -13,7 +13,7 @@ from foxglove.messages import (Color, Duration, KeyValuePair, LinePrimitive, Lin
                                Quaternion, SceneEntity, SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate,
                                SpherePrimitive, TextPrimitive, Timestamp, Vector3)
 
-from mvpose_ros.core.evaluation.overlay import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
+from mvpose_ros.core.evaluation.colours import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
                                                 person_colour)
 from mvpose_ros.core.geometry.body import BONES, NUM_JOINTS, UP
 

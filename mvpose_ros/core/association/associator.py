@@ -13,7 +13,8 @@ from typing import Generic, Sequence, TypeVar
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
-from mvpose_ros.core.geometry.camera import Camera, line_terms_into, solve_line_terms_into
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rays import line_terms_into, solve_line_terms_into
 from mvpose_ros.core.association.identity import IdentityKeeper
 from mvpose_ros.core.association.matching import MatchingConfig, ViewRays, all_view_distances, cluster_views
 from mvpose_ros.core.types import Keypoints2D
@@ -66,7 +67,7 @@ class PersonObservation(Generic[P]):
 @kernel('float64[:, ::1](float64[:, :, ::1], float64[:, ::1], float64[:, :, ::1], int64[:, ::1], float64)')
 def _rough_centres(keypoints, origins, dirs, idx, min_score):
     """rough_centres of people's views idx (P, K) (-1: padding) of the rays of ViewRays, with the
-    arithmetic of camera.closest_point_to_rays (directions normalised again, each term summed
+    arithmetic of rays.closest_point_to_rays (directions normalised again, each term summed
     over the K lines in numpy's pairwise order), so the same bits."""
     n_people, width = idx.shape
     n_joints = keypoints.shape[1]

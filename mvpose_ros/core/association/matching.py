@@ -19,7 +19,8 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
-from mvpose_ros.core.geometry.camera import Camera, line_distance
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rays import line_distance
 from mvpose_ros.core.types import Keypoints2D
 
 
@@ -72,7 +73,7 @@ class ViewRays:
 
 
 # Below this sine of the angle between two rays, their distance is taken from the parallel-safe
-# formula (camera.line_distance) instead of the one that divides by the sine.
+# formula (rays.line_distance) instead of the one that divides by the sine.
 _NEAR_PARALLEL = 1e-6
 
 

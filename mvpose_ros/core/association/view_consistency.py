@@ -24,7 +24,9 @@ import numpy as np
 
 from mvpose_ros.core.association.matching import ViewRays
 from mvpose_ros.core.compiled import kernel, kernel_array
-from mvpose_ros.core.geometry.camera import Camera, line_terms_into, project_point, rig_model, solve_line_terms_into
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.projection import project_point, rig_model
+from mvpose_ros.core.geometry.rays import line_terms_into, solve_line_terms_into
 
 
 @kernel('float64(float64[::1])')
@@ -48,7 +50,7 @@ def _median(values):
         'float64[:, ::1], float64[:, ::1])')
 def _person_residuals(keypoints, owner, origins, dirs, views, width, min_score, model, out):
     """leave_one_out_residuals of one person into out[:width, :width], its views the rows
-    views[:width] of the rays of ViewRays (-1: padding), and the rig's camera.rig_model (C, 27).
+    views[:width] of the rays of ViewRays (-1: padding), and the rig's projection.rig_model (C, 27).
     width: the most views of any person of the call (it scales the singularity threshold)."""
     n_joints = keypoints.shape[1]
     seen = np.zeros((width, n_joints), dtype=np.bool_)

@@ -1,13 +1,10 @@
-"""The ONNX 2D pose models (MoveNet MultiPose, EfficientPose RT / I): what each file must look
-like, and onnxruntime sessions checked against it when they are loaded, so that a wrong file is
-a clear error at start-up rather than a shape error on the first image."""
+"""The ONNX 2D pose models (MoveNet MultiPose, EfficientPose RT / I, the single-person MoveNet
+and BlazePose models): what each file must look like (core.detection.onnx_sessions loads and
+checks them; this module does not load onnxruntime, so that the parameters naming models cost a
+node nothing)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Sequence
-
-import onnxruntime as ort
 
 DEFAULT_PROVIDERS = ('CPUExecutionProvider',)
 
@@ -45,64 +42,44 @@ EFFICIENTPOSE = {
 }
 
 
-def check_providers(providers: Sequence[str]) -> tuple[str, ...]:
-    """The execution providers, ValueError when one is not in this onnxruntime build (which
-    would otherwise fall back to the CPU with only a warning)."""
-    available = ort.get_available_providers()
-    missing = [p for p in providers if p not in available]
-    if not providers or missing:
-        raise ValueError(f'execution providers {list(providers)}: '
-                         f'{"none given" if not providers else f"{missing} not available"} '
-                         f'(this onnxruntime has {", ".join(available)})')
-    return tuple(providers)
+COCO_KEYPOINTS = 17
 
 
-def _shape_matches(shape: Sequence[object], expected: Sequence[int | None]) -> bool:
-    # ONNX symbolic dimensions come back as strings (or None): they match a None in the spec only
-    return len(shape) == len(expected) and all(e is None or s == e for s, e in zip(shape, expected))
+@dataclass(frozen=True)
+class SinglePoseSpec:
+    """A single-person model: its ModelSpec (input, and the keypoint output checked at load),
+    the heatmap output, and for BlazePose the landmark of each COCO-17 joint."""
+
+    spec: ModelSpec
+    heatmap_name: str
+    offsets_name: str | None  # MoveNet's offsets; None for BlazePose
+    landmarks: tuple[int, ...] | None  # BlazePose-33 index of each COCO-17 joint; None for MoveNet
+
+    @property
+    def side(self) -> int:
+        return int(self.spec.input_shape[1])
+
+    @property
+    def movenet(self) -> bool:
+        return self.landmarks is None
 
 
-def _describe(args: Sequence[ort.NodeArg]) -> str:
-    return ', '.join(f'{a.name} {a.type} {list(a.shape)}' for a in args) or 'none'
+def _movenet(name: str, side: int) -> SinglePoseSpec:
+    spec = ModelSpec(f'MoveNet SinglePose {name.capitalize()}', f'movenet_{name}.onnx', 'input', 'tensor(int32)',
+                     (1, side, side, 3), 'keypoints', (1, 1, COCO_KEYPOINTS, 3))
+    return SinglePoseSpec(spec, 'heatmap', 'offsets', None)
 
 
-def session_options(threads: int = 0) -> ort.SessionOptions:
-    """The options of every model session: `threads` intra-op threads (0 = onnxruntime's default,
-    one per core), all graph optimisations, operators one after the other, and idle threads that
-    sleep instead of spinning."""
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = threads
-    options.inter_op_num_threads = 1
-    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL  # the models are chains: nothing to run in parallel
-    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    # Spinning threads burn the cores the Python side (crops, heatmap resampling) and the other
-    # nodes need between runs: on 2 loaded cores a set took about twice as long with it.
-    options.add_session_config_entry('session.intra_op.allow_spinning', '0')
-    options.log_severity_level = 3  # errors only: onnxruntime's warnings are not the user's business
-    return options
+def _blazepose(name: str) -> SinglePoseSpec:
+    spec = ModelSpec(f'BlazePose {name.capitalize()}', f'blazepose_{name}.onnx', 'input', 'tensor(float)',
+                     (1, 256, 256, 3), 'landmarks', (1, 195))
+    # COCO-17: nose, l/r eye (BlazePose's eye centres), l/r ear, shoulders, elbows, wrists, hips, knees, ankles
+    return SinglePoseSpec(spec, 'heatmap', None, (0, 2, 5, 7, 8, 11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28))
 
 
-def load_session(path: str | Path, spec: ModelSpec, providers: Sequence[str] = DEFAULT_PROVIDERS,
-                 threads: int = 0) -> ort.InferenceSession:
-    """An onnxruntime session of the model file `path` (session_options(threads)), checked against
-    `spec`. ModelError when the file is missing, is not an ONNX model, or has other inputs or
-    outputs than spec."""
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f'{path}: {spec.kind} model file not found')
-    options = session_options(threads)
-    try:
-        session = ort.InferenceSession(str(path), options, providers=list(providers))
-    except Exception as exc:  # onnxruntime's own exception types (InvalidProtobuf, Fail, ...) share no base
-        reason = ' '.join(str(exc).split())
-        raise ModelError(f'{path}: not a loadable ONNX model ({reason})') from None
-    inputs, outputs = session.get_inputs(), session.get_outputs()
-    output = [o for o in outputs if o.name == spec.output_name]
-    if not (len(inputs) == 1 and inputs[0].name == spec.input_name and inputs[0].type == spec.input_type
-            and _shape_matches(inputs[0].shape, spec.input_shape)
-            and output and _shape_matches(output[0].shape, spec.output_shape)):
-        expected = (f'input {spec.input_name} {spec.input_type} {list(spec.input_shape)}, output '
-                    f'{spec.output_name} {list(spec.output_shape)} (None = any)')
-        raise ModelError(f'{path}: not the {spec.kind} model: expected {expected}; the file has input '
-                         f'{_describe(inputs)}, output {_describe(outputs)}')
-    return session
+SINGLE_POSE = {
+    'lightning': _movenet('lightning', 192),
+    'thunder': _movenet('thunder', 256),
+    'blazepose_full': _blazepose('full'),
+    'blazepose_heavy': _blazepose('heavy'),
+}

@@ -23,49 +23,8 @@ from typing import Sequence
 
 import numpy as np
 
-from mvpose_ros.core.detection.onnx_models import DEFAULT_PROVIDERS, ModelSpec, load_session
-
-COCO_KEYPOINTS = 17
-
-
-@dataclass(frozen=True)
-class SinglePoseSpec:
-    """A single-person model: its ModelSpec (input, and the keypoint output checked at load),
-    the heatmap output, and for BlazePose the landmark of each COCO-17 joint."""
-
-    spec: ModelSpec
-    heatmap_name: str
-    offsets_name: str | None  # MoveNet's offsets; None for BlazePose
-    landmarks: tuple[int, ...] | None  # BlazePose-33 index of each COCO-17 joint; None for MoveNet
-
-    @property
-    def side(self) -> int:
-        return int(self.spec.input_shape[1])
-
-    @property
-    def movenet(self) -> bool:
-        return self.landmarks is None
-
-
-def _movenet(name: str, side: int) -> SinglePoseSpec:
-    spec = ModelSpec(f'MoveNet SinglePose {name.capitalize()}', f'movenet_{name}.onnx', 'input', 'tensor(int32)',
-                     (1, side, side, 3), 'keypoints', (1, 1, COCO_KEYPOINTS, 3))
-    return SinglePoseSpec(spec, 'heatmap', 'offsets', None)
-
-
-def _blazepose(name: str) -> SinglePoseSpec:
-    spec = ModelSpec(f'BlazePose {name.capitalize()}', f'blazepose_{name}.onnx', 'input', 'tensor(float)',
-                     (1, 256, 256, 3), 'landmarks', (1, 195))
-    # COCO-17: nose, l/r eye (BlazePose's eye centres), l/r ear, shoulders, elbows, wrists, hips, knees, ankles
-    return SinglePoseSpec(spec, 'heatmap', None, (0, 2, 5, 7, 8, 11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28))
-
-
-SINGLE_POSE = {
-    'lightning': _movenet('lightning', 192),
-    'thunder': _movenet('thunder', 256),
-    'blazepose_full': _blazepose('full'),
-    'blazepose_heavy': _blazepose('heavy'),
-}
+from mvpose_ros.core.detection.onnx_models import COCO_KEYPOINTS, DEFAULT_PROVIDERS, SINGLE_POSE
+from mvpose_ros.core.detection.onnx_sessions import load_session
 
 
 @dataclass

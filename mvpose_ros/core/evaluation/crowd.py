@@ -1,7 +1,7 @@
 """More people for a benchmark or a bag: copies of a recorded scene's 2D detections, shifted in space.
 
 Each frame's original 2D people are associated (core.association.Associator) into 3D people,
-whose joints are triangulated from their keypoints (camera.closest_point_to_rays). Copy k of the
+whose joints are triangulated from their keypoints (rays.closest_point_to_rays). Copy k of the
 scene moves every 3D person by a fixed offset d_k in the floor plane and re-renders each of its
 views geometrically: keypoint j of a view becomes project(X_j + d_k) (its score kept), and map j
 of the view's heatmap is translated by that joint's pixel displacement
@@ -28,7 +28,8 @@ import numpy as np
 
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE
-from mvpose_ros.core.geometry.camera import Camera, closest_point_to_rays
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.rays import closest_point_to_rays
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.types import Person2D
 

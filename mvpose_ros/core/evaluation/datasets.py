@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-import scipy.io
 
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
@@ -112,6 +111,7 @@ class GroundTruth:
 
 def _cells(mat_path: str | Path, key: str, frames: Sequence[int] | None) -> tuple[np.ndarray, list]:
     """Frame indices (F,) and per-actor lists of the selected cells of `key`."""
+    import scipy.io  # the one reader of MATLAB files; every node imports this module for data_root
     actors = scipy.io.loadmat(str(mat_path), variable_names=[key])[key][0]
     n_frames = actors[0].shape[0]
     idx = np.arange(n_frames) if frames is None else np.asarray(list(frames), dtype=int)

@@ -4,7 +4,6 @@ ground truth in one fixed colour, so an annotation and an estimate that disagree
 at a glance."""
 from __future__ import annotations
 
-import colorsys
 from typing import Sequence
 
 import cv2
@@ -16,26 +15,8 @@ from mvpose_ros.core.types import Person2D
 
 DETECTION_BGR = (255, 255, 255)
 GROUND_TRUTH_BGR = (0, 255, 255)  # yellow, and drawn thinner than the estimates and with open joints
-GOLDEN_RATIO_CONJUGATE = (5.0 ** 0.5 - 1.0) / 2.0
-# A person in 3D (RViz markers, the Foxglove scene): joint spheres, bone lines, the id label.
-JOINT_DIAMETER_M = 0.06
-BONE_WIDTH_M = 0.03
-TEXT_HEIGHT_M = 0.12
-MIN_ALPHA = 0.15  # a joint of confidence 0 stays faintly visible; confidence 1 is opaque
 _SHIFT = 4  # cv2 sub-pixel drawing: coordinates in 1/16 px
 _BONES = np.array(BONES)  # (B, 2) joints of each bone, the 14 dataset joints
-
-
-def person_colour(person_id: int) -> tuple[float, float, float]:
-    """(r, g, b) in [0, 1] for a person id, the same in RViz markers, overlays and videos: hues
-    step by the golden ratio, so consecutive ids get far-apart hues and any few ids stay distinct."""
-    r, g, b = colorsys.hsv_to_rgb((int(person_id) * GOLDEN_RATIO_CONJUGATE) % 1.0, 0.85, 0.95)
-    return r, g, b
-
-
-def confidence_alpha(confidence: np.ndarray) -> np.ndarray:
-    """Alpha (...) in [MIN_ALPHA, 1] of confidences (...) in [0, 1]."""
-    return MIN_ALPHA + (1.0 - MIN_ALPHA) * np.asarray(confidence, dtype=np.float64)
 
 
 def _segments(uv: np.ndarray) -> np.ndarray:

@@ -10,14 +10,12 @@ their coefficients in D's order, between normalised coordinates (x/z, y/z) and d
   theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8). Never the identity: zero
   coefficients still map angles, not tangents, to radii.
 
-Kernels take a lens as KERNEL_SIZE numbers (kernel_form): the coefficients in KERNEL_SLOTS slots,
-then its kind (NONE, RADIAL_TANGENTIAL, FISHEYE).
+Kernels (core.geometry.projection) take a lens as KERNEL_SIZE numbers (kernel_form): the
+coefficients in KERNEL_SLOTS slots, then its kind (NONE, RADIAL_TANGENTIAL, FISHEYE).
 """
 from __future__ import annotations
 
 import numpy as np
-
-from mvpose_ros.core.compiled import inline_kernel
 
 PLUMB_BOB, RATIONAL_POLYNOMIAL, EQUIDISTANT = 'plumb_bob', 'rational_polynomial', 'equidistant'
 # model -> its coefficients, in D's order
@@ -104,32 +102,10 @@ def _distorted_radii(model: str, dist: np.ndarray) -> np.ndarray:
 
 
 def kernel_form(model: str, dist: np.ndarray) -> np.ndarray:
-    """(KERNEL_SIZE,) the lens as distort_point takes it: the coefficients in D's order, padded with
+    """(KERNEL_SIZE,) the lens as projection.distort_point takes it: the coefficients in D's order, padded with
     zeros (plumb_bob k1 k2 p1 p2 k3 is rational_polynomial's first five), then its kind."""
     kind = FISHEYE if model == EQUIDISTANT else RADIAL_TANGENTIAL if distorts(model, dist) else NONE
     return np.concatenate([dist, np.zeros(KERNEL_SLOTS - len(dist)), [kind]])
-
-
-@inline_kernel
-def distort_point(lens, x, y):
-    """Distorted normalised coordinates of the normalised point (x, y) through a lens of
-    kernel_form (KERNEL_SIZE,); the arithmetic of distort, in the same order."""
-    kind = lens[KERNEL_SLOTS]
-    if kind == RADIAL_TANGENTIAL:
-        k1, k2, p1, p2, k3, k4, k5, k6 = lens[0], lens[1], lens[2], lens[3], lens[4], lens[5], lens[6], lens[7]
-        r2 = x * x + y * y
-        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-        return (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
-    if kind == FISHEYE:
-        r = np.sqrt(x * x + y * y)
-        if r == 0:
-            return x, y
-        theta = np.arctan(r)
-        t2 = theta * theta
-        scale = theta * (1 + t2 * (lens[0] + t2 * (lens[1] + t2 * (lens[2] + t2 * lens[3])))) / r
-        return x * scale, y * scale
-    return x, y
 
 
 def distort(model: str, dist: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -13,7 +13,8 @@ import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
 from mvpose_ros.core.geometry.body import PLAUSIBLE_BONE_SCALE
-from mvpose_ros.core.geometry.camera import Camera, rig_project
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.projection import rig_project
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 TEMPORAL_FORMS = ('laplace', 'gauss')

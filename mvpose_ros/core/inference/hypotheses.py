@@ -19,7 +19,9 @@ import numpy as np
 from mvpose_ros.core.compiled import kernel, kernel_array
 from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_PARENT, PLAUSIBLE_BONE_SCALE,
                                            PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_FROM_SEEN, UNSEEN_RISE, UP)
-from mvpose_ros.core.geometry.camera import Camera, closest_points_of_ray_sets, rig_directions
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.geometry.projection import rig_directions
+from mvpose_ros.core.geometry.rays import closest_points_of_ray_sets
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
 
 
