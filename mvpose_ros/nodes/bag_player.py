@@ -32,7 +32,6 @@ wait_subscribers, ack_timeout and the diagnostics thresholds; the others are rea
 """
 from __future__ import annotations
 
-import importlib
 import time
 from typing import Any, Iterator
 
@@ -48,6 +47,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty
 
 from msg_adapters.cdr_header import NS, header_stamp_ns, with_header_stamp
+from msg_adapters.definitions import message_class
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros.bags.io import bag_size, bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped
@@ -81,15 +81,6 @@ def _camera_input(topic: str, name: str) -> bool:
     """Whether `topic` ('cam<c>/<name>', relative) is a camera's `name` topic."""
     head, _, tail = relative(topic).partition('/')
     return head.startswith('cam') and head[3:].isdigit() and tail == name
-
-
-def _message_class(msgtype: str) -> Any:
-    """The rclpy class of 'pkg/msg/Name'."""
-    package, kind, name = msgtype.split('/')
-    try:
-        return getattr(importlib.import_module(f'{package}.{kind}'), name)
-    except (ImportError, AttributeError):
-        raise StartupError(f'no Python message class for {msgtype} (is its package installed?)') from None
 
 
 class BagPlayerNode(Node):
@@ -157,7 +148,7 @@ class BagPlayerNode(Node):
             raise StartupError(f'parameter topics: {", ".join(unknown)} not in {self._bag} '
                                f'(it has {", ".join(summary.topics)})')
         self._topics = [in_bag[t] for t in wanted] if wanted else list(summary.topics)
-        self._pubs = {t: self.create_publisher(_message_class(summary.topics[t][0]), relative(t), qos)
+        self._pubs = {t: self.create_publisher(message_class(summary.topics[t][0]), relative(t), qos)
                       for t in self._topics}
         self._stamped = {t: has_header(summary.topics[t][0]) for t in self._topics}
         self._clock_pub = self.create_publisher(ClockMsg, '/clock', DATA_QOS) if p['clock'] else None
