@@ -86,7 +86,8 @@ class AssociationNode(Node):
             Param('min_cameras', 2, 'cameras a set needs to be bundled (smaller sets are dropped: nobody in them is '
                                     'seen twice)', 1, 65535),
             *parameter_specs(ASSOCIATION_PARAMETERS),
-            Param('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (for max_skew 0)', 0.1, 1000.0),
+            Param('frame_rate', FRAME_RATE, 'nominal frames per second of the cameras (max_skew 0 is half its period; '
+                  'a camera not heard yet is waited one period)', 0.1, 1000.0),
             Param('state_dir', '', 'folder for the person ids\' state, kept across a restart (empty: none kept)'),
             Param('state_max_age', 30.0, 's: positions in an older state are not used (ids are still not reused)', 0.0,
                   86400.0),
