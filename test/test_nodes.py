@@ -126,7 +126,8 @@ def test_whole_rig_detector_announces_a_set_short_of_min_cameras_on_skeletons_dr
         node.create_subscription(Header, '/skeletons/dropped', lost.append, DATA_QOS)
         pubs = [node.create_publisher(PointCloud2, f'/cam{c}/openpose', DATA_QOS) for c in range(5)]
         proc = start_node('heatmap_detector', domain, log, '-p', 'camera:=all', '-p', 'min_cameras:=2',
-                          '-p', 'max_skew:=0.005', '-p', 'sync_timeout:=5.0', '-p', 'waiting_sets:=8')
+                          '-p', 'max_skew:=0.005', '-p', 'sync_timeout:=5.0', '-p', 'waiting_sets:=8',
+                          '-p', 'frame_rate:=1.0')  # a camera not heard yet waited 1 s: a burst stays whole
         try:
             assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)), log.read_text()
             for f in frames:
