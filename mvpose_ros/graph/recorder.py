@@ -170,7 +170,9 @@ class SkeletonRecorder(Node):
                     event_callbacks=NO_EVENTS))
         self._output_name = self.resolve_topic_name(OUTPUT_TOPIC)
         self._statuses: dict[str, Status] = {}  # name -> the latest status of that name on /diagnostics
-        self._status_at: dict[str, float] = {}  # name -> when (monotonic s) its latest status came
+        # the detectors' refusals statuses (core.health.refusals) by name: the latest, and when it came
+        self._refusals: dict[str, tuple[Status, float]] = {}
+        self.unusable: list[str] = []  # '<camera>: every image refused: <cause>' of each unusable camera, sorted
         self.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, DIAGNOSTICS_QOS,
                                  event_callbacks=NO_EVENTS)
 
@@ -186,26 +188,22 @@ class SkeletonRecorder(Node):
         now = time.monotonic()
         for status in statuses:
             self._statuses[status.name] = status
-            self._status_at[status.name] = now
+            if refusals_of(status) is not None:
+                self._refusals[status.name] = status, now
+        self.unusable = sorted(f'{s.hardware_id}: {s.message}' for s, _ in self._refusals.values()
+                               if s.level == Level.ERROR)
 
     def refusals_since(self, since: float) -> bool:
-        """Whether every refusals status (core.health.refusals) heard was heard again after
-        `since` (monotonic s): the counts then include every input before it."""
-        return all(self._status_at[name] > since for name, s in self._statuses.items() if refusals_of(s) is not None)
-
-    def unusable_cameras(self) -> list[str]:
-        """'<camera>: every image refused: <cause>' of each camera a detector found unusable
-        (core.health.refusals), in name order."""
-        return sorted(f'{s.hardware_id}: {s.message}' for s in self._statuses.values()
-                      if s.level == Level.ERROR and refusals_of(s) is not None)
+        """Whether every refusals status heard was heard again after `since` (monotonic s): the
+        counts then include every input before it."""
+        return all(at > since for _, at in self._refusals.values())
 
     def refusals(self) -> dict[str, Counter]:
         """Camera -> its inputs refused since the start by cause, as the detectors last reported."""
         out: dict[str, Counter] = {}
-        for status in self._statuses.values():
-            found = refusals_of(status)
-            if found is not None:
-                out[found[0]] = out.get(found[0], Counter()) + found[1]
+        for status, _ in self._refusals.values():
+            camera, causes = refusals_of(status)
+            out[camera] = out.get(camera, Counter()) + causes
         return out
 
     def _on_people(self, topic: str, cdr: bytes, info: Any) -> None:

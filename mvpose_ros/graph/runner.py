@@ -184,17 +184,17 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
     unusable_since: float | None = None  # when a detector first said a camera cannot work
     sampled = 0.0
     while wanted is None or not node.accounted(wanted):
-        if wanted is None and not (isinstance(stamps, Future) and not stamps.done()):
+        if wanted is None and (not isinstance(stamps, Future) or stamps.done()):
             wanted = set(_known(stamps))
         executor.spin_once(timeout_sec=SPIN_S)
         if time.monotonic() - sampled > MEMORY_PERIOD_S:
             sampled = time.monotonic()
             memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
         _check_crashes(group, (PLAYER,), watch, node)
-        if unusable_since is None and node.unusable_cameras():
+        if unusable_since is None and node.unusable:
             unusable_since = time.monotonic()
         if unusable_since is not None and time.monotonic() - unusable_since > UNUSABLE_GRACE_S:
-            raise GraphFailure('', '\n'.join(node.unusable_cameras()))
+            raise GraphFailure('', '\n'.join(node.unusable))
         if player_done is None and PLAYER in group.poll():
             player_done = time.monotonic()
         limit = settings.timeout if node.last_activity or player_done else STARTUP_TIMEOUT_S

@@ -215,11 +215,11 @@ def rig_run_plan(args: argparse.Namespace) -> tuple[Rig, RigRun, GraphSettings, 
     if from_bag:
         frame_rate = round(bag_rate, 2)
         max_skew, sync_timeout = rig_sync(params_list, frame_rate)
-    sets = _in_background(partial(_every_set, bag, images, max_skew, sync_timeout, args.loops,
-                                  None if args.lockstep else (summary.first_ns, summary.last_ns)))
     rate = 0.0 if args.lockstep else float(section['rate'] if args.rate is None else args.rate)
     if not (rate > 0 or args.lockstep):
         raise ValueError(f'--rate must be > 0 (or use --lockstep), got {rate:g}')
+    sets = _in_background(partial(_every_set, bag, images, max_skew, sync_timeout, args.loops,
+                                  None if args.lockstep else (summary.first_ns, summary.last_ns)))
     run = RigRun(str(rig_path), str(bag), args.lockstep, rate, args.qos or str(section['qos']), max_skew,
                  sync_timeout, float(section['ack_timeout']), args.loops, frame_rate, bag_rate, from_bag)
     settings = GraphSettings('rig', len(rig.cameras), str(bag), args.predictions or str(section['predictions']),
