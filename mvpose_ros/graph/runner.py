@@ -20,6 +20,8 @@ the last frame's output is in (the frames lost in the restart never come).
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -30,7 +32,6 @@ from rclpy.executors import SingleThreadedExecutor
 
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.replay import loop_offset_ns
-from mvpose_ros.core.compiled import compile_all
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.window import FrameResult
@@ -248,9 +249,10 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     outcome = Outcome(MemoryLog(per_loop), restarts=watch.respawner.restarts if watch.respawner else [])
     # one BLAS thread per node: a dozen numpy processes on a few cores only fight otherwise
     env = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', **os.environ, 'PYTHONUNBUFFERED': '1'}
-    # nodes started together on a fresh install would each compile the same kernels at once; this
-    # process holds most of them already (the recorder's results), so loading the rest here is quick
-    compile_all()
+    # nodes started together on a fresh install would each compile the same kernels at once. In a
+    # process of their own, started as the nodes are: run from a checkout, `python -m` takes the
+    # checkout's modules, whose cache is not the installed package's
+    subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
     with ProcessGroup(log_dir, env) as group:
         try:
             for name, specs in processes(nodes, compose):
