@@ -75,8 +75,8 @@ START_TOPIC = 'bag_player/start'  # the player's start signal (its parameter sta
 SPIN_S = 0.05
 # Readers and writers without rclpy's default QoS event handlers (a warning on an incompatible QoS
 # or type), but for the skeletons reader: each handler is a waitable that the Python executor
-# sets up at every wait: without them the runner took about half the CPU on a rig (five
-# camera_info readers at the cameras' rate; 9-11% of a core instead of 19%), which the nodes share.
+# sets up at every wait: with them the runner's camera_info readers, at the cameras' rate, took
+# about twice the CPU, which the nodes share.
 NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
@@ -107,7 +107,7 @@ class SkeletonRecorder(Node):
         stamps are kept in `people_stamps` (by the topic as given), with when each stamp's last
         people2d and each set's bundles came (`people_at`, `bundles_at`); watch_topics: topics (as given,
         PointCloud2: the nodes' outputs) that `arm` can watch, each read from its first `arm` on
-        (reading every node's output all along cost the runner 8% of a core at 25 Hz);
+        (reading every node's output all along would cost the runner CPU at every frame);
         overlay_files: overlay topic (CompressedImage, the overlay node's) -> folder each of its
         images is written to as <stamp ns>.jpg (their stamps in `overlay_stamps`, None without
         overlay_files; the monotonic s of the last in `last_overlay`); the run waits for these

@@ -178,7 +178,7 @@ class BagPlayerNode(Node):
             return group_frames(messages)
         if bag_size(self._bag) <= p['preload_mib'] * 2 ** 20:
             # Read while playing, a bag's chunks are decompressed between two frames on the cores the
-            # graph works on (Shelf: 27 ms at frame 271). Damage is then found before anything plays.
+            # graph works on, and delay them. Damage is then found before anything plays.
             frames = list(read_pass())
             self._frames = looped(lambda: frames, self._loops)
         else:

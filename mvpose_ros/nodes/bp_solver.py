@@ -4,8 +4,8 @@ causal estimate at once.
 
 In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
 record per person joint with its confidence, empty when nobody is seen) and skeletons/markers
-(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes: 2 ms
-a frame of four people), both with the input bundle's stamp;
+(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes), both
+with the input bundle's stamp;
 skeletons/live (encoding D, the same ids) as soon as a bundle is in: its frame decoded from the
 frames up to it (no lag: for a robot that reacts, where skeletons, smoothed by the `lag` frames
 after it, is for analysis); and once, as soon as every camera's intrinsics are known,
@@ -341,8 +341,8 @@ class BpSolverNode(Node):
         self._skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
 
     def _after_output(self, result: FrameResult, stamp: Time) -> None:
-        """What follows an output frame, off the latency path: its markers (while anyone subscribes:
-        about 2 ms), diagnostics and counts."""
+        """What follows an output frame, off the latency path: its markers (while anyone subscribes),
+        diagnostics and counts."""
         if self._markers.get_subscription_count():
             ids = np.asarray(result.person_ids, dtype=np.int64)
             self._markers.publish(skeleton_markers(ids, result.joints, Header(stamp=stamp, frame_id=self._world_frame),

@@ -15,8 +15,8 @@ Which image goes with a set: its 2D people's stamp, in [set stamp, set stamp + m
 set, is not drawn (counted in the diagnostics). At most `max_rate` images per second per camera
 are drawn, each decoded at 1/`reduce` of its size; a dropped set only when a camera has had no
 image for a second (core.overlay_sets.due: under overload most sets are dropped). It still
-receives every image, held serialised and deserialised only when drawn: at 5 cameras x 25 Hz
-about 15% of a core with the drawing (docs/own_cameras.md). Bytes whose header stamp
+receives every image, held serialised and deserialised only when drawn (its CPU:
+docs/own_cameras.md). Bytes whose header stamp
 cannot be read are not held (logged once per camera).
 Every input is best effort, so this node never slows the graph's reliable publishers down, and a
 lost message only costs a picture. An image topic's type (Image or CompressedImage) is the
@@ -149,7 +149,7 @@ class OverlayNode(Node):
         self._images[camera].add(stamp, (kind, cdr), len(cdr))
 
     def _on_people(self, camera: int, msg: PointCloud2) -> None:
-        # kept as it came: most are never drawn, and decoding each cost 0.13 ms (Shelf)
+        # kept as it came: most are never drawn, so most are never decoded
         self._people[camera].add(stamp_ns(msg.header.stamp), msg)
 
     def _detections(self, camera: int, msg: PointCloud2 | None) -> list:

@@ -327,8 +327,8 @@ class SlidingWindow:
 
     def _frame_tables(self, i: int) -> None:
         """The collision and limb tables of every person at buffer position i not yet made, each
-        kind in one call for all of them: a person's tables depend on their own hypotheses only, and
-        four people's took 0.29-0.39 ms so against 0.42-0.65 ms one person at a time."""
+        kind in one call for all of them (a person's tables depend on their own hypotheses only), as
+        one call per person costs more."""
         slot = self._slots[i]
         terms = self.config.terms
         pids = [pid for pid in sorted(slot.people)
