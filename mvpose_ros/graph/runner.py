@@ -37,6 +37,7 @@ from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, composed_command, expected_connections, node_command,
                                      played_connections, processes)
+from mvpose_ros.graph.cpu import CpuLog
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
@@ -55,7 +56,7 @@ OVERLAY_QUIET_S = 0.2  # the last set's overlays are all in once none came for t
 # Node start-up (imports, calibration, models, DDS discovery, the player's wait for readers).
 STARTUP_TIMEOUT_S = 60.0
 LOG_TAIL = 15
-MEMORY_PERIOD_S = 1.0
+SAMPLE_PERIOD_S = 1.0
 
 
 Stamps = Sequence[int] | Future  # the input stamps (ns), or a future of them: see run_graph
@@ -77,10 +78,11 @@ class GraphFailure(Exception):
 @dataclass
 class Outcome:
     """How the run ended: why it stopped early if it did (a failure, a stall, or the signal that
-    interrupted it), the end of the failed node's log, and the nodes' memory, and every restart of
-    a node (with a Respawner)."""
+    interrupted it), the end of the failed node's log, the nodes' memory and CPU, and every restart
+    of a node (with a Respawner)."""
 
     memory: MemoryLog = field(default_factory=lambda: MemoryLog(0))
+    cpu: CpuLog = field(default_factory=CpuLog)
     failure: GraphFailure | None = None
     log_tail: str = ''
     stalled: bool = False
@@ -168,7 +170,7 @@ def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, grou
 
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
-          stamps: Stamps, memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
+          stamps: Stamps, outcome: Outcome, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
     """Spin until every stamp has an output or was dropped (skeletons/dropped: a set short of
     min_cameras, or bp_solver behind the input); True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
@@ -188,9 +190,11 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
         if wanted is None and (not isinstance(stamps, Future) or stamps.done()):
             wanted = set(_known(stamps))
         executor.spin_once(timeout_sec=SPIN_S)
-        if time.monotonic() - sampled > MEMORY_PERIOD_S:
+        if time.monotonic() - sampled > SAMPLE_PERIOD_S:
             sampled = time.monotonic()
-            memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
+            pids = {name: p.pid for name, p in group.procs.items() if p.poll() is None}
+            outcome.memory.sample(pids, len(node.outputs))
+            outcome.cpu.sample(pids)
         _check_crashes(group, (PLAYER,), watch, node)
         if unusable_since is None and node.unusable:
             unusable_since = time.monotonic()
@@ -262,7 +266,7 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
                 else:
                     group.start(name, node_command(specs[0], config) if len(specs) == 1
                                 else composed_command(specs, config))
-            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)
+            outcome.stalled = _play(node, executor, group, settings, stamps, outcome, quiet, watch)
         except GraphFailure as failure:
             outcome.failure = failure
         except Interrupted as exc:
