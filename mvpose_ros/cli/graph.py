@@ -2,7 +2,8 @@
 
     mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
                  [--predictions FILE] [--domain-id N] [--log-dir DIR]
-                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S] [--compose detectors|all]
+                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S]
+                 [--compose none|detectors|detectors+association|all]
                  [--record DIR [--record-inputs]] [--foxglove-port PORT]
     mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--loops N] [--qos sensor|reliable] [--config FILE]
                  [--predictions FILE] [--ground-truth shelf --frame N] [--domain-id N] [--log-dir DIR]
@@ -26,9 +27,10 @@ line per restart: when the node's output and the graph's came back, the frames l
 as missing), the person ids before and after. --report-every S adds a table by S s of the run:
 frames in / out, latency p50 / p95 and each process's resident memory.
 Every run also prints the start-up time (the command to the first skeleton) and each node
-process's largest resident memory, RSS and PSS, with their totals. --compose detectors runs the
-heatmap detectors in one process, --compose all every node but the player (nodes.composed;
-docs/footprint.md); by default each node has its own.
+process's largest resident memory, RSS and PSS, with their totals. --compose says which nodes
+share a process (nodes.composed; docs/footprint.md): by default the heatmap detectors and
+association share one and bp_solver and the player have their own; --compose none gives each
+node its own, as --respawn does.
 
 With --rig (any recorded rig: the bag's own topics, sqlite3 or mcap), the graph is ONE
 heatmap_detector for the whole rig (camera 'all', onnx backend), association and bp_solver, with
@@ -64,7 +66,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from mvpose_ros.graph.config import COMPOSED
+from mvpose_ros.graph.config import COMPOSED, DEFAULT_COMPOSE
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, RESPAWN_WINDOW_S
 from mvpose_ros.graph.session import PROG, run
 
@@ -118,9 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--foxglove-port', type=int, metavar='PORT',
                    help='also run the live view: the skeletons, frusta, overlays and diagnostics over Foxglove\'s '
                         'WebSocket protocol on ws://127.0.0.1:PORT (docs/visualize.md)')
-    p.add_argument('--compose', choices=sorted(COMPOSED),
-                   help='run nodes in one process (ROS composition): detectors, every heatmap_detector; all, every '
-                        'node but the player (default: each node its own process; docs/footprint.md)')
+    p.add_argument('--compose', choices=list(COMPOSED),
+                   help='which nodes share a process (ROS composition): none, a process per node; detectors, '
+                        'every heatmap_detector; detectors+association, those and association; all, every node but '
+                        f'the player (default: {DEFAULT_COMPOSE}, none with --respawn; docs/footprint.md)')
     p.add_argument('--report-every', type=float, metavar='SECONDS',
                    help='also print frames in / out, latency and memory per node by this many s of the run')
     return p
@@ -131,8 +134,9 @@ def _check_arguments(args: argparse.Namespace) -> None:
     for name in ('respawn_delay', 'respawn_limit'):
         if getattr(args, name) is not None and not args.respawn:
             raise ValueError(f'--{name.replace("_", "-")} needs --respawn')
-    if args.compose and args.respawn:
-        raise ValueError('--respawn restarts one node, not a process of composed nodes: not with --compose')
+    if args.respawn and args.compose not in (None, 'none'):
+        raise ValueError(f'--respawn restarts one node, not a process of composed nodes: not with --compose '
+                         f'{args.compose}')
     if args.respawn_delay is not None and not args.respawn_delay >= 0:
         raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
     if args.respawn_limit is not None and args.respawn_limit < 1:
@@ -163,11 +167,20 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ValueError('--ground-truth and --frame go together')
 
 
+def _compose(args: argparse.Namespace) -> str:
+    """The run's --compose: the one given, else DEFAULT_COMPOSE, or 'none' with --respawn (a restart
+    is of one node's process)."""
+    if args.compose is not None:
+        return args.compose
+    return 'none' if args.respawn else DEFAULT_COMPOSE
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `mvpose-graph`."""
     args = build_parser().parse_args(argv)
     try:
         _check_arguments(args)
+        args.compose = _compose(args)
         return run(args)
     except (FileNotFoundError, ValueError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
