@@ -38,7 +38,7 @@ KERNEL_MODULES: tuple[str, ...] = (
     'mvpose_ros.core.detection.openpose_detector',
     'mvpose_ros.core.geometry.projection',
     'mvpose_ros.core.geometry.rays',
-    'mvpose_ros.core.heatmap',
+    'mvpose_ros.core.heatmap_kernels',
     'mvpose_ros.core.inference.bp',
     'mvpose_ros.core.inference.confidence',
     'mvpose_ros.core.inference.factors',
