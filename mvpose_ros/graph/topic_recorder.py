@@ -40,10 +40,9 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters.definitions import type_name, typestore
 from mvpose_ros.core.evaluation.datasets import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.image_topics import image_type_by_name
-from mvpose_ros.nodes.runtime import DATA_QOS, VIEWER_QOS
+from mvpose_ros.nodes.runtime import DATA_QOS, LATCHED_QOS, VIEWER_QOS
 from mvpose_ros.topics import (CAMERA_INFO, CAMERA_MARKERS, DIAGNOSTICS, IMAGE, MARKERS, OPENPOSE, OVERLAY, SKELETONS,
                                SKELETONS_DROPPED, SKELETONS_LIVE, camera_namespace, camera_topic)
 

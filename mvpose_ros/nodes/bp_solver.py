@@ -48,7 +48,6 @@ import numpy as np
 import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
@@ -70,7 +69,7 @@ from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, parameter_spec
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.core.types import Bundle, FrameResult
 from mvpose_ros.nodes.health import NodeHealth
-from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, live_parameters,
+from mvpose_ros.nodes.runtime import (DATA_QOS, LATCHED_QOS, RigIntrinsics, StartupError, declare, live_parameters,
                                       load_rig_parameter, rig_parameters, run)
 
 IDLE_CHECK_S = 0.1
@@ -79,8 +78,6 @@ IDLE_CHECK_S = 0.1
 IDLE_PERIODS = 3
 PACE_WINDOW_S = 5.0  # s of receipts the typical interval is the median over
 REPORT_EVERY = 100  # frames between timing lines
-# published once and kept for late subscribers (RViz opened after the solver)
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class _NotReady(ValueError):

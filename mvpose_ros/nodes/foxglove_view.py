@@ -37,9 +37,8 @@ from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
-from mvpose_ros.nodes.runtime import VIEWER_QOS, StartupError, declare, run
+from mvpose_ros.nodes.runtime import LATCHED_QOS, VIEWER_QOS, StartupError, declare, run
 from mvpose_ros.topics import CAMERA_MARKERS, DIAGNOSTICS, OVERLAY, SKELETONS
 from mvpose_ros.view.scene import skeleton_scene
 

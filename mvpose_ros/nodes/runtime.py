@@ -53,6 +53,8 @@ CAMERA_QUEUE_DEPTH = 2
 # to reliable publishers too and never holds them up, a few messages deep.
 VIEWER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE)
+# Published once and kept for late subscribers (RViz opened after the solver): the camera frusta.
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SPIN_ONCE_S = 0.2  # s an idle node waits per executor turn: how long a stop signal can take to act
 
 
