@@ -16,8 +16,8 @@ Every kernel of the package is compiled the same way, by `kernel`:
 Callers hand kernels their arrays through `kernel_array` (the one place that says what a
 signature takes); kernels sum through `pairwise_sum` where numpy's bits must be kept.
 
-`python -m mvpose_ros.core.compiled` imports every module that holds kernels, so that a graph's
-nodes, started together, load the cache instead of each compiling the same code.
+`python -m mvpose_ros.core.compiled` imports every module that holds kernels (core.kernel_cache),
+so that a graph's nodes, started together, load the cache instead of each compiling the same code.
 """
 from __future__ import annotations
 
@@ -28,23 +28,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, DTypeLike
 
-# Every module that defines kernels (test_compiled checks that none is missing).
-KERNEL_MODULES: tuple[str, ...] = (
-    'mvpose_ros.core.association.associator',
-    'mvpose_ros.core.association.matching',
-    'mvpose_ros.core.association.tracking',
-    'mvpose_ros.core.association.view_consistency',
-    'mvpose_ros.core.detection.grouping',
-    'mvpose_ros.core.detection.openpose_detector',
-    'mvpose_ros.core.geometry.projection',
-    'mvpose_ros.core.geometry.rays',
-    'mvpose_ros.core.heatmap_kernels',
-    'mvpose_ros.core.inference.bp',
-    'mvpose_ros.core.inference.confidence',
-    'mvpose_ros.core.inference.factors',
-    'mvpose_ros.core.inference.hypotheses',
-    'mvpose_ros.core.inference.window',
-)
+from mvpose_ros.core.kernel_cache import KERNEL_MODULES
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:

@@ -35,6 +35,7 @@ from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.window import FrameResult
+from mvpose_ros.core.kernel_cache import caches_fresh, import_root
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, composed_command, expected_connections, node_command,
                                      played_connections, processes)
 from mvpose_ros.graph.cpu import CpuLog
@@ -256,7 +257,8 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     # nodes started together on a fresh install would each compile the same kernels at once. In a
     # process of their own, started as the nodes are: run from a checkout, `python -m` takes the
     # checkout's modules, whose cache is not the installed package's
-    subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
+    if not caches_fresh(import_root()):
+        subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
     with ProcessGroup(log_dir, env) as group:
         try:
             for name, specs in processes(nodes, compose):
