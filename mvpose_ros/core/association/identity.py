@@ -47,7 +47,7 @@ class IdentityKeeper:
 
         members: per person the (camera, track id) pairs it was built from; centres: (P, 3)
         rough 3D centres in metres. Returns one id per person; people sharing an id are one
-        person seen twice (module doc).
+        person seen twice (docs/method.md#stable-ids).
         """
         for known in self._known.values():
             known.last_time = time_s if known.last_time is None else known.last_time
@@ -75,7 +75,7 @@ class IdentityKeeper:
             gap = max(time_s - self._last_time, 0.0) if self._last_time is not None else 0.0
             by_tracks = self.max_jump + self.max_speed * elapsed  # (K,) m
             by_position = self.max_jump + self.max_speed * gap
-            # by position alone only a person none of whose tracks has a history (module doc)
+            # by position alone only a person none of whose tracks has a history (docs/method.md#stable-ids)
             new_tracks = (shared == 0).all(axis=1, keepdims=True)
             allowed = np.where(shared > 0, jump <= by_tracks[None], new_tracks & (jump <= by_position))
             # Shared track history dominates; distance breaks ties and decides when no track survives.
@@ -108,7 +108,7 @@ class IdentityKeeper:
         """Ids for views no other camera's matched this frame, after `assign`: each (camera, track
         id) gets the id its track has been part of for the most frames, unless that id is in
         `taken` (the frame's people's: the view is then a duplicate of one of them), each id once,
-        or -1. A person who walks out of all but one camera's view so keeps his id (module doc); the
+        or -1. A person who walks out of all but one camera's view so keeps his id (docs/method.md#stable-ids); the
         keeper's state is left as it was, so he keeps it until the frames have gone `memory` seconds
         without two cameras seeing him."""
         votes = [max(((known.members.get(t, 0), k) for k, known in self._known.items()), default=(0, -1))
@@ -124,7 +124,7 @@ class IdentityKeeper:
     def _join_duplicates(self, ids: list[int], shared: np.ndarray, known_ids: list[int],
                          centres: np.ndarray) -> set[int]:
         """Give each person left without an id (-1 in ids) the id its tracks vote for most among
-        those another person of the frame took within max_jump of it (module doc); returns the
+        those another person of the frame took within max_jump of it (docs/method.md#stable-ids); returns the
         people given one so."""
         host = {pid: row for row, pid in enumerate(ids) if pid >= 0}
         twice = set()
