@@ -1,22 +1,11 @@
 """Running the node graph on a bag: start the node processes, wait until the graph is connected
 and the recorder's readers have matched, play, collect every output, stop everything.
 
-The order makes start-up lossless: the player is started only once every endpoint the graph needs
-is visible, the recorder's skeletons reader has matched bp_solver's writer, and the nodes report
-on /diagnostics that each writer between them (the detectors' people2d, association's bundles)
-has matched its readers and each reader its writers (core.health.links: a volatile message sent
-before its writer and reader have matched each other is lost); the player then waits until its
-writers have matched their readers (the detectors', the recorder's) and for the recorder's start
-signal, which the recorder sends once its camera_info reader has matched the player's writer and
-the nodes report the player's links matched at their end too (`played`: the player's writer can
-match a reader before that reader has matched it). So the first frame reaches every node, and its
-camera_info and skeletons reach the recorder.
-
-With a Respawner, a node that dies is started again after its delay instead of ending the run
-(not the player: a new one would play the bag from its start again); the recorder is armed to
-note when the node's output topic is heard again, and the run ends once the player is done and
-the last frame's output is in (the frames lost in the restart never come).
-"""
+The order makes start-up lossless: a volatile message sent before its writer and reader have
+matched each other is lost, so the player starts only once every link between the nodes reports
+matched at both ends (core.health.links) and the recorder has signalled that its readers matched
+the player's writers. With a Respawner, a node that dies (not the player) is started again
+instead of ending the run. The whole order: docs/cli.md#mvpose-graph (Start order)."""
 from __future__ import annotations
 
 import os

@@ -2,42 +2,13 @@
 belief propagation; publishes every frame's 3D skeletons `lag` frames after it arrives, and its
 causal estimate at once.
 
-In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
-record per person joint with its confidence, empty when nobody is seen) and skeletons/markers
-(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes), both
-with the input bundle's stamp;
-skeletons/live (encoding D, the same ids) as soon as a bundle is in: its frame decoded from the
-frames up to it (no lag: for a robot that reacts, where skeletons, smoothed by the `lag` frames
-after it, is for analysis); and once, as soon as every camera's intrinsics are known,
-cameras/markers (the rig's frusta, transient local: RViz started later still gets them). Frames
-are numbered by arrival (the association's set order), not by stamp x rate; the temporal term
-uses the real time between the bundles' stamps, so sets dropped upstream (uneven gaps) are
-bridged, and a gap longer than `max_gap` seconds breaks the temporal chains. Every bundle message
-yields exactly one skeleton message, but for a late one (a stamp not after the last one taken: a
-duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
-of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged), and not even
-deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD. With no input
-for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
-decoded and published; by default (0) that wait is IDLE_PERIODS times the input's typical
-interval (the median between DDS receipts over the last PACE_WINDOW_S s, at least 1 / frame_rate),
-so a replay's last frames come out a few frame periods after its end, not a fixed second later,
-and a slow input (sets seconds apart) still gets its lag. A bundle that has waited more
-than `max_wait` seconds since DDS received it (solving slower than the input: a crowd on a small
-machine) is dropped unsolved, logged, counted, and its stamp published on skeletons/dropped
-(std_msgs/Header, the world frame: that frame gets no skeletons, so a subscriber need not wait for
-it), so the queue and the latency stay bounded (the node runs rclpy's single-threaded executor for
-that receipt time: nodes.runtime.run).
-A rig without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
-published with no people (logged).
-
-Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
-node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
-skeletons it outputs: each camera's 2D keypoints of a person against the person's 3D joints
-projected into it (core.health.residual), WARN for a camera whose residual rises well above the
-others' (moved out of its calibration). Live parameters: idle_flush, marker_lifetime,
-collision_centre, collision_width, max_gap and the diagnostics thresholds; the others are
-read-only.
-"""
+In: people/bundles. Out: skeletons (`lag` frames late, for analysis) and skeletons/live (at once,
+for a robot that reacts), PointCloud2 encoding D in the rig's world frame with the bundle's stamp,
+one message per bundle; skeletons/markers and cameras/markers for RViz; skeletons/dropped for a
+bundle that waited longer than `max_wait` (solving slower than the input), so the queue and the
+latency stay bounded. Frames are numbered by arrival; the temporal term uses the real time
+between stamps, so frames dropped upstream are bridged.
+Behaviour in detail (bad input, idle flush, intrinsics): docs/operations.md#bp_solver."""
 from __future__ import annotations
 
 import time
