@@ -114,7 +114,8 @@ def test_composed_nodes_take_their_own_arguments_in_one_process(monkeypatch):
     parsed = composed.parse(cmd[3:])
     assert [exe for exe, _ in parsed] == [s.executable for s in specs]
     factories, events = composed.factories(parsed)
-    assert not events  # bp_solver needs rclpy's single-threaded executor
+    # bp_solver needs rclpy's single-threaded executor, the others take the events executor
+    assert events == [s.executable != 'bp_solver' for s in specs]
     params = load_params(CONFIG)
     with ros_domain(monkeypatch):
         rclpy.init(args=['prog'], signal_handler_options=SignalHandlerOptions.NO)

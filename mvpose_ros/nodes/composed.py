@@ -1,14 +1,14 @@
 """Several nodes in one process (what ROS users know as composition): each keeps its name,
-namespace, parameters and topics, and they share one interpreter, one executor and one DDS
-participant, so what a process holds (numba and its compiled kernels, rclpy, the DDS shared
-memory) is held once.
+namespace, parameters and topics, and they share one interpreter and one DDS participant, so what
+a process holds (numba and its compiled kernels, rclpy, the DDS shared memory) is held once.
 
     python -m mvpose_ros.nodes.composed --node heatmap_detector --ros-args -r __ns:=/cam0 \
         --params-file shelf.yaml -p camera:=0 --node heatmap_detector --ros-args ...
 
 Each `--node EXECUTABLE` is followed by that node's own ROS arguments, as its own process would
-take them (nodes.runtime.run_nodes; `mvpose-graph --compose`). The nodes run in one thread: the
-events executor when every node can have it, else rclpy's single-threaded one.
+take them (nodes.runtime.run_nodes; `mvpose-graph --compose`). The nodes run in the events
+executor, but for a node that needs rclpy's single-threaded one (bp_solver), which spins in a
+thread of its own.
 """
 from __future__ import annotations
 
@@ -46,15 +46,15 @@ def parse(argv: Sequence[str]) -> list[tuple[str, list[str]]]:
     return nodes
 
 
-def factories(nodes: Sequence[tuple[str, list[str]]]) -> tuple[list[Callable[[], Node]], bool]:
-    """A factory per node (its class with its own arguments) and whether every node can run in
-    the events executor."""
+def factories(nodes: Sequence[tuple[str, list[str]]]) -> tuple[list[Callable[[], Node]], list[bool]]:
+    """A factory per node (its class with its own arguments) and, per node, whether it can run
+    in the events executor."""
     made: list[Callable[[], Node]] = []
-    events = True
+    events: list[bool] = []
     for exe, args in nodes:
         module = importlib.import_module(f'mvpose_ros.nodes.{exe}')
         made.append(partial(getattr(module, COMPOSABLE[exe]), cli_args=args))
-        events = events and getattr(module, 'EVENTS_EXECUTOR', True)
+        events.append(getattr(module, 'EVENTS_EXECUTOR', True))
     return made, events
 
 

@@ -14,7 +14,7 @@ from typing import Any, Callable, Sequence
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 from rclpy.node import Node
@@ -252,18 +252,34 @@ def release_free_heap() -> None:
         pass
 
 
-def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None, events: bool = True) -> None:
-    """rclpy main: spin the nodes (one executor, in this thread) until SIGINT (Ctrl-C) or SIGTERM,
-    or, for a node with a `finished` future, until it completes (its result is the exit code). A
-    bad parameter, parameter file or data file (StartupError, or a parameter file rcl cannot
-    parse) exits with code 2 after one fatal log line naming the parameter files, not a traceback.
+def _spin(executor: Executor, running: Callable[[], bool], done: threading.Event,
+          failed: list[BaseException]) -> None:
+    """Spin executor while running() and until done is set; sets done on the way out, so that the
+    process's other executors stop too, and keeps what ended it in failed."""
+    try:
+        while not done.is_set() and running():
+            executor.spin_once(timeout_sec=SPIN_ONCE_S)
+    except BaseException as exc:  # raised again in the main thread, once the others stopped
+        failed.append(exc)
+    finally:
+        done.set()
+
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None,
+              events: bool | Sequence[bool] = True) -> None:
+    """rclpy main: spin the nodes until SIGINT (Ctrl-C) or SIGTERM, or, for a node with a
+    `finished` future, until it completes (its result is the exit code). A bad parameter,
+    parameter file or data file (StartupError, or a parameter file rcl cannot parse) exits with
+    code 2 after one fatal log line naming the parameter files, not a traceback.
 
     The executor is rclpy's C++ events executor: about half the CPU per message of the default
     one, which a flooded node, or a graph near its CPU limit, needs (docs/benchmarks.md). In
     these rclpy wheels its spin() runs no callback and rclpy's signal handlers do not stop its
-    spin_once, so the loop is spin_once, ended by a flag the signals set. It cannot run a callback that takes message
-    info (SystemError in these wheels): a node that needs the DDS receipt time passes
-    events=False and gets rclpy's single-threaded executor."""
+    spin_once, so the loop is spin_once, ended by a flag the signals set. It cannot run a callback
+    that takes message info (SystemError in these wheels): a node that needs the DDS receipt time
+    has events False (one flag for all, or one per factory) and gets rclpy's single-threaded
+    executor. Where a process holds both kinds, that one spins in a thread of its own, so the
+    compiled kernels of its node, which run without the GIL, go on beside the others' callbacks."""
     files = params_files(sys.argv if args is None else args)
     where = f'{", ".join(files)}: ' if files else ''
     stop = threading.Event()
@@ -276,15 +292,28 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         signal.signal(signum, lambda *_: stop.set())
     nodes: list[Node] = []
     code = 0
+    kinds = [events] * len(factories) if isinstance(events, bool) else list(events)
+    failed: list[BaseException] = []
     try:
-        executor = EventsExecutor() if events else SingleThreadedExecutor()
-        for factory in factories:
+        executors = {kind: EventsExecutor() if kind else SingleThreadedExecutor() for kind in dict.fromkeys(kinds)}
+        for factory, kind in zip(factories, kinds):
             nodes.append(factory())
-            executor.add_node(nodes[-1])
+            executors[kind].add_node(nodes[-1])
         release_free_heap()
         finished = [f for node in nodes if (f := getattr(node, 'finished', None)) is not None]
-        while not stop.is_set() and rclpy.ok() and not any(f.done() for f in finished):
-            executor.spin_once(timeout_sec=SPIN_ONCE_S)
+
+        def running() -> bool:
+            return not stop.is_set() and rclpy.ok() and not any(f.done() for f in finished)
+        done = threading.Event()
+        first, *others = executors.values()
+        threads = [threading.Thread(target=_spin, args=(e, running, done, failed), daemon=True) for e in others]
+        for thread in threads:
+            thread.start()
+        _spin(first, running, done, failed)
+        for thread in threads:
+            thread.join()
+        if failed:
+            raise failed[0]
         code = next((f.result() or 0 for f in finished if f.done()), 0)
     except StartupError as exc:
         rclpy.logging.get_logger('mvpose_ros').fatal(f'{where}{exc}')
