@@ -57,21 +57,22 @@ from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.core.evaluation.datasets import GroundTruth, data_root, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table, match_actors
 from mvpose_ros.core.detection.image_file import read_image
-from mvpose_ros.core.detection.onnx_config import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig
+from mvpose_ros.core.detection.detector_settings import ONNX_PARAMETERS, DetectorConfig
 from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector, PendingSet
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
-from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
+from mvpose_ros.core.detection.upright import upright_turns
 from mvpose_ros.core.evaluation.colours import person_colour
 from mvpose_ros.core.evaluation.overlay import overlay
-from mvpose_ros.core.stage import StageConfig, Stage3D
+from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, Stage3D
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.types import FrameResult
+from mvpose_ros.cli.parameter_options import add_parameter_options, parameter_values
 from mvpose_ros.graph.config import RIG_TEMPLATE, load_params, node_section
 from mvpose_ros.package_files import package_path
 
 PROG = 'mvpose-images'
 NO_IMAGE = '-'  # in --images: this camera has no image in the set
-DEFAULTS = OnnxDetectorConfig(model_dir=Path())
+HEAD_MODEL = StageConfig().solver.head_model
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -89,49 +90,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--frame', type=int, default=0, help='frame number written with the skeletons (default: 0)')
     p.add_argument('--data-root', help='folder holding data/ and models/ (default: $MVPOSE_DATA_ROOT or ../shared)')
     p.add_argument('--models', type=Path, help='folder of the .onnx files (default: <data root>/models)')
-    p.add_argument('--model', choices=MODELS, default=DEFAULTS.model,
-                   help='the model on each person crop (--heatmaps efficientpose or fused): EfficientPose rt or i '
-                        '(heatmaps), or a single-person keypoint model, MoveNet lightning or thunder, BlazePose '
-                        f'blazepose_full or blazepose_heavy (keypoints as Gaussians; docs/crop_models.md) '
-                        f'(default: {DEFAULTS.model})')
-    p.add_argument('--crop-workers', type=int, default=DEFAULTS.crop_workers,
-                   help='single-person keypoint models: crops run at once, each with --threads intra-op threads '
-                        f'(default: {DEFAULTS.crop_workers})')
-    p.add_argument('--providers', nargs='+', default=list(DEFAULTS.providers),
-                   help='onnxruntime execution providers (default: CPUExecutionProvider)')
-    p.add_argument('--input-size', type=int, default=DEFAULTS.input_size,
-                   help='MultiPose input side, a multiple of 32 (default: 384)')
-    p.add_argument('--threads', type=int, default=DEFAULTS.threads,
-                   help='onnxruntime intra-op threads per model (default: 0, one per core)')
-    p.add_argument('--max-batch', type=int, default=DEFAULTS.max_batch,
-                   help=f'EfficientPose crops per run, 0 = all crops of the set in one (default: {DEFAULTS.max_batch})')
-    p.add_argument('--multipose-workers', type=int, default=DEFAULTS.multipose_workers,
-                   help='images MultiPose runs on at once, each with --threads intra-op threads (default: '
-                        f'{DEFAULTS.multipose_workers}; on two cores 2 with --threads 1 was faster)')
     p.add_argument('--sets', type=int, default=1, help='detect the images this many times as a sequence (default: 1)')
-    p.add_argument('--person-detector-every', type=int, default=1,
-                   help='run MultiPose on the whole image of every K-th set only; between, where the previous '
-                        "set's 3D skeletons project: MultiPose on that region (heatmaps multipose) or EfficientPose "
-                        'on those crops (default: 1, every set)')
-    p.add_argument('--heatmaps', choices=HEATMAP_SOURCES, default=DEFAULTS.heatmaps,
-                   help="heatmap source: EfficientPose on crops, MultiPose's keypoints as Gaussians, or both fused "
-                        f'(default: {DEFAULTS.heatmaps})')
-    p.add_argument('--keypoint-sigma', type=float, default=DEFAULTS.keypoint_sigma,
-                   help="multipose, fused: std of the Gaussians of MultiPose's keypoints, as a fraction of the "
-                        f"person's box diagonal (default: {DEFAULTS.keypoint_sigma:g})")
-    p.add_argument('--stride', type=float, default=DEFAULTS.stride, help='heatmap cell size, pixels (default: 4)')
-    p.add_argument('--no-ears', dest='ears', action='store_false',
-                   help="leave the ear joints empty instead of taking MultiPose's COCO ears")
-    p.add_argument('--tile-levels', type=int, default=DEFAULTS.tile_levels,
-                   help='a MultiPose run that comes back full (6 people) is repeated on two overlapping halves of '
-                        f'what it searched, at most this many levels deep (crowds; 0: never; default: '
-                        f'{DEFAULTS.tile_levels})')
-    p.add_argument('--no-upright', dest='upright', action='store_false', default=UPRIGHT,
-                   help='detect in every image as it comes, not turned by quarter turns so that the people of a '
-                        "camera mounted on its side or upside down stand up (from its orientation and the rig's up)")
-    p.add_argument('--head-model', choices=HEAD_MODELS, default='anatomical',
-                   help='how the head joints are derived in 3D (default: anatomical, from the COCO ears and the '
-                        'MPII upper neck; direct: MPII upper neck and head top)')
+    add_parameter_options(p, ONNX_PARAMETERS)
+    p.add_argument('--head-model', choices=HEAD_MODELS, default=HEAD_MODEL,
+                   help=f'{SOLVER_PARAMETERS["head_model"]} (default: {HEAD_MODEL})')
     p.add_argument('--ground-truth', choices=('shelf',),
                    help="score the frame against this dataset's actorsGT (--frame is its frame index)")
     return p
@@ -212,20 +174,16 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         raise ValueError(f'--sets {args.sets} must be >= 1')
     cameras, up, images = _rig_and_images(args)
     models = args.models or data_root(args.data_root) / 'models'
-    detector = OnnxPoseDetector(OnnxDetectorConfig(model_dir=models, model=args.model, providers=tuple(args.providers),
-                                                   threads=args.threads, input_size=args.input_size,
-                                                   crop_workers=args.crop_workers,
-                                                   stride=args.stride, ears=args.ears, max_batch=args.max_batch,
-                                                   keypoint_sigma=args.keypoint_sigma, heatmaps=args.heatmaps,
-                                                   multipose_workers=args.multipose_workers,
-                                                   tile_levels=args.tile_levels))
-    planner = CropPlanner(cameras, args.person_detector_every)
+    settings = DetectorConfig.from_params(parameter_values(args, ONNX_PARAMETERS), models)
+    detector = OnnxPoseDetector(settings.onnx)
+    planner = CropPlanner(cameras, settings.person_detector_every)
     # warm-up: onnxruntime's first run allocates; not a steady-state latency
     detector.detect(next(im for im in images if im is not None))
-    turns = [upright_turns(cam.R, up) if args.upright else 0 for cam in cameras]
-    source = 'MultiPose keypoints' if args.heatmaps == 'multipose' else f'{args.heatmaps} {args.model.upper()}'
+    turns = [upright_turns(cam.R, up) if settings.upright else 0 for cam in cameras]
+    onnx = settings.onnx
+    source = 'MultiPose keypoints' if onnx.heatmaps == 'multipose' else f'{onnx.heatmaps} {onnx.model.upper()}'
     print(f'{PROG}: {len(cameras)} cameras, heatmaps {source}, MultiPose input '
-          f'{args.input_size} px, {",".join(detector.providers)}', file=out)
+          f'{onnx.input_size} px, {",".join(detector.providers)}', file=out)
     stage = Stage3D(cameras, stage_config(args.sets, args.head_model), up)
     gt = (load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', [args.frame])
           if args.ground_truth == 'shelf' else None)

@@ -81,7 +81,7 @@ import time
 import traceback
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -106,10 +106,10 @@ from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
                                                           default_max_skew, stamp_rate)
 from mvpose_ros.core.detection.newest_queue import NewestQueue
-from mvpose_ros.core.detection.onnx_config import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig
-from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.detection.detector_settings import PARAMETERS, SPECS, DetectorConfig
+from mvpose_ros.core.detection.openpose_detector import detect_people
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
-from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
+from mvpose_ros.core.detection.upright import upright_turns
 from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
@@ -134,14 +134,10 @@ if TYPE_CHECKING:
 
 # backend -> its input topic in a Shelf-style rig (onnx: the rig camera's `image` topic)
 INPUT_TOPICS = {'openpose': OPENPOSE, 'onnx': 'image_raw'}
-BACKENDS = tuple(INPUT_TOPICS)
 WHOLE_RIG = ('', 'all')  # values of `camera` meaning one node for every camera
 # Skeletons older than this, against a set's stamp, place no one (the whole image is searched):
 # a few sets at the onnx backend's 2-5 sets per second, a walk of about a metre.
 TRACK_MAX_AGE_S = 1.0
-# parameter -> the detector configuration field it sets, applied live
-LIVE_DETECTOR = {'openpose': ('secondary_radius',),
-                 'onnx': ('box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor')}
 
 
 def rig_namespace(node_namespace: str, camera: str | None) -> str:
@@ -200,8 +196,6 @@ class HeatmapDetectorNode(Node):
     def __init__(self, **options: Any) -> None:
         """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
         super().__init__('heatmap_detector', **options)
-        defaults = OpenPoseDetectorConfig()
-        onnx = OnnxDetectorConfig(model_dir=Path())  # its defaults
         try:
             self.declare_parameter('camera', 0, ParameterDescriptor(
                 dynamic_typing=True, read_only=True, additional_constraints=RESTART,
@@ -211,53 +205,7 @@ class HeatmapDetectorNode(Node):
         except ParameterException as exc:
             raise StartupError(f'parameter camera: {exc}') from None
         p = declare(self, [
-            Param('backend', 'openpose', f'2D detector: one of {", ".join(BACKENDS)} (input: openpose: '
-                  "<camera>/openpose; onnx: the rig camera's image topic)"),
-            Param('stride', defaults.stride, 'heatmap cell size, pixels', 0.5, 256.0),
-            Param('sigma', defaults.sigma, 'std of the Gaussian rendered at each candidate (onnx: at each COCO ear), '
-                  'pixels', 0.1, 1000.0),
-            Param('secondary_radius', defaults.secondary_radius,
-                  "openpose: other candidates within this fraction of the person's box diagonal also enter its map",
-                  0.0, 10.0, live=True),
-            Param('heatmaps', onnx.heatmaps, f'onnx: heatmap source, {" or ".join(HEATMAP_SOURCES)}: EfficientPose on '
-                  "each person's crop, MultiPose's own keypoints as Gaussians (EfficientPose not loaded), or both "
-                  'fused per limb joint'),
-            Param('keypoint_sigma', onnx.keypoint_sigma, "onnx, heatmaps multipose or fused: std of the Gaussians of "
-                  "MultiPose's keypoints, as a fraction of the person's box diagonal", 0.001, 1.0),
-            Param('model', onnx.model, f'onnx: the model on each person crop, {" or ".join(MODELS)}: EfficientPose '
-                  '(rt, i: heatmaps) or a single-person keypoint model (MoveNet, BlazePose; docs/crop_models.md)'),
-            Param('crop_workers', onnx.crop_workers, 'onnx, single-person keypoint models: crops run at once, each '
-                  'with `threads` intra-op threads', 1, 64),
-            Param('providers', list(onnx.providers), 'onnx: onnxruntime execution providers, in order of preference'),
-            Param('threads', onnx.threads, 'onnx: intra-op threads per model (0 = one per core)', 0, 1024),
-            Param('max_batch', onnx.max_batch, 'onnx: EfficientPose crops per run (0 = all crops of a set in one run, '
-                  'for a GPU)', 0, 4096),
-            Param('multipose_workers', onnx.multipose_workers, 'onnx, whole rig: images of a set MultiPose runs on at '
-                  'once, each with `threads` intra-op threads (two cores: 2 with threads 1 was faster)', 1, 64),
-            Param('input_size', onnx.input_size, 'onnx: MultiPose square input side, pixels, a multiple of 32',
-                  32, 4096),
-            Param('person_detector_every', 1, 'onnx, whole rig: MultiPose searches the whole image of every K-th '
-                  'set only; between, where the newest skeletons on skeletons/live project: MultiPose on that region '
-                  '(heatmaps multipose) or EfficientPose on those crops (MultiPose does not run)', 1, 1000),
-            Param('region_margin', onnx.region_margin, "onnx, person_detector_every > 1, heatmaps multipose: each "
-                  "person's projected box grows by this fraction of its size into the region MultiPose searches",
-                  0.0, 10.0),
-            Param('box_margin', onnx.box_margin,
-                  "onnx: each side of a person's box grows by this fraction of its size before the EfficientPose "
-                  'crop', 0.0, 10.0, live=True),
-            Param('min_person_score', onnx.min_person_score, 'onnx: MultiPose people scoring less are dropped',
-                  0.0, 1.0, live=True),
-            Param('min_joint_score', onnx.min_joint_score,
-                  'onnx: a joint whose heatmap peak is lower is not detected (empty map)', 0.0, 1.0, live=True),
-            Param('heatmap_floor', onnx.heatmap_floor, "onnx: heatmap cells below this fraction of their map's peak "
-                  'are 0', 0.0, 0.999, live=True),
-            Param('ears', onnx.ears, "onnx: fill the ear joints from MultiPose's COCO ears (the anatomical head model "
-                  'needs them)'),
-            Param('tile_levels', onnx.tile_levels, 'onnx: a MultiPose run that comes back full (6 people) is '
-                  'repeated on two overlapping halves of what it searched, at most this many levels deep (crowds; '
-                  '0: never)', 0, 4),
-            Param('upright', UPRIGHT, 'onnx: turn the image of a camera mounted on its side or upside down by quarter '
-                  "turns (from its orientation and the rig's up) so that the networks see people standing"),
+            *PARAMETERS,
             Param('queue_depth', CAMERA_QUEUE_DEPTH, 'camera inputs (images, CameraInfo): keep-last depth of the '
                   'best-effort subscriptions (a parameter file may override each topic: qos_overrides.<topic>...)',
                   1, 10000),
@@ -274,17 +222,14 @@ class HeatmapDetectorNode(Node):
         p |= declare(self, [Param('max_skew', default_max_skew(p['frame_rate']),
                                   'whole rig: s between the oldest and newest stamp of a set (default: half a frame '
                                   'period)', 0.0, 3600.0, live=True)])
-        if p['backend'] not in BACKENDS:
-            raise StartupError(f'parameter backend: {p["backend"]!r} is not one of {", ".join(BACKENDS)}')
+        self._settings = _settings(p)
         rig = load_rig_parameter(p)
         indices = _camera_indices(p['camera'], rig)
         self._whole_rig = len(indices) != 1 or p['camera'] in WHOLE_RIG
-        self._backend = p['backend']
+        self._backend = self._settings.backend
         self._depth = p['queue_depth']
-        self._config = OpenPoseDetectorConfig(stride=p['stride'], sigma=p['sigma'],
-                                              secondary_radius=p['secondary_radius'])
         if self._backend == 'onnx':
-            self._detector = self._onnx_detector(p)  # before subscribing: the graph connects when it is ready
+            self._detector = _onnx_detector(self._settings)  # before subscribing: the graph connects when ready
         self._log = ThrottledLog(self.get_logger())
         self._monitor = NodeMonitor()
         self._released: dict[int, float] = {}  # whole rig: set index -> when released (monotonic)
@@ -300,7 +245,7 @@ class HeatmapDetectorNode(Node):
             if self._backend == 'onnx':
                 cam.input_topic = in_namespace(namespace, rc.image)
                 cam.image = self._image_types.add(index, rc.name, cam.input_topic)
-                cam.turns = upright_turns(rc.R, rig.up) if p['upright'] else 0
+                cam.turns = upright_turns(rc.R, rig.up) if self._settings.upright else 0
             else:
                 cam.input_topic = in_namespace(namespace, camera_topic(rc.name, OPENPOSE))
             self._cameras.append(cam)
@@ -308,8 +253,8 @@ class HeatmapDetectorNode(Node):
             self._planner: CropPlanner | None = None
             # (stamp ns, joints (P, 14, 3), ids (P,)) of the newest skeletons
             self._tracked: tuple[int, np.ndarray, np.ndarray] | None = None
-            if self._backend == 'onnx' and p['person_detector_every'] > 1:
-                self._planner = CropPlanner([c.camera for c in self._cameras], p['person_detector_every'])
+            if self._backend == 'onnx' and self._settings.person_detector_every > 1:
+                self._planner = CropPlanner([c.camera for c in self._cameras], self._settings.person_detector_every)
                 self.create_subscription(PointCloud2, in_namespace(namespace, SKELETONS_LIVE), self._on_skeletons,
                                          DATA_QOS)
             self._start_sets(p, rig.world_frame)
@@ -327,7 +272,8 @@ class HeatmapDetectorNode(Node):
                                   else 'openpose input')
         self._unusable: set[str] = set()  # cameras said to be unusable (logged once)
         self._health = NodeHealth(self, self._statuses)
-        live_parameters(self, [*LIVE_DETECTOR[self._backend], 'sync_timeout', 'max_skew'], self._check, self._retune)
+        live_parameters(self, [*(s.name for s in PARAMETERS if s.live), 'sync_timeout', 'max_skew'], self._check,
+                        self._retune)
 
     # --- set-up -------------------------------------------------------------------------------
 
@@ -378,25 +324,6 @@ class HeatmapDetectorNode(Node):
         cam = next(c for c in self._cameras if c.index == index)
         self.destroy_subscription(cam.subscription)
         self._subscribe(cam)
-
-    @staticmethod
-    def _onnx_detector(p: dict[str, Any]) -> OnnxPoseDetector:
-        """The ONNX sessions, created once; a bad value or model file is a StartupError."""
-        # the one entry to the onnx backend: an openpose node never loads onnxruntime
-        from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
-        try:
-            config = OnnxDetectorConfig(
-                model_dir=data_root(p['data_root'] or None) / 'models', model=p['model'],
-                providers=tuple(p['providers']), threads=p['threads'], input_size=p['input_size'],
-                box_margin=p['box_margin'], min_person_score=p['min_person_score'],
-                min_joint_score=p['min_joint_score'], heatmap_floor=p['heatmap_floor'], stride=p['stride'],
-                ears=p['ears'], sigma=p['sigma'], max_batch=p['max_batch'], heatmaps=p['heatmaps'],
-                keypoint_sigma=p['keypoint_sigma'], multipose_workers=p['multipose_workers'],
-                crop_workers=p['crop_workers'],
-                region_margin=p['region_margin'], tile_levels=p['tile_levels'])
-            return OnnxPoseDetector(config)
-        except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
-            raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
 
     # --- CameraInfo ---------------------------------------------------------------------------
 
@@ -464,7 +391,7 @@ class HeatmapDetectorNode(Node):
         """The people2d message of one input; ValueError (one line) when it cannot be used."""
         if self._backend == 'openpose':
             self._admit(cam, msg)
-            return people_to_msg(detect_people(msg_to_openpose(msg), self._config), msg.header)
+            return people_to_msg(detect_people(msg_to_openpose(msg), self._settings.openpose), msg.header)
         (people,) = self._detector.detect_set([self._image(cam, msg)], sizes=[_size(cam.camera)], turns=[cam.turns])
         return people_to_msg(people, msg.header)
 
@@ -526,7 +453,7 @@ class HeatmapDetectorNode(Node):
 
     def _check(self, changes: dict[str, Any]) -> str | None:
         try:
-            self._retuned(changes)
+            self._settings.retuned({k: v for k, v in changes.items() if k in SPECS})
             if {'sync_timeout', 'max_skew'} & changes.keys() and self._whole_rig:
                 ApproximateSync(1, changes.get('sync_timeout', self._sync.timeout),
                                 changes.get('max_skew', self._sync.max_skew_ns / 1e9))
@@ -535,18 +462,12 @@ class HeatmapDetectorNode(Node):
         return None
 
     def _retune(self, changes: dict[str, Any]) -> None:
+        self._settings = self._settings.retuned({k: v for k, v in changes.items() if k in SPECS})
         if self._backend == 'onnx':
-            self._detector.config = self._retuned(changes)
-        else:
-            self._config = self._retuned(changes)
+            self._detector.config = self._settings.onnx
         if self._whole_rig and {'sync_timeout', 'max_skew'} & changes.keys():
             self._sync.retune(changes.get('sync_timeout', self._sync.timeout),
                               changes.get('max_skew', self._sync.max_skew_ns / 1e9))
-
-    def _retuned(self, changes: dict[str, Any]) -> Any:
-        """The detector configuration with the live changes (ValueError when invalid)."""
-        config = self._detector.config if self._backend == 'onnx' else self._config
-        return replace(config, **{k: v for k, v in changes.items() if k in LIVE_DETECTOR[self._backend]})
 
     def _statuses(self, now: float, t: HealthThresholds) -> list[Status]:
         node = self._health.prefix()
@@ -763,6 +684,25 @@ def _camera_indices(camera: Any, rig: Rig) -> list[int]:
         return [camera]
     raise StartupError(f'parameter camera: {camera!r} is not a camera of {rig.path or "the rig"} (expected one of '
                        f'{", ".join(rig.names)}, an index 0..{n - 1}, or {" or ".join(map(repr, WHOLE_RIG))})')
+
+
+def _settings(p: dict[str, Any]) -> DetectorConfig:
+    """The detector's configuration from the parameter values; a bad value is a StartupError."""
+    try:
+        model_dir = data_root(p['data_root'] or None) / 'models' if p['backend'] == 'onnx' else Path()
+        return DetectorConfig.from_params(p, model_dir)
+    except (FileNotFoundError, ValueError) as exc:
+        raise StartupError(f'parameters: {" ".join(str(exc).split())}') from None
+
+
+def _onnx_detector(settings: DetectorConfig) -> OnnxPoseDetector:
+    """The ONNX sessions, created once; a bad model file is a StartupError."""
+    # the one entry to the onnx backend: an openpose node never loads onnxruntime
+    from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
+    try:
+        return OnnxPoseDetector(settings.onnx)
+    except (FileNotFoundError, ValueError) as exc:  # ModelError is a ValueError
+        raise StartupError(f'backend onnx: {" ".join(str(exc).split())}') from None
 
 
 def main(args: list[str] | None = None) -> None:
