@@ -197,7 +197,7 @@ def test_admission_checks_every_input_before_it_is_queued_and_decodes_nothing(sh
     with pytest.raises(ValueError, match=f'^Image data: {len(junk.data)} bytes, more than a 1032x776 image takes'):
         check_camera_image(junk, size)
     padded = CompressedImage(header=HEADER, format=jpeg.format, data=bytes(jpeg.data) + bytes(limit))
-    with pytest.raises(ValueError, match='^CompressedImage size: .* bytes, more than a 1032x776 image takes'):
+    with pytest.raises(ValueError, match='^CompressedImage data: .* bytes, more than a 1032x776 image takes'):
         check_camera_image(padded, size)
     small = image_to_compressed_msg(bgr[:100, :100], HEADER, 'png')
     with pytest.raises(ValueError, match='declares 100x100, expected 1032x776'):
