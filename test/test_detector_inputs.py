@@ -13,17 +13,17 @@ from types import SimpleNamespace
 import cv2
 import numpy as np
 import pytest
-import rclpy
 from builtin_interfaces.msg import Time
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import serialize_message
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.cdr_header import deserialise
 from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compressed_msg, image_to_msg
+from mvpose_ros.core.detection.detector_settings import PARAMETERS, SPECS
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
@@ -33,7 +33,7 @@ from mvpose_ros.nodes.heatmap_detector import HeatmapDetectorNode
 from mvpose_ros.nodes.image_topics import TYPE_RECHECK_S, ImageTypes, image_type, image_type_by_name
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
-from ros_harness import ros_domain
+from ros_harness import node_in_process
 
 HEADER = Header(frame_id='cam1')
 
@@ -216,32 +216,22 @@ def test_a_camera_info_is_read_once_per_content_and_what_is_wrong_said_once(monk
     """A driver sends its CameraInfo with every image: the detector deserialises one only when
     more than its stamp differs from the last it read; one that contradicts the rig, or cannot be
     read, is still said (once)."""
-    with ros_domain(monkeypatch):
-        rclpy.init(args=['prog', '--ros-args', '-r', '__ns:=/cam1', '-p', 'camera:=1'],
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = None
-        try:
-            node = HeatmapDetectorNode()
-            [cam] = node._cameras
-            reads = []
-            monkeypatch.setattr(detector_cameras, 'deserialise',
-                                lambda cdr, t: reads.append(cdr) or deserialise(cdr, t))
+    with node_in_process(monkeypatch, HeatmapDetectorNode, '-r', '__ns:=/cam1', '-p', 'camera:=1') as node:
+        [cam] = node._cameras
+        reads = []
+        monkeypatch.setattr(detector_cameras, 'deserialise', lambda cdr, t: reads.append(cdr) or deserialise(cdr, t))
 
-            def sent(sec: int, camera) -> bytes:
-                return serialize_message(camera_to_info(camera, Header(stamp=Time(sec=sec), frame_id='cam1')))
+        def sent(sec: int, camera) -> bytes:
+            return serialize_message(camera_to_info(camera, Header(stamp=Time(sec=sec), frame_id='cam1')))
 
-            wrong = dataclasses.replace(cam.camera, K=cam.camera.K * [[1.1], [1], [1]])
-            for sec, camera, total in ((12, cam.camera, 1), (13, cam.camera, 1), (14, cam.camera, 1),
-                                       (15, wrong, 2), (16, wrong, 2), (17, cam.camera, 3)):
-                node._on_info_cdr(cam, sent(sec, camera))
-                assert len(reads) == total, sec
-            junk = b'\x00\x01\x00\x00' + bytes(8) + b'\xff' * 8
-            node._on_info_cdr(cam, junk)
-            node._on_info_cdr(cam, junk)
-        finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
+        wrong = dataclasses.replace(cam.camera, K=cam.camera.K * [[1.1], [1], [1]])
+        for sec, camera, total in ((12, cam.camera, 1), (13, cam.camera, 1), (14, cam.camera, 1),
+                                   (15, wrong, 2), (16, wrong, 2), (17, cam.camera, 3)):
+            node._on_info_cdr(cam, sent(sec, camera))
+            assert len(reads) == total, sec
+        junk = b'\x00\x01\x00\x00' + bytes(8) + b'\xff' * 8
+        node._on_info_cdr(cam, junk)
+        node._on_info_cdr(cam, junk)
     err = capfd.readouterr().err
     assert err.count('contradicts the calibration parameter: CameraInfo fx') == 1, err
     assert err.count(f'cam1: camera_info of {len(junk)} bytes unreadable') == 1, err
@@ -273,3 +263,19 @@ def test_an_image_is_checked_once_however_it_goes(shelf_image, monkeypatch):
     with pytest.raises(ValueError, match=r'^CompressedImage size: the jpeg header declares 100x100, expected '
                                          r'1032x776$'):
         cam.decode(image)
+
+
+def test_the_node_declares_the_detectors_table_and_takes_live_changes_through_it(monkeypatch):
+    """Every parameter of core.detection.detector_settings with its default, description and
+    live or read-only; a live change reaches the detector's configuration, a read-only one is refused."""
+    with node_in_process(monkeypatch, HeatmapDetectorNode, '-r', '__ns:=/cam1', '-p', 'camera:=1') as node:
+        for p in PARAMETERS:
+            assert node.get_parameter(p.name).value == p.default, p.name
+            descriptor = node.describe_parameter(p.name)
+            assert (descriptor.description, descriptor.read_only) == (p.description, not p.live), p.name
+        live = {p.name for p in PARAMETERS if p.live}
+        assert live == {'secondary_radius', 'box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor'}
+        (result,) = node.set_parameters([Parameter('secondary_radius', value=0.5)])
+        assert result.successful and node._settings.openpose.secondary_radius == 0.5
+        (result,) = node.set_parameters([Parameter('stride', value=8.0)])
+        assert not result.successful and node._settings.openpose.stride == SPECS['stride'].default

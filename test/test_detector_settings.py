@@ -1,22 +1,17 @@
 """The detector's settings: one table (core.detection.detector_settings) whose defaults are the
-configuration dataclasses' own, one `DetectorConfig.from_params`, and the heatmap_detector node's
-parameters and mvpose-images' options both made from that table."""
+configuration dataclasses' own, one `DetectorConfig.from_params`, and mvpose-images' options made
+from that table (the node's parameters: test_detector_inputs)."""
 from __future__ import annotations
 
 import dataclasses
 
 import pytest
-import rclpy
-from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 
 from mvpose_ros.cli import images
 from mvpose_ros.cli.parameter_options import option
-from mvpose_ros.core.detection.detector_settings import ONNX_PARAMETERS, PARAMETERS, SPECS, DetectorConfig
+from mvpose_ros.core.detection.detector_settings import ONNX_PARAMETERS, PARAMETERS, DetectorConfig
 from mvpose_ros.core.detection.onnx_config import OnnxDetectorConfig
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.nodes.heatmap_detector import HeatmapDetectorNode
-from ros_harness import ros_domain
 
 
 def test_the_defaults_are_the_configurations_own_and_from_params_inverts_to_params():
@@ -70,26 +65,3 @@ def test_mvpose_images_takes_its_detector_options_from_the_table():
     config = DetectorConfig.from_params({p.name: getattr(args, p.name) for p in ONNX_PARAMETERS})
     assert (config.onnx.box_margin, config.onnx.ears, config.onnx.heatmaps, config.onnx.providers) == \
         (0.2, False, 'fused', ('X', 'Y'))
-
-
-def test_the_node_declares_the_table_and_takes_live_changes_through_it(monkeypatch):
-    with ros_domain(monkeypatch):
-        rclpy.init(args=['prog', '--ros-args', '-r', '__ns:=/cam1', '-p', 'camera:=1'],
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = None
-        try:
-            node = HeatmapDetectorNode()
-            for p in PARAMETERS:
-                assert node.get_parameter(p.name).value == p.default, p.name
-                descriptor = node.describe_parameter(p.name)
-                assert (descriptor.description, descriptor.read_only) == (p.description, not p.live), p.name
-            live = {p.name for p in PARAMETERS if p.live}
-            assert live == {'secondary_radius', 'box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor'}
-            (result,) = node.set_parameters([Parameter('secondary_radius', value=0.5)])
-            assert result.successful and node._settings.openpose.secondary_radius == 0.5
-            (result,) = node.set_parameters([Parameter('stride', value=8.0)])
-            assert not result.successful and node._settings.openpose.stride == SPECS['stride'].default
-        finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
