@@ -11,22 +11,16 @@ detected in its callback; or the whole rig ('' or 'all'), its inputs detected in
 sets (core.detection.rig_sets; with the onnx backend core.detection.image_sets), the stamp of a
 set that reaches the association from no camera published on `skeletons/dropped`.
 
-Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace) and,
-optionally, frame_id (else the camera's first CameraInfo's or input's: core.geometry.frame_id). The
-rig's namespace is the node's own, except that a one-camera node whose namespace ends with the
-camera's name (the Shelf graph's `/cam1`) is in the camera's namespace: the rig's is its parent.
-Images are Image or CompressedImage, by their publishers' type or the topic's name
-(nodes.image_topics); camera inputs are best effort, keep last `queue_depth` (runtime.camera_subscription).
-Intrinsics come from the rig file, else from the camera's first usable CameraInfo; one that
-contradicts them is logged once per problem and never acted on.
+Names: the rig file gives each camera's topics (absolute, or relative to the rig's namespace) and
+frame_id (nodes.detector_cameras). Images are Image or CompressedImage, by their publishers' type
+or the topic's name (nodes.image_topics); camera inputs are best effort, keep last `queue_depth`.
+Intrinsics come from the rig file, else from the camera's first usable CameraInfo.
 
 Bounded input: every input is checked once, on arrival, before it is queued or worked on, and
-nothing is decoded before: its frame_id, an image against its camera's size (msg_adapters.image_msg.
-check_camera_image; a camera whose size is not known yet: once it is, from what that check read),
-OpenPose output as serialised bytes against openpose_msg.max_openpose_bytes (msg_adapters.cdr_header).
-An input that cannot be used is logged once per camera and cause (core.throttled_log), counted on
-/diagnostics (core.health.refusals: a camera every first input of which is refused is an ERROR),
-and nothing is published for it: the synchronisation downstream leaves that camera out of its set.
+nothing is decoded before (DetectorCamera.admit, .openpose). An input that cannot be used is
+logged once per camera and cause (core.throttled_log), counted on /diagnostics
+(core.health.refusals: a camera every first input of which is refused is an ERROR), and nothing
+is published for it: the synchronisation downstream leaves that camera out of its set.
 """
 from __future__ import annotations
 
