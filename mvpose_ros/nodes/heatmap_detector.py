@@ -37,6 +37,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, PointCloud2
 from std_msgs.msg import Header
 
+from msg_adapters.image_msg import CheckedImage
 from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
@@ -265,7 +266,7 @@ class HeatmapDetectorNode(Node):
             with self._intrinsics_in:
                 self._intrinsics_in.wait_for(lambda: all(cam.camera is not None for cam in unknown),
                                              timeout=self._sets.sync.timeout)
-        msgs = [None if item is None else getattr(item, 'msg', item) for item in synced.items]
+        msgs = [item.msg if isinstance(item, CheckedImage) else item for item in synced.items]  # openpose: the msg
         if self._backend == 'onnx':
             found, errors = self._images.detect(synced.stamp_ns, synced.items, [c.camera for c in self._cameras],
                                                 [c.turns for c in self._cameras],
