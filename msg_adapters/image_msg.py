@@ -14,20 +14,22 @@ the caller's expected size and MAX_PIXELS before anything is decoded: a small me
 huge image is refused without allocating it.
 
 Bounded input: with an expected size, a message's data may hold at most max_image_bytes of it
-(either type), checked first; check_camera_image runs every check short of decoding.
+(either type), checked first. check_camera_image runs every check short of decoding, once, on
+arrival; its CheckedImage decodes without checking again.
 
 Every failure is a ValueError with a one-line reason.
 """
 from __future__ import annotations
 
 import array
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from mvpose_ros.core.detection.encoded_image import MAX_PIXELS, check_encoded, decode_encoded, max_image_bytes
+from mvpose_ros.core.detection.encoded_image import MAX_PIXELS, check_bytes, check_encoded, check_size, decode_checked
 
 # encoding -> (channels, bytes per channel, channel order to BGR or a cv2 4:2:2 conversion)
 _PLAIN = {
@@ -103,21 +105,20 @@ def image_to_msg(bgr: np.ndarray, header: Header, encoding: str = 'bgr8', paddin
 
 def check_image(msg: Image, expected: tuple[int, int] | None = None) -> None:
     """Every check of msg_to_image short of converting: the data at most max_image_bytes of
-    expected (width, height) (first, if given), the encoding, exactly that size, step and data
-    length. ValueError otherwise."""
-    if expected is not None and len(msg.data) > max_image_bytes(*expected):
-        raise ValueError(f'Image data: {len(msg.data)} bytes, more than a {expected[0]}x{expected[1]} image takes '
-                         f'({max_image_bytes(*expected)})')
+    expected (width, height) (first, if given), the encoding, exactly that size (at most
+    MAX_PIXELS anyway), step and data length. ValueError otherwise."""
+    try:
+        check_bytes(len(msg.data), expected)
+    except ValueError as exc:
+        raise _with_prefix('Image', exc) from None
     encoding = msg.encoding
     if encoding not in ENCODINGS:
         raise ValueError(f'Image encoding: expected one of {list(ENCODINGS)}, got {encoding!r}')
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    if h < 1 or w < 1:
-        raise ValueError(f'Image size: expected at least 1x1 pixels, got {w}x{h}')
-    if expected is not None and (w, h) != tuple(expected):
-        raise ValueError(f'Image size: {w}x{h}, expected {expected[0]}x{expected[1]}')
-    if w * h > MAX_PIXELS:
-        raise ValueError(f'Image size: {w}x{h}, more than {MAX_PIXELS} pixels')
+    try:
+        check_size(w, h, expected)
+    except ValueError as exc:
+        raise _with_prefix('Image', exc) from None
     packed = _bytes_per_pixel(encoding) * w
     if step < packed:
         raise ValueError(f'Image step: {step} is less than {_bytes_per_pixel(encoding)} * width = {packed}')
@@ -131,6 +132,11 @@ def msg_to_image(msg: Image, expected: tuple[int, int] | None = None) -> np.ndar
     """(H, W, 3) uint8 BGR of an Image in any of ENCODINGS; step may exceed the packed row
     (padding). expected: (width, height) pixels the image must have, if given (check_image)."""
     check_image(msg, expected)
+    return _converted(msg)
+
+
+def _converted(msg: Image) -> np.ndarray:
+    """(H, W, 3) uint8 BGR of an Image that check_image passed."""
     encoding = msg.encoding
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     packed = _bytes_per_pixel(encoding) * w
@@ -184,47 +190,77 @@ def _with_prefix(what: str, exc: ValueError) -> ValueError:
 
 
 def check_compressed(msg: CompressedImage, expected: tuple[int, int] | None = None,
-                     max_pixels: int = MAX_PIXELS) -> str:
-    """'jpeg' or 'png': the kind of a CompressedImage whose format string and data agree, whose
-    data is at most what an image of expected (width, height) takes and whose header declares
-    exactly that size (if given; at most max_pixels anyway), with its end marker: every check
-    short of decoding. ValueError otherwise."""
+                     max_pixels: int = MAX_PIXELS) -> tuple[str, int, int]:
+    """('jpeg' | 'png', width, height) of a CompressedImage whose format string and data agree,
+    whose data is at most what an image of expected (width, height) takes and whose header
+    declares exactly that size (if given; at most max_pixels anyway), with its end marker: every
+    check short of decoding. ValueError otherwise."""
     fmt = compressed_format(msg.format)
-    data = np.frombuffer(msg.data, dtype=np.uint8)
     try:
-        kind, _, _ = check_encoded(data, expected, max_pixels)
+        kind, width, height = check_encoded(np.frombuffer(msg.data, dtype=np.uint8), expected, max_pixels)
     except ValueError as exc:
         raise _with_prefix('CompressedImage', exc) from None
     if kind != fmt:
         raise ValueError(f'CompressedImage data: format {msg.format!r} says {fmt}, the data is a {kind.upper()}')
-    return kind
+    return kind, width, height
+
+
+@dataclass(frozen=True)
+class CheckedImage:
+    """An Image or CompressedImage that passed every check short of decoding (check_camera_image),
+    with what they found: kind ('jpeg', 'png', or 'raw' for an Image), the size it declares, and
+    the size it was checked against (None: a camera whose size was not known yet, see fits)."""
+
+    msg: Image | CompressedImage
+    kind: str
+    width: int
+    height: int
+    expected: tuple[int, int] | None
+
+    def fits(self, expected: tuple[int, int]) -> CheckedImage:
+        """This image, checked against the size of its camera (expected (width, height)) from what
+        its check found, nothing read again. ValueError when it is another size or too large."""
+        raw = self.kind == 'raw'
+        what, declared = ('Image', '') if raw else ('CompressedImage', f'the {self.kind} header declares ')
+        try:
+            check_bytes(len(self.msg.data), expected)
+            check_size(self.width, self.height, expected, declared=declared)
+        except ValueError as exc:
+            raise _with_prefix(what, exc) from None
+        return CheckedImage(self.msg, self.kind, self.width, self.height, tuple(expected))
+
+    def decode(self, reduce: int = 1) -> np.ndarray:
+        """(H, W, 3) uint8 BGR, decoded without checking again; a JPEG may come back at 1/reduce of
+        its size (encoded_image.decode_checked), other images whole."""
+        if self.kind == 'raw':
+            return _converted(self.msg)
+        try:
+            return decode_checked(np.frombuffer(self.msg.data, dtype=np.uint8), self.kind, self.width, self.height,
+                                  reduce)
+        except ValueError as exc:
+            raise _with_prefix('CompressedImage', exc) from None
 
 
 def compressed_to_image(msg: CompressedImage, expected: tuple[int, int] | None = None,
                         max_pixels: int = MAX_PIXELS, reduce: int = 1) -> np.ndarray:
     """(H, W, 3) uint8 BGR of a jpeg or png CompressedImage, decoded once check_compressed passes
-    (a jpeg at 1/reduce of its size: encoded_image.decode_encoded)."""
-    check_compressed(msg, expected, max_pixels)
-    try:
-        return decode_encoded(np.frombuffer(msg.data, dtype=np.uint8), expected, max_pixels, reduce)
-    except ValueError as exc:
-        raise _with_prefix('CompressedImage', exc) from None
+    (a jpeg at 1/reduce of its size: encoded_image.decode_checked)."""
+    return CheckedImage(msg, *check_compressed(msg, expected, max_pixels), expected).decode(reduce)
 
 
-def check_camera_image(msg: Image | CompressedImage, expected: tuple[int, int] | None) -> None:
+def check_camera_image(msg: Image | CompressedImage, expected: tuple[int, int] | None) -> CheckedImage:
     """Every check of to_bgr short of decoding, for a camera of expected (width, height) pixels
-    (None: a camera whose size is not known yet, at most MAX_PIXELS): cheap enough for every
-    message that arrives, before it is queued or decoded. ValueError."""
+    (None: a camera whose size is not known yet, at most MAX_PIXELS; CheckedImage.fits checks its
+    size later): cheap enough for every message that arrives, before it is queued or decoded.
+    ValueError."""
     if isinstance(msg, CompressedImage):
-        check_compressed(msg, expected)
-    else:
-        check_image(msg, expected)
+        return CheckedImage(msg, *check_compressed(msg, expected), expected)
+    check_image(msg, expected)
+    return CheckedImage(msg, 'raw', int(msg.width), int(msg.height), expected)
 
 
 def to_bgr(msg: Image | CompressedImage, expected: tuple[int, int] | None = None, reduce: int = 1) -> np.ndarray:
     """(H, W, 3) uint8 BGR of an Image or CompressedImage (expected: (width, height) pixels the
     image must have; a CompressedImage's header is checked before it is decoded). reduce: a JPEG
     may come back at 1/reduce of its size, where decoding it so costs less (other images whole)."""
-    if isinstance(msg, CompressedImage):
-        return compressed_to_image(msg, expected, reduce=reduce)
-    return msg_to_image(msg, expected)
+    return check_camera_image(msg, expected).decode(reduce)

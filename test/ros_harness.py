@@ -104,6 +104,23 @@ def ros_domain(monkeypatch=None, profile: Path | None = FASTDDS_PROFILE) -> Iter
         release_domain(domain)
 
 
+@contextmanager
+def node_in_process(monkeypatch, factory: Callable[[], Node], *ros_args: str) -> Iterator[Node]:
+    """A node made by factory in this process (the global rclpy context, --ros-args ros_args) on a
+    fresh domain, destroyed and the context shut down after the test."""
+    from rclpy.signals import SignalHandlerOptions
+    with ros_domain(monkeypatch):
+        rclpy.init(args=['prog', '--ros-args', *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        try:
+            node = factory()
+            yield node
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+
+
 def node_env(domain_id: int) -> dict[str, str]:
     """`ros_env` with the shared-memory profile (kept for callers that name it so)."""
     return ros_env(domain_id)

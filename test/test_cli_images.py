@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
+from mvpose_ros.bench.still_sets import stage_config
 from mvpose_ros.cli import images
 from mvpose_ros.core.evaluation.datasets import calibration_file, dataset_dir, load_actors_gt, shelf_cameras
 from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR
@@ -279,8 +280,8 @@ def test_a_sequence_is_solved_as_the_rig_graph_solves_it_and_one_set_from_scratc
     """--sets above 1 takes the rig template's bp_solver parameters (a set's cost bounded by its
     window, as in the graph); one set is the whole clip of one frame."""
     template = node_section([load_params(REPO / 'config' / 'rig_template.yaml')], 'bp_solver')
-    sequence = images.stage_config(5, 'anatomical').solver.inference
+    sequence = stage_config(5, 'anatomical').solver.inference
     assert (sequence.window, sequence.lag, sequence.slide_iterations, sequence.frame_rate) == \
         (template['window'], template['lag'], template['slide_iterations'], template['frame_rate'])
-    assert images.stage_config(1, 'anatomical').solver.inference.window is None
-    assert images.stage_config(5, 'direct').solver.head_model == 'direct'
+    assert stage_config(1, 'anatomical').solver.inference.window is None
+    assert stage_config(5, 'direct').solver.head_model == 'direct'

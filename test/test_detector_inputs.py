@@ -1,7 +1,8 @@
 """The heatmap detector's input handling without processes: every image encoding and both
-compressed formats decoded with the node's checks (decode_image: the calibrated size, a compressed
-header checked before decoding), the image type from the graph or by image_transport's naming,
-rig topics resolved in the rig's namespace, the `camera` parameter, unusable inputs logged
+compressed formats decoded with the node's checks (DetectorCamera.admit, once, on arrival: the
+calibrated size, a compressed header checked before decoding; then decode, nothing checked
+again), an image checked once however it goes, the image type from the graph or by
+image_transport's naming, rig topics resolved in the rig's namespace, the `camera` parameter, unusable inputs logged
 once per camera and cause, and a driver's CameraInfo read once per content."""
 from __future__ import annotations
 
@@ -12,29 +13,36 @@ from types import SimpleNamespace
 import cv2
 import numpy as np
 import pytest
-import rclpy
 from builtin_interfaces.msg import Time
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import serialize_message
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.cdr_header import deserialise
 from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compressed_msg, image_to_msg
+from mvpose_ros.core.detection.detector_settings import PARAMETERS, SPECS
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
 from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes import heatmap_detector
-from mvpose_ros.nodes.heatmap_detector import (HeatmapDetectorNode, _camera_indices, decode_image, in_namespace,
-                                               rig_namespace)
+from mvpose_ros.nodes import detector_cameras
+from mvpose_ros.nodes.detector_cameras import DetectorCamera, camera_indices, in_namespace, rig_namespace
+from mvpose_ros.nodes.heatmap_detector import HeatmapDetectorNode
 from mvpose_ros.nodes.image_topics import TYPE_RECHECK_S, ImageTypes, image_type, image_type_by_name
 from mvpose_ros.nodes.runtime import StartupError, camera_qos
 from mvpose_ros.package_files import package_path
-from ros_harness import ros_domain
+from ros_harness import node_in_process
 
 HEADER = Header(frame_id='cam1')
+
+
+def decode_image(msg, camera):
+    """An image through a one-camera node's input path: admitted (checked once), then decoded."""
+    rig_camera = load_rig_file(package_path('config/rigs/shelf.yaml'), data_root=data_root()).cameras[1]
+    cam = DetectorCamera(1, rig_camera, '/cam1/image_raw', '/cam1/camera_info', camera)
+    return cam.decode(cam.admit(msg, queued=False))
 
 
 @pytest.fixture(scope='module')
@@ -164,16 +172,16 @@ def test_rig_topics_resolve_in_the_rig_namespace():
 
 def test_the_camera_parameter_names_a_camera_an_index_or_the_whole_rig():
     rig = load_rig_file(package_path('config/rigs/shelf.yaml'), data_root=data_root())
-    assert _camera_indices(2, rig) == [2]
-    assert _camera_indices('2', rig) == [2]
-    assert _camera_indices('cam3', rig) == [3]
-    assert _camera_indices('', rig) == _camera_indices('all', rig) == [0, 1, 2, 3, 4]
+    assert camera_indices(2, rig) == [2]
+    assert camera_indices('2', rig) == [2]
+    assert camera_indices('cam3', rig) == [3]
+    assert camera_indices('', rig) == camera_indices('all', rig) == [0, 1, 2, 3, 4]
     with pytest.raises(StartupError, match=r'parameter camera: 9 is not in 0..4 .* cam0, cam1'):
-        _camera_indices(9, rig)
+        camera_indices(9, rig)
     with pytest.raises(StartupError, match=r"parameter camera: 'left' is not a camera of"):
-        _camera_indices('left', rig)
+        camera_indices('left', rig)
     with pytest.raises(StartupError, match='parameter camera'):
-        _camera_indices(True, rig)
+        camera_indices(True, rig)
 
 
 def test_camera_inputs_are_best_effort_keep_last():
@@ -197,7 +205,7 @@ def test_admission_checks_every_input_before_it_is_queued_and_decodes_nothing(sh
     with pytest.raises(ValueError, match=f'^Image data: {len(junk.data)} bytes, more than a 1032x776 image takes'):
         check_camera_image(junk, size)
     padded = CompressedImage(header=HEADER, format=jpeg.format, data=bytes(jpeg.data) + bytes(limit))
-    with pytest.raises(ValueError, match='^CompressedImage size: .* bytes, more than a 1032x776 image takes'):
+    with pytest.raises(ValueError, match='^CompressedImage data: .* bytes, more than a 1032x776 image takes'):
         check_camera_image(padded, size)
     small = image_to_compressed_msg(bgr[:100, :100], HEADER, 'png')
     with pytest.raises(ValueError, match='declares 100x100, expected 1032x776'):
@@ -208,32 +216,66 @@ def test_a_camera_info_is_read_once_per_content_and_what_is_wrong_said_once(monk
     """A driver sends its CameraInfo with every image: the detector deserialises one only when
     more than its stamp differs from the last it read; one that contradicts the rig, or cannot be
     read, is still said (once)."""
-    with ros_domain(monkeypatch):
-        rclpy.init(args=['prog', '--ros-args', '-r', '__ns:=/cam1', '-p', 'camera:=1'],
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = None
-        try:
-            node = HeatmapDetectorNode()
-            [cam] = node._cameras
-            reads = []
-            monkeypatch.setattr(heatmap_detector, 'deserialise',
-                                lambda cdr, t: reads.append(cdr) or deserialise(cdr, t))
+    with node_in_process(monkeypatch, HeatmapDetectorNode, '-r', '__ns:=/cam1', '-p', 'camera:=1') as node:
+        [cam] = node._cameras
+        reads = []
+        monkeypatch.setattr(detector_cameras, 'deserialise', lambda cdr, t: reads.append(cdr) or deserialise(cdr, t))
 
-            def sent(sec: int, camera) -> bytes:
-                return serialize_message(camera_to_info(camera, Header(stamp=Time(sec=sec), frame_id='cam1')))
+        def sent(sec: int, camera) -> bytes:
+            return serialize_message(camera_to_info(camera, Header(stamp=Time(sec=sec), frame_id='cam1')))
 
-            wrong = dataclasses.replace(cam.camera, K=cam.camera.K * [[1.1], [1], [1]])
-            for sec, camera, total in ((12, cam.camera, 1), (13, cam.camera, 1), (14, cam.camera, 1),
-                                       (15, wrong, 2), (16, wrong, 2), (17, cam.camera, 3)):
-                node._on_info_cdr(cam, sent(sec, camera))
-                assert len(reads) == total, sec
-            junk = b'\x00\x01\x00\x00' + bytes(8) + b'\xff' * 8
-            node._on_info_cdr(cam, junk)
-            node._on_info_cdr(cam, junk)
-        finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
+        wrong = dataclasses.replace(cam.camera, K=cam.camera.K * [[1.1], [1], [1]])
+        for sec, camera, total in ((12, cam.camera, 1), (13, cam.camera, 1), (14, cam.camera, 1),
+                                   (15, wrong, 2), (16, wrong, 2), (17, cam.camera, 3)):
+            node._on_info_cdr(cam, sent(sec, camera))
+            assert len(reads) == total, sec
+        junk = b'\x00\x01\x00\x00' + bytes(8) + b'\xff' * 8
+        node._on_info_cdr(cam, junk)
+        node._on_info_cdr(cam, junk)
     err = capfd.readouterr().err
     assert err.count('contradicts the calibration parameter: CameraInfo fx') == 1, err
     assert err.count(f'cam1: camera_info of {len(junk)} bytes unreadable') == 1, err
+
+
+def test_an_image_is_checked_once_however_it_goes(shelf_image, monkeypatch):
+    """One header read per image on every path: a one-camera node's (admitted, decoded), a whole
+    rig's with the camera's size known and not yet known (fitted to it from what the check read),
+    and to_bgr's; decoding reads it no more."""
+    from msg_adapters.image_msg import to_bgr
+    from mvpose_ros.core.detection import encoded_image
+    bgr, camera = shelf_image
+    reads = []
+    declared_size = encoded_image.declared_size
+    monkeypatch.setattr(encoded_image, 'declared_size', lambda data: reads.append(1) or declared_size(data))
+    rig_camera = load_rig_file(package_path('config/rigs/shelf.yaml'), data_root=data_root()).cameras[1]
+    jpeg = image_to_compressed_msg(bgr, HEADER)
+    for queued, known in ((False, True), (True, True), (True, False)):
+        cam = DetectorCamera(1, rig_camera, '/cam1/image_raw', '/cam1/camera_info', camera if known else None)
+        image = cam.admit(jpeg, queued)
+        cam.camera = camera
+        assert cam.decode(image, 2).shape == (388, 516, 3) and len(reads) == 1, (queued, known)
+        reads.clear()
+    assert to_bgr(jpeg, (camera.width, camera.height)).shape == bgr.shape and len(reads) == 1
+    small = image_to_compressed_msg(bgr[:100, :100], HEADER)
+    cam = DetectorCamera(1, rig_camera, '/cam1/image_raw', '/cam1/camera_info')
+    image = cam.admit(small, queued=True)  # any size until the camera's is known
+    cam.camera = camera
+    with pytest.raises(ValueError, match=r'^CompressedImage size: the jpeg header declares 100x100, expected '
+                                         r'1032x776$'):
+        cam.decode(image)
+
+
+def test_the_node_declares_the_detectors_table_and_takes_live_changes_through_it(monkeypatch):
+    """Every parameter of core.detection.detector_settings with its default, description and
+    live or read-only; a live change reaches the detector's configuration, a read-only one is refused."""
+    with node_in_process(monkeypatch, HeatmapDetectorNode, '-r', '__ns:=/cam1', '-p', 'camera:=1') as node:
+        for p in PARAMETERS:
+            assert node.get_parameter(p.name).value == p.default, p.name
+            descriptor = node.describe_parameter(p.name)
+            assert (descriptor.description, descriptor.read_only) == (p.description, not p.live), p.name
+        live = {p.name for p in PARAMETERS if p.live}
+        assert live == {'secondary_radius', 'box_margin', 'min_person_score', 'min_joint_score', 'heatmap_floor'}
+        (result,) = node.set_parameters([Parameter('secondary_radius', value=0.5)])
+        assert result.successful and node._settings.openpose.secondary_radius == 0.5
+        (result,) = node.set_parameters([Parameter('stride', value=8.0)])
+        assert not result.successful and node._settings.openpose.stride == SPECS['stride'].default

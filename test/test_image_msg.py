@@ -126,7 +126,7 @@ def test_16_bit_byte_order_and_alpha():
     (dict(encoding='16UC1'), "got '16UC1'"),
     (dict(step=20), r'Image step: 20 is less than 3 \* width = 21'),
     (dict(height=7), 'Image data: expected step \\* height = 147 bytes, got 126'),
-    (dict(width=0, step=0, data=b''), 'Image size: expected at least 1x1 pixels, got 0x6'),
+    (dict(width=0, step=0, data=b''), 'Image size: 0x6, not at least 1x1 pixels'),
     (dict(encoding='yuyv', step=14, data=b'\0' * 84), 'the width must be even, got 7'),
 ])
 def test_image_rejects(change, problem):
@@ -289,7 +289,7 @@ def test_data_larger_than_the_expected_image_can_take_is_refused_unread(compress
         fits = Image(encoding='bgr8', width=w, height=h, step=limit // h, data=bytes(limit // h * h))
         assert msg_to_image(fits, expected=(w, h)).shape == (h, w, 3)  # padded rows, within the bound
         over = Image(encoding='bgr8', width=w, height=h, step=limit // h + 1, data=bytes((limit // h + 1) * h))
-    kind = 'CompressedImage size' if compressed else 'Image data'
+    kind = 'CompressedImage data' if compressed else 'Image data'
     with pytest.raises(ValueError, match=f'^{kind}: {len(over.data)} bytes, more than a 128x96 image takes '
                                          f'\\({limit}\\)$'):
         to_bgr(over, expected=(w, h))

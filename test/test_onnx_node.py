@@ -137,7 +137,7 @@ def test_heatmaps_multipose_runs_without_efficientpose_and_a_bad_source_stops_th
     bad = tmp_path / 'bad.log'
     assert start_node('heatmap_detector', domain, bad, *args, '-p', 'heatmaps:=mpii').wait(30) == 2
     text = bad.read_text()
-    assert "backend onnx: heatmaps 'mpii' is not one of efficientpose, multipose, fused" in text
+    assert "parameters: heatmaps 'mpii' is not one of efficientpose, multipose, fused" in text
     assert 'Traceback' not in text
 
 

@@ -1,11 +1,14 @@
-"""JPEG and PNG data, decoded only after the size its own header declares has been checked.
+"""JPEG and PNG data, decoded only after the size its own header declares has been checked, and
+the bounds of any image from outside (its pixels, and its bytes against a camera's size).
 
 A few hundred bytes of PNG or JPEG can declare 30000 x 30000 pixels (a decompression bomb):
 OpenCV's decoder would allocate the whole image (2.7 GB as BGR; OpenCV's own limit is 2^30 pixels)
 before anyone could look at its size. Here the size is read from the JPEG frame header or the PNG
-IHDR first, and refused unless it is the expected one (when given) and at most MAX_PIXELS.
+IHDR first, and refused unless it is the expected one (when given) and at most MAX_PIXELS:
+check_encoded does every check once, and decode_checked decodes what passed without checking it
+again.
 
-Used by every path that decodes an image from outside: CompressedImage messages
+Used by every path that decodes an image from outside: Image and CompressedImage messages
 (msg_adapters.image_msg) and image files (image_file). ValueErrors start with 'data: ' or 'size: '
 so that the caller can say what held the data ('CompressedImage data: ...', '<file>: image size: ...').
 """
@@ -80,21 +83,36 @@ def _jpeg_size(data: memoryview) -> tuple[int, int]:
         i += length
 
 
+def check_bytes(length: int, expected: tuple[int, int] | None) -> None:
+    """ValueError ('data: ...') when `length` bytes are more than an image of expected (width,
+    height) can take (max_image_bytes; nothing to check without expected)."""
+    if expected is not None and length > max_image_bytes(*expected):
+        raise ValueError(f'data: {length} bytes, more than a {expected[0]}x{expected[1]} image takes '
+                         f'({max_image_bytes(*expected)})')
+
+
+def check_size(width: int, height: int, expected: tuple[int, int] | None = None, max_pixels: int = MAX_PIXELS,
+               declared: str = '') -> None:
+    """ValueError ('size: <declared>WxH, ...') unless an image of width x height pixels is at least
+    1x1, exactly expected (width, height) if given, and at most max_pixels."""
+    said = f'size: {declared}{width}x{height}'
+    if width < 1 or height < 1:
+        raise ValueError(f'{said}, not at least 1x1 pixels')
+    if expected is not None and (width, height) != tuple(expected):
+        raise ValueError(f'{said}, expected {expected[0]}x{expected[1]}')
+    if width * height > max_pixels:
+        raise ValueError(f'{said}, more than {max_pixels} pixels')
+
+
 def check_encoded(data: np.ndarray, expected: tuple[int, int] | None = None,
                   max_pixels: int = MAX_PIXELS) -> tuple[str, int, int]:
-    """('jpeg' | 'png', width, height) of encoded data (N,) uint8 whose header declares at least
-    1x1 pixels, exactly expected (width, height) if given, at most max_pixels, and which ends
-    with its end marker: everything short of decoding. ValueError otherwise."""
-    if expected is not None and len(data) > max_image_bytes(*expected):
-        raise ValueError(f'size: {len(data)} bytes, more than a {expected[0]}x{expected[1]} image takes '
-                         f'({max_image_bytes(*expected)})')
+    """('jpeg' | 'png', width, height) of encoded data (N,) uint8 of at most the bytes an image of
+    expected (width, height) takes, whose header declares at least 1x1 pixels, exactly expected if
+    given, at most max_pixels, and which ends with its end marker: everything short of decoding.
+    ValueError otherwise."""
+    check_bytes(len(data), expected)
     kind, width, height = declared_size(data)
-    if width < 1 or height < 1:
-        raise ValueError(f'size: the {kind} header declares {width}x{height}')
-    if expected is not None and (width, height) != tuple(expected):
-        raise ValueError(f'size: the {kind} header declares {width}x{height}, expected {expected[0]}x{expected[1]}')
-    if width * height > max_pixels:
-        raise ValueError(f'size: the {kind} header declares {width}x{height}, more than {max_pixels} pixels')
+    check_size(width, height, expected, max_pixels, f'the {kind} header declares ')
     # A decoder fills a cut-off image with grey rather than failing: refuse one without its end.
     end = {'jpeg': b'\xff\xd9', 'png': b'IEND'}[kind]
     if end not in data[-_END_SEARCH:].tobytes():
@@ -103,19 +121,18 @@ def check_encoded(data: np.ndarray, expected: tuple[int, int] | None = None,
 
 
 # libjpeg's DCT scaling: a JPEG decodes at 1/2, 1/4 or 1/8 of its size for much less than a whole
-# decode and a shrink (1548 x 1164 at 1/4: 6.1 + 1.3 ms to MultiPose's input against 11.4 + 5.3)
+# decode and a shrink (figures: docs/own_cameras.md, JPEG decoding)
 REDUCED_JPEG = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4,
                 8: cv2.IMREAD_REDUCED_COLOR_8}
 
 
-def decode_encoded(data: np.ndarray, expected: tuple[int, int] | None = None,
-                   max_pixels: int = MAX_PIXELS, reduce: int = 1) -> np.ndarray:
-    """(H, W, 3) uint8 BGR of JPEG or PNG data (N,) uint8, decoded only once check_encoded passes;
-    the decoded image must have the declared size. reduce (REDUCED_JPEG's keys): a JPEG is decoded
-    at 1/reduce of its size, ceil(W / reduce) x ceil(H / reduce) (a PNG whole). ValueError otherwise."""
+def decode_checked(data: np.ndarray, kind: str, width: int, height: int, reduce: int = 1) -> np.ndarray:
+    """(H, W, 3) uint8 BGR of JPEG or PNG data (N,) uint8 that check_encoded passed as (kind, width,
+    height), decoded without checking it again; the decoded image must have that size. reduce
+    (REDUCED_JPEG's keys): a JPEG is decoded at 1/reduce of its size, ceil(W / reduce) x
+    ceil(H / reduce) (a PNG whole). ValueError otherwise."""
     if reduce not in REDUCED_JPEG:
         raise ValueError(f'reduce {reduce}: not one of {sorted(REDUCED_JPEG)}')
-    kind, width, height = check_encoded(data, expected, max_pixels)
     k = reduce if kind == 'jpeg' else 1
     bgr = cv2.imdecode(data, REDUCED_JPEG[k])
     if bgr is None:
@@ -124,3 +141,9 @@ def decode_encoded(data: np.ndarray, expected: tuple[int, int] | None = None,
         raise ValueError(f'size: decoded {bgr.shape[1]}x{bgr.shape[0]}, the header declares {width}x{height}'
                          f'{f" (at 1/{k})" if k > 1 else ""}')
     return bgr
+
+
+def decode_encoded(data: np.ndarray, expected: tuple[int, int] | None = None,
+                   max_pixels: int = MAX_PIXELS, reduce: int = 1) -> np.ndarray:
+    """(H, W, 3) uint8 BGR of JPEG or PNG data (N,) uint8: check_encoded, then decode_checked."""
+    return decode_checked(data, *check_encoded(data, expected, max_pixels), reduce)

@@ -15,16 +15,16 @@ HEATMAP_SOURCES = ('efficientpose', 'multipose', 'fused')
 class OnnxDetectorConfig:
     """model_dir: folder of the .onnx files (<data root>/models). model: the crop model, one of MODELS:
     EfficientPose 'rt' (224 px crops) or 'i' (256 px), or a single-person keypoint model (see the
-    core.detection.onnx_detector's docstring); crop_workers: crops those run at once. providers: onnxruntime execution
+    OnnxPoseDetector's docstring); crop_workers: crops those run at once. providers: onnxruntime execution
     providers in order of preference; threads: intra-op threads per session (0 = one per core).
     input_size: MultiPose's square input side (a multiple of 32). box_margin: each side of a
     MultiPose box grows by this fraction of the box's width (height) before the crop.
     min_person_score: MultiPose people below it are dropped. min_joint_score, heatmap_floor, stride:
-    see the module docstring. ears: fill the ear joints from MultiPose's COCO ears, rendered as
-    Gaussians of std sigma px. max_batch: EfficientPose crops per run (0 = all crops of a set in one
+    see OnnxPoseDetector's docstring. ears: fill the ear joints from MultiPose's COCO ears,
+    rendered as Gaussians of std sigma px. max_batch: EfficientPose crops per run (0 = all crops of a set in one
     run): on a CPU small runs are as fast as one large one, whose tensors leave the cache; a GPU
-    gains from 0. heatmaps: one of HEATMAP_SOURCES, see the
-    module docstring; keypoint_sigma: the std of the Gaussians of MultiPose's keypoints there, as a
+    gains from 0. heatmaps: one of HEATMAP_SOURCES, see OnnxPoseDetector's docstring;
+    keypoint_sigma: the std of the Gaussians of MultiPose's keypoints there, as a
     fraction of the person's box diagonal. multipose_workers: images of a set MultiPose runs on at
     once, each run with `threads` intra-op threads: one run keeps a CPU's cores busy only part of the
     time, so two workers of one thread each beat one worker of every core.
@@ -32,7 +32,7 @@ class OnnxDetectorConfig:
     size before MultiPose searches the region holding them all (tracked_crops.people_region).
     tile_levels: a MultiPose run that comes back full (6 people, all scoring min_person_score) is
     repeated on two overlapping halves of the part it searched, down to this many levels (0: never;
-    see the module docstring)."""
+    see OnnxPoseDetector's docstring)."""
 
     model_dir: Path
     model: str = 'rt'

@@ -1,51 +1,7 @@
-"""2D people with heatmaps from a camera image, with two ONNX models on onnxruntime: MoveNet
-MultiPose finds the people (boxes and COCO-17 keypoints) in the whole letterboxed frame, then
-EfficientPose (RT or I) gives each person's MPII-16 heatmaps on a letterboxed crop around its
-box. detect_set() takes a synchronised set of the rig's images: MultiPose runs once per image
-(its batch dimension is fixed at 1), EfficientPose on the crops of every camera in runs of at most
-`max_batch` crops. A camera can be given crops instead (core.detection.tracked_crops: the previous set's
-3D skeletons projected into it): MultiPose does not run on its image, and its people's ears are
-carried from the camera's previous people.
-
-Crowds: MultiPose returns at most 6 people a run. When a run returns 6 that all score at least
-`min_person_score` the part searched may hold more, so it is searched again in two overlapping
-halves along its long side, each on MultiPose's whole input (a half that comes back full is halved
-again, `tile_levels` levels deep), and the people of all runs are merged, a person found twice kept
-once. Mosaics of the frame-572 images (4 people in each but camera 3's 3): side by side two and
-three (8 and 12 people), two by two (16): 6, 6 and 6 found without tiles; 8, 12 and 16 with two
-levels, in 0.21, 0.49 and 0.48 s against 0.07 s on one core.
-
-Joint mapping (body.SOURCE_INDEX['mpii16']): the 12 limb joints one-to-one; MPII upper_neck ->
-inference 'neck' and head_top -> inference 'head', the points the 'direct' head model takes as
-the dataset's bottom and top of the head. MPII has no ears: with `ears`, the r_ear / l_ear
-inference joints come from MultiPose's COCO ears (keypoint, and a Gaussian of std `sigma` px as
-their map), which the 'anatomical' head model needs.
-
-Crop model (`model`): EfficientPose 'rt' or 'i' as above, or a single-person keypoint model
-(single_person.SINGLE_POSE: MoveNet 'lightning' / 'thunder', 'blazepose_full' / 'blazepose_heavy'):
-each crop's COCO-17 keypoints as inference joints (body.to_inference 'coco17', its own ears),
-each rendered as a Gaussian of std `keypoint_sigma` times the diagonal of the crop's box (MultiPose's
-or the given one) with its score as peak, as with heatmaps 'multipose'; their batch axis is fixed
-at 1, so crops run one per run, `crop_workers` at once.
-
-Heatmap source (`heatmaps`): 'efficientpose', the crop model as above. 'multipose', the default (on the Shelf
-frame-572 images closer for every annotated actor with all five cameras, and on average with four
-of them in 4 of 5 cases, in about a third of the time): EfficientPose is not loaded; each person's
-16 inference joints are MultiPose's own COCO keypoints (body.to_inference 'coco17': limbs
-one-to-one, neck = shoulder midpoint, head = nose, COCO ears), each rendered as a Gaussian with its
-score as peak (heatmap.render_heatmaps, as the OpenPose backend renders its candidates), of std
-`keypoint_sigma` times the diagonal of the person's MultiPose box: MultiPose's keypoint error grows
-with the person's size in the image; MultiPose must then run on every image (no given boxes).
-'fused': both models; per limb joint (not the neck and head: MPII's upper neck and head top are
-other points than COCO's shoulder midpoint and nose), the EfficientPose map and the MultiPose
-Gaussian on the crop's grid, pointwise max, and the keypoint of the source that scores higher.
-
-Heatmaps: EfficientPose's values are not probabilities (peaks 0.3-0.9, small negatives): they
-are clipped to [0, 1], so a map's peak is the joint's confidence as with the OpenPose backend's
-Gaussians; cells below `heatmap_floor` of their map's peak are set to 0 so that sampling a map as
-a pmf stays near its evidence; a joint whose peak is below `min_joint_score` is not detected
-(empty map, score 0). Maps are resampled from the crop onto an image-aligned grid of `stride` px
-cells and each is cut to the cells holding its evidence, which keeps messages small.
+"""The onnx backend of the heatmap detector: 2D people with per-joint heatmaps from camera images,
+MoveNet MultiPose finding the people and (heatmaps 'efficientpose' or 'fused') a crop model giving
+each person's joints, on onnxruntime. How it works is OnnxPoseDetector's docstring; what its
+settings cost and gain: docs/own_cameras.md (Crowds, Heatmap source) and docs/crop_models.md.
 """
 from __future__ import annotations
 
@@ -78,8 +34,7 @@ _EARS = (R_EAR, L_EAR)
 _LIMBS = np.arange(NUM_INFERENCE_JOINTS) < NECK
 _MULTIPOSE_KEYPOINTS = 17
 # A shrunk image keeps at least this many of its pixels per MultiPose input pixel along the long
-# side (reduced_decoding): on the 1548 x 1164 frame-572 JPEGs keypoints moved 0.44 px from the whole
-# image's on average at 1/2 (774 px: 2.0 per input pixel), 1.9 px at 1/4 (387 px: 1.0).
+# side (reduced_decoding; what one pixel fewer moves the keypoints: docs/own_cameras.md, JPEG decoding)
 SHRUNK_OVERSAMPLING = 2
 # Two people of one camera closer than this fraction of their size are one (without_duplicates):
 # real neighbours' keypoints, even overlapping, lie far apart for most joints.
@@ -151,7 +106,42 @@ class _Crop:
 class OnnxPoseDetector:
     """The sessions are created (and checked) once, here (EfficientPose's not with heatmaps
     'multipose'); detect() runs them on one image, detect_set() on a synchronised set, and
-    start_set() / finish() on a sequence of sets, one starting while the one before finishes."""
+    start_set() / finish() on a sequence of sets, one starting while the one before finishes.
+
+    MultiPose finds the people (boxes and COCO-17 keypoints) in the whole letterboxed frame (its
+    batch dimension is fixed at 1: one run per image), then the crop model (`model`) gives each
+    person's joints on a letterboxed crop around its box: EfficientPose 'rt' or 'i' MPII-16
+    heatmaps, in runs of at most `max_batch` crops over every camera of a set; or a single-person
+    keypoint model (single_person.SINGLE_POSE: MoveNet, BlazePose), each crop's COCO-17 keypoints
+    rendered as Gaussians of std `keypoint_sigma` times the box diagonal, one crop per run,
+    `crop_workers` at once. A camera can be given crops instead (tracked_crops: the previous
+    set's skeletons projected into it): MultiPose does not run on its image, and its people's
+    ears are carried from the camera's previous people.
+
+    Crowds: MultiPose returns at most 6 people a run. A run that returns 6 all scoring at least
+    `min_person_score` is repeated on two overlapping halves along the long side of the part it
+    searched, each on MultiPose's whole input, `tile_levels` levels deep, and the people of all
+    runs are merged, a person found twice kept once.
+
+    Joints (body.SOURCE_INDEX['mpii16']): the 12 limb joints one-to-one; MPII upper_neck ->
+    inference 'neck' and head_top -> 'head', the points the 'direct' head model takes. MPII has
+    no ears: with `ears`, the ear joints come from MultiPose's COCO ears (keypoint, and a
+    Gaussian of std `sigma` px as their map), which the 'anatomical' head model needs.
+
+    Heatmap source (`heatmaps`): 'efficientpose', the crop model as above; 'multipose' (the
+    default), no crop model: each person's joints are MultiPose's own COCO keypoints
+    (body.to_inference 'coco17': neck = shoulder midpoint, head = nose), each rendered as a
+    Gaussian with its score as peak, of std `keypoint_sigma` times the diagonal of the person's
+    box (MultiPose's keypoint error grows with the person's size in the image); 'fused': both,
+    per limb joint the pointwise max of the two maps on the crop's grid and the keypoint of the
+    source that scores higher.
+
+    Heatmaps: EfficientPose's values (peaks 0.3-0.9, small negatives) are clipped to [0, 1], so a
+    map's peak is the joint's confidence; cells below `heatmap_floor` of their map's peak are 0,
+    so that sampling a map as a pmf stays near its evidence; a joint whose peak is below
+    `min_joint_score` is not detected. Maps are resampled onto an image-aligned grid of `stride`
+    px cells, each cut to the cells holding its evidence.
+    """
 
     def __init__(self, config: OnnxDetectorConfig) -> None:
         self.config = config
@@ -326,7 +316,7 @@ class OnnxPoseDetector:
         edges) of it, turned `turns` quarter turns: people scoring at least min_person_score whose
         box holds pixels of the part searched, in the pixels of a camera of size (width, height),
         of which bgr is a copy (shrunk where smaller). A full run is repeated on tiles of the part
-        (crowds, see the module docstring) while `level` is below tile_levels."""
+        (crowds, see OnnxPoseDetector's docstring) while `level` is below tile_levels."""
         found, full = self._multipose_run(bgr, size, region, turns, tile=level > 0)
         if not full or level >= self.config.tile_levels:
             return found
@@ -338,7 +328,7 @@ class OnnxPoseDetector:
         """One MultiPose run of _find_people, and whether it came back full (as many people as the
         model returns, all scoring at least min_person_score). A crowd's tile takes the whole input:
         a crowd's people are small in the image, and MultiPose missed a third of them at the
-        whole image's scale (the module docstring's mosaics)."""
+        whole image's scale (docs/own_cameras.md, Crowds)."""
         shrink = np.array(size, dtype=np.float64) / (bgr.shape[1], bgr.shape[0])  # camera px per bgr px
         if region is None:
             side = self.config.input_size
