@@ -121,6 +121,7 @@ class HeatmapStack:
 
     @classmethod
     def of(cls, heatmaps: Sequence[PersonHeatmap]) -> HeatmapStack:
+        """The stack of heatmaps, each of the same number of maps (none: an empty stack)."""
         if not heatmaps:  # a frame with nobody in it
             return cls(np.zeros(0, np.float32), np.zeros((0, 0), np.intp), np.zeros((0, 0, 2), np.intp),
                        np.zeros((0, 0, 2)), np.zeros(0))

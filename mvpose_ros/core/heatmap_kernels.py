@@ -51,6 +51,8 @@ def trim(values, start, rows, cols, origin, stride, lo, shape):
 
 @kernel(*(f'void({stack}, int64[::1], float64[::1], float64[:, ::1], float64[:, ::1])' for stack in _STACKS))
 def sample(values, start, rows, cols, origin, stride, maps, u, jitter, out):
+    """HeatmapStack.sample_at's draws: writes out (Q, 2) a pixel from each of maps (Q,), picked by
+    u (Q,) and placed in its cell by jitter (Q, 2); NaN for an empty map."""
     # Only non-zero cells can be drawn: one CDF (float64, summed in cell order) over the non-zero
     # cells of every map, each map drawing inside its own stretch [first, end) of it. nz and cum
     # are sized for every cell, but only their first (non-zero) entries are ever touched.
@@ -95,6 +97,8 @@ def sample(values, start, rows, cols, origin, stride, maps, u, jitter, out):
 
 @kernel(*(f'void({stack}, float64[:, ::1])' for stack in _STACKS))
 def peak(values, start, rows, cols, origin, stride, out):
+    """HeatmapStack.peak's maxima: writes out (N * J, 3) u, v and value of each map's first maximal
+    cell; (NaN, NaN, 0) for an empty map."""
     for m in range(len(start)):
         best_cell = 0
         best = values[start[m]]
@@ -113,6 +117,8 @@ def peak(values, start, rows, cols, origin, stride, out):
 
 @kernel(*(f'void({stack}, float64[:, ::1], int64, float64[::1])' for stack in _STACKS))
 def lookup(values, start, rows, cols, origin, stride, uv, per_map, out):
+    """HeatmapStack.lookup's values: writes out (N * J * per_map,) each map's bilinear value at its
+    per_map pixels of uv; 0 outside its grid of cell centres and for NaN pixels."""
     # uv (N * J * K, 2): K pixels per map; the same arithmetic, in the same order, as numpy's
     # bilinear interpolation on whole arrays
     for m in range(len(start)):

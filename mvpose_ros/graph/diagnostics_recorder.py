@@ -97,6 +97,7 @@ def record(output: Path, duration: float | None) -> int:
 
 
 def main(argv: Sequence[str] | None = None, out: TextIO | None = None) -> int:
+    """Entry point of `python -m mvpose_ros.graph.diagnostics_recorder`; returns the exit code."""
     p = argparse.ArgumentParser(prog='python -m mvpose_ros.graph.diagnostics_recorder',
                                 description=__doc__.split('\n')[0])
     what = p.add_mutually_exclusive_group(required=True)

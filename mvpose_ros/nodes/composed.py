@@ -59,6 +59,7 @@ def factories(nodes: Sequence[tuple[str, list[str]]]) -> tuple[list[Callable[[],
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros composed --node EXE --ros-args ... --node EXE ...`."""
     argv = sys.argv if argv is None else argv
     try:
         nodes = parse(argv[1:])

@@ -140,6 +140,7 @@ class FoxgloveView(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros foxglove_view`."""
     run(FoxgloveView, args, events=False)  # feeds are subscribed while it spins
 
 

@@ -51,6 +51,7 @@ class SkeletonEcho(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros skeleton_echo`."""
     run(SkeletonEcho, args)
 
 

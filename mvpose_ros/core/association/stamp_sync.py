@@ -21,6 +21,7 @@ class SyncedFrame:
 
     @property
     def missing(self) -> list[int]:
+        """The cameras without a member in the set."""
         return [c for c, item in enumerate(self.items) if item is None]
 
 

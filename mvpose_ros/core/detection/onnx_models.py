@@ -57,10 +57,12 @@ class SinglePoseSpec:
 
     @property
     def side(self) -> int:
+        """The model's square input side, pixels."""
         return int(self.spec.input_shape[1])
 
     @property
     def movenet(self) -> bool:
+        """Whether the model is a MoveNet (keypoints from a heatmap and offsets; BlazePose gives landmarks)."""
         return self.landmarks is None
 
 

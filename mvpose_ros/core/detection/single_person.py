@@ -45,6 +45,7 @@ class SinglePoseModel:
 
     @property
     def side(self) -> int:
+        """The model's square input side, pixels."""
         return self.model.side
 
     def run(self, rgb: np.ndarray) -> SinglePoseOutput:

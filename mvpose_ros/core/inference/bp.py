@@ -45,6 +45,8 @@ class Messages:
 
     @classmethod
     def uniform(cls, shape: tuple[int, int, int], edge_counts: Sequence[int]) -> Messages:
+        """Uniform (all-zero log) messages: unary (3, T, J, M) for shape (T, J, M), and per pairwise
+        factor kind k, (T, edge_counts[k], 2, M)."""
         t, j, m = shape
         return cls(np.zeros((3, t, j, m)), [np.zeros((t, e, 2, m)) for e in edge_counts])
 
