@@ -16,7 +16,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = 'mvpose_ros'
-NODES = ('bag_player', 'heatmap_detector', 'association', 'bp_solver', 'overlay', 'skeleton_echo')
+NODES = ('bag_player', 'heatmap_detector', 'association', 'bp_solver', 'overlay', 'skeleton_echo', 'composed')
 
 
 def _colcon() -> str:
