@@ -11,23 +11,21 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import shelf_cameras
+from mvpose_ros.bench import report as bench_report, runs as bench_runs
 from mvpose_ros.bench.pipelined import run_two_processes
-from mvpose_ros.core.evaluation.plot import Series, line_plot, nice_ticks
-from mvpose_ros.core.evaluation.crowd import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene,
-                                              scene_people, triangulate)
 from mvpose_ros.cli import bench
-from mvpose_ros.graph.config import load_params
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.geometry.camera import Camera
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, shelf_cameras
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.drawing.plot import Series, line_plot, nice_ticks
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.scenarios.crowd import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene,
+                                             scene_people, triangulate)
 from mvpose_ros.core.stage import Stage3D, StageConfig
-from mvpose_ros.bench import runs as bench_runs
-from mvpose_ros.bench import report as bench_report
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.types import Person2D
+from mvpose_ros.graph.config import load_params
 
 REPO = Path(__file__).resolve().parents[1]
 N_JOINTS = 16

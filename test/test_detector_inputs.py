@@ -23,8 +23,9 @@ from std_msgs.msg import Header
 from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.cdr_header import deserialise
 from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compressed_msg, image_to_msg
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, shelf_cameras
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.nodes import heatmap_detector
 from mvpose_ros.nodes.heatmap_detector import (HeatmapDetectorNode, _camera_indices, decode_image, in_namespace,

@@ -174,7 +174,7 @@ def _sweep_value(result: dict, sweep: str) -> float:
 
 def write_plots(results: Sequence[dict], output: Path) -> list[Path]:
     """One PNG per sweep run: time per frame of each stage and the total against the setting."""
-    from mvpose_ros.core.evaluation.plot import Series, line_plot
+    from mvpose_ros.core.drawing.plot import Series, line_plot
     titles = {'cameras': ('cameras', 'cameras (the first k of Shelf\'s 5)'),
               'people': ('people', '3D people per frame (scene copies; measured)'),
               'window': ('window', 'window length (frames; lag = window // 2)'),

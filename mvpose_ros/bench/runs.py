@@ -6,7 +6,7 @@ the node graph streams it: grouping and per-person heatmaps (the detector nodes'
 network), then core.stage.Stage3D (association, sampling, data term, factor tables, BP and
 decoding over the sliding window). Rows: the graph's settings (config/shelf.yaml) and the
 defaults (the offline evaluator's window); sweeps change one setting of the graph row: the first k
-cameras; people multiplied by shifted copies of the scene (core.evaluation.crowd); window length (lag =
+cameras; people multiplied by shifted copies of the scene (core.scenarios.crowd); window length (lag =
 window // 2); M, hypotheses per joint. A paced row feeds the graph row's 2D people at a camera rate
 and sleeps between frames, as a node waits for its next message: code that has not just run takes
 longer than back to back, and that is the time a frame costs in the graph.
@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.crowd import multiply_scene
+from mvpose_ros.core.datasets.shelf_campus import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.offline import GROUPING, as_predictions, detect_sequence, shelf_openpose_raw
 from mvpose_ros.core.evaluation.pcp import Evaluation, evaluate
+from mvpose_ros.core.scenarios.crowd import multiply_scene
 from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig
 from mvpose_ros.graph.memory import rss_kib
 

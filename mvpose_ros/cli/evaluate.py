@@ -21,21 +21,21 @@ from typing import Any, Sequence, TextIO
 
 import numpy as np
 
+from mvpose_ros.core.datasets.campus import campus_sequence
+from mvpose_ros.core.datasets.shelf_campus import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
+                                                   dataset_dir, load_actors_gt)
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.evaluation.campus import campus_sequence
+from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
 from mvpose_ros.core.evaluation.error_sources import format_error_sources, head_offsets, wrong_endpoints
-from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
-                                                 dataset_dir, load_actors_gt)
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.evaluation.identities import identity_report
 from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
 from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table, match_actors
-from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
 from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
-from mvpose_ros.core.evaluation.ring import RingConfig, ring_sequence
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, UNSEEN_JOINTS
 from mvpose_ros.core.inference.window import TERMS
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
+from mvpose_ros.core.scenarios.ring import RingConfig, ring_sequence
 from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, SOLVER_PARAMETERS, StageConfig
 from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.types import Sequence2D
@@ -64,7 +64,7 @@ def _heights(text: str) -> tuple[float, ...]:
 
 # `mvpose-eval ring` options -> (RingConfig field, type, help)
 RING_OPTIONS: dict[str, tuple[str, Any, str]] = {
-    '--ring-cameras': ('cameras', int, 'cameras on the circle around the actors (core.evaluation.ring)'),
+    '--ring-cameras': ('cameras', int, 'cameras on the circle around the actors (core.scenarios.ring)'),
     '--ring-noise': ('noise_px', float, "std of every projected keypoint's noise, px"),
     '--ring-radius': ('radius', float, "the cameras' distance from the actors' centre, horizontally, m"),
     '--ring-heights': ('heights', _heights, "the cameras' heights above the actors' centre, m, comma separated, "

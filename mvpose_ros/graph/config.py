@@ -15,8 +15,7 @@ from typing import Mapping, Sequence, get_type_hints
 
 import yaml
 
-from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, max_skew_or_default
 from mvpose_ros.core.geometry.rig import Rig
 from mvpose_ros.topics import BUNDLES, OPENPOSE, PEOPLE2D, SKELETONS, camera_namespace, camera_topic
 
@@ -291,7 +290,7 @@ def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]],
     sync_timeout 0.5 s)."""
     section = node_section(params_list, 'association')
     rate = rig_frame_rate(params_list) if frame_rate is None else frame_rate
-    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(rate)
+    max_skew = max_skew_or_default(float(section.get('max_skew', 0.0)), rate)
     return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
 
 

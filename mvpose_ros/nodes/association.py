@@ -51,10 +51,9 @@ from msg_adapters.cdr_header import CLOUD_OVERHEAD, Oversize, deserialise_cloud,
 from msg_adapters.people_msg import max_people_bytes, msg_to_wire_people, wire_bundles_to_msg
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros import topics
-from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
-                                                          default_max_skew)
+from mvpose_ros.core.association.approximate_sync import ApproximateSync, Drop, SyncedSet
 from mvpose_ros.core.association.associator import Associator
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, max_skew_or_default
 from mvpose_ros.core.geometry.frame_id import CameraFrameId
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
 from mvpose_ros.core.health.status import Status
@@ -104,7 +103,7 @@ class AssociationNode(Node):
         self._names = rig.names
         self._frame_rate = p['frame_rate']
         self._params = p
-        max_skew = p['max_skew'] or default_max_skew(p['frame_rate'])
+        max_skew = max_skew_or_default(p['max_skew'], p['frame_rate'])
         # a camera whose intrinsics are still unknown (no CameraInfo yet) is left out of the sets
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
         self._associator = Associator(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
@@ -151,7 +150,7 @@ class AssociationNode(Node):
 
     def _retune(self, changes: dict[str, Any]) -> None:
         self._params = p = self._retuned(changes)
-        self._sync.retune(p['sync_timeout'], p['max_skew'] or default_max_skew(self._frame_rate))
+        self._sync.retune(p['sync_timeout'], max_skew_or_default(p['max_skew'], self._frame_rate))
         self._associator.retune(StageConfig.from_params(p).association)
 
     def _restore_ids(self, max_age: float) -> None:

@@ -103,14 +103,13 @@ from msg_adapters.openpose_msg import max_openpose_bytes, msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns, stamp_of_ns
-from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, SyncedSet,
-                                                          default_max_skew, stamp_rate)
+from mvpose_ros.core.association.approximate_sync import ApproximateSync, SyncedSet, stamp_rate
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, data_root, default_max_skew
 from mvpose_ros.core.detection.newest_queue import NewestQueue
 from mvpose_ros.core.detection.onnx_config import HEATMAP_SOURCES, MODELS, OnnxDetectorConfig
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.detection.upright import UPRIGHT, upright_turns
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.frame_id import CameraFrameId
