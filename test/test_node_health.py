@@ -51,9 +51,15 @@ def test_bp_solver_publishes_diagnostics_and_takes_live_parameters(domain, tmp_p
             assert applied.successful, applied.reason
             arrays.clear()
             assert spin_until(executor, lambda: bundles_input(Level.OK), 10.0), log.read_text()  # applied live
+            for name, value in (('collision_width', 0.2), ('max_gap', 0.5)):  # the stage's, via StageConfig
+                stage = _set(node, executor, client, name,
+                             ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+                assert stage.successful, stage.reason
         finally:
             stop(proc)
-    assert 'parameters changed: diagnostics.stale_error = 1000.0' in log.read_text()
+    text = log.read_text()
+    assert 'parameters changed: diagnostics.stale_error = 1000.0' in text
+    assert 'parameters changed: collision_width = 0.2' in text and 'parameters changed: max_gap = 0.5' in text
 
 
 def test_a_node_reports_on_diagnostics_the_endpoints_its_writers_and_readers_have_matched(domain, tmp_path):

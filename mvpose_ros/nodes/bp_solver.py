@@ -41,7 +41,6 @@ read-only.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -117,7 +116,7 @@ class BpSolverNode(Node):
             raise StartupError(f'parameters: {exc}') from None
         if config.solver.inference.window is None:
             raise StartupError('parameter window: must be >= 1 (0, the whole clip, is for offline runs)')
-        self._config = config.solver
+        self._params = p
         self._world_frame = rig.world_frame
         self._n_cameras = len(rig.cameras)
         self._names = rig.names
@@ -165,24 +164,24 @@ class BpSolverNode(Node):
                 self._inference.cameras[c] = self._intrinsics.known[c]
         return [self._names[c] for c in sorted(cameras) if self._inference.cameras[c] is None]
 
+    def _retuned(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """The parameter values with the live changes."""
+        return {**self._params, **changes}
+
     def _check(self, changes: dict[str, Any]) -> str | None:
         try:
-            self._retuned(changes)
+            StageConfig.from_params(self._retuned(changes))
         except ValueError as exc:
             return str(exc)
         return None
 
     def _retune(self, changes: dict[str, Any]) -> None:
-        self._idle = changes.get('idle_flush', self._idle)
-        self._marker_lifetime = changes.get('marker_lifetime', self._marker_lifetime)
-        self._max_wait = changes.get('max_wait', self._max_wait)
-        self._inference.window.config = self._retuned(changes)
-
-    def _retuned(self, changes: dict[str, Any]) -> Any:
-        """The window's InferenceConfig with the live changes (ValueError when invalid)."""
-        config = self._inference.window.config
-        factors = replace(config.factors, **{k: v for k, v in changes.items() if k.startswith('collision_')})
-        return replace(config, factors=factors, max_gap=changes.get('max_gap', config.max_gap))
+        self._params = p = self._retuned(changes)
+        self._idle = p['idle_flush']
+        self._marker_lifetime = p['marker_lifetime']
+        self._max_wait = p['max_wait']
+        # the stage's live parameters (collision_*, max_gap) take effect through the window's config
+        self._inference.window.config = StageConfig.from_params(p).solver.inference
 
     def _on_bundles(self, cdr: bytes, info: dict[str, int]) -> None:
         """A bundles message as bytes with its DDS receipt time: dropped unread when it waited longer
