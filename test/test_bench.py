@@ -172,8 +172,18 @@ GRAPH = bench_runs.default_graph_config()
 def test_the_default_row_is_the_graph_config():
     params = load_params(REPO / 'config' / 'shelf.yaml')['bp_solver']
     assert GRAPH.stage() == StageConfig.from_params(params)
-    assert (GRAPH.window, GRAPH.lag) == (params['window'], params['lag'])
+    assert (GRAPH.settings['window'], GRAPH.settings['lag']) == (params['window'], params['lag'])
     assert bench_runs.OFFLINE.stage() == StageConfig()
+
+
+def test_a_runs_stage_settings_are_the_stage_parameters_and_survive_json():
+    assert set(GRAPH.settings) == set(StageConfig().to_params())
+    wider = GRAPH.with_settings(window=10, lag=5)
+    assert wider.stage().solver.inference.window == 10 and GRAPH.settings['window'] == 6  # a copy changed
+    assert bench_runs.RunConfig.from_dict(json.loads(json.dumps(asdict(wider)))) == wider
+    assert GRAPH.with_settings(window=6).key() == GRAPH.key() != wider.key()
+    with pytest.raises(ValueError, match='windows'):
+        GRAPH.with_settings(windows=10)
 
 
 def test_plan_measures_each_setting_once():
