@@ -11,7 +11,7 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, 
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.body import UP
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
-from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig, parameter_specs
+from mvpose_ros.core.stage import ALL_PARAMETERS, LiveStageParameters, Stage3D, StageConfig, parameter_specs
 
 
 def test_a_frame_with_nobody_is_output_empty_and_the_others_go_on():
@@ -272,3 +272,13 @@ def test_a_person_walking_out_of_all_views_but_one_stays_where_he_is(single_view
         else:
             assert not near
     assert len(set(ids)) == 1
+
+
+def test_live_changes_take_one_route_and_a_bad_one_is_refused_and_not_kept():
+    live = LiveStageParameters({**StageConfig().to_params(), 'idle_flush': 0.0})
+    assert live.refusal({'collision_width': 0.2}) is None
+    assert 'hanging_legs' in live.refusal({'hanging_legs': 'false'})
+    config = live.apply({'collision_width': 0.2, 'max_gap': 0.5, 'track_iou': 0.4})
+    assert config.solver.inference.factors.collision_width == 0.2 and config.solver.inference.max_gap == 0.5
+    assert config.association.track_iou == 0.4 and live.values['idle_flush'] == 0.0
+    assert live.values['hanging_legs'] is StageConfig().solver.sampling.hanging_legs

@@ -65,7 +65,7 @@ from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.parameters import Param
-from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, parameter_specs
+from mvpose_ros.core.stage import SOLVER_PARAMETERS, LiveStageParameters, StageConfig, parameter_specs
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.core.types import Bundle, FrameResult
 from mvpose_ros.nodes.health import NodeHealth
@@ -116,7 +116,7 @@ class BpSolverNode(Node):
             raise StartupError(f'parameters: {exc}') from None
         if config.solver.inference.window is None:
             raise StartupError('parameter window: must be >= 1 (0, the whole clip, is for offline runs)')
-        self._params = p
+        self._live = LiveStageParameters(p)
         self._world_frame = rig.world_frame
         self._n_cameras = len(rig.cameras)
         self._names = rig.names
@@ -144,7 +144,7 @@ class BpSolverNode(Node):
         live_names = [s.name for s in parameter_specs(SOLVER_PARAMETERS) if s.live] + ['idle_flush', 'marker_lifetime',
                                                                                        'max_wait']
         live_parameters(self, live_names,
-                        self._check, self._retune)
+                        self._live.refusal, self._retune)
         self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
         self._live_skeletons = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
         self._dropped = self.create_publisher(Header, topics.SKELETONS_DROPPED, DATA_QOS)
@@ -164,24 +164,14 @@ class BpSolverNode(Node):
                 self._inference.cameras[c] = self._intrinsics.known[c]
         return [self._names[c] for c in sorted(cameras) if self._inference.cameras[c] is None]
 
-    def _retuned(self, changes: dict[str, Any]) -> dict[str, Any]:
-        """The parameter values with the live changes."""
-        return {**self._params, **changes}
-
-    def _check(self, changes: dict[str, Any]) -> str | None:
-        try:
-            StageConfig.from_params(self._retuned(changes))
-        except ValueError as exc:
-            return str(exc)
-        return None
-
     def _retune(self, changes: dict[str, Any]) -> None:
-        self._params = p = self._retuned(changes)
+        config = self._live.apply(changes)
+        p = self._live.values
         self._idle = p['idle_flush']
         self._marker_lifetime = p['marker_lifetime']
         self._max_wait = p['max_wait']
         # the stage's live parameters (collision_*, max_gap) take effect through the window's config
-        self._inference.window.config = StageConfig.from_params(p).solver.inference
+        self._inference.window.config = config.solver.inference
 
     def _on_bundles(self, cdr: bytes, info: dict[str, int]) -> None:
         """A bundles message as bytes with its DDS receipt time: dropped unread when it waited longer
