@@ -1,18 +1,11 @@
 """Your own live cameras: `ros2 launch mvpose_ros rig.launch.py rig:=FILE [params:=FILE] [namespace:=NS]`.
 
-Starts the graph for N cameras that are already publishing (their drivers, or a bag played by
-`ros2 bag play` / bag_player): ONE heatmap_detector for the whole rig (camera 'all': every camera's
-image topic from the rig file, synchronised into sets, the newest set detected while older ones
-are dropped), association and bp_solver, each with the parameter file (default: the package's
-config/rig_template.yaml) and the rig file, and the package's Fast DDS profile (large heatmap
-messages). Outputs: <camera>/people2d, people/bundles, skeletons and skeletons/markers (RViz),
-relative to `namespace` (default: the root). A node that dies is started again after
-RESPAWN_DELAY_S (launch has no cap on restarts); association keeps its person ids in `state_dir`.
-`tf:=true` also puts each camera's pose from the rig file on /tf_static (tf2_ros's
-static_transform_publisher, one per camera): leave it off where something else, a robot's URDF for
-example, already publishes those frames. `overlay:=true` also starts the overlay node: each
-camera's image with its people and skeletons drawn, on <camera>/overlay/compressed (rqt_image_view).
-"""
+Starts the graph for N cameras that are already publishing (their drivers, or a played bag): ONE
+heatmap_detector for the whole rig, association and bp_solver, each with the parameter file
+(default: the package's config/rig_template.yaml), the rig file and the package's Fast DDS
+profile (large heatmap messages). Outputs are relative to `namespace`. A node that dies is
+started again after RESPAWN_DELAY_S. `tf:=true` also puts each camera's pose on /tf_static;
+`overlay:=true` also starts the overlay node. Step by step: docs/own_cameras.md#steps."""
 import os
 
 from ament_index_python.packages import get_package_share_directory

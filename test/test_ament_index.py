@@ -14,7 +14,7 @@ from ament_index_python.packages import (PackageNotFoundError, get_package_prefi
 
 DOMAIN_ID = 172
 PACKAGE = 'mvpose_ros'
-NODES = ('bag_player', 'heatmap_detector', 'association', 'bp_solver', 'overlay', 'skeleton_echo')
+NODES = ('bag_player', 'heatmap_detector', 'association', 'bp_solver', 'overlay', 'skeleton_echo', 'composed')
 
 
 @pytest.fixture

@@ -22,9 +22,8 @@ from mvpose_ros.cli import graph
 from mvpose_ros.core.health.status import Level, Status
 from mvpose_ros.graph import session
 from mvpose_ros.graph.config import graph_nodes
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
-from mvpose_ros.nodes.runtime import DATA_QOS
+from mvpose_ros.nodes.runtime import DATA_QOS, LATCHED_QOS
 from foxglove_client import Client
 from ros_harness import probe, spin_until, start_node, stop
 

@@ -104,6 +104,9 @@ def test_composed_nodes_take_their_own_arguments_in_one_process(monkeypatch):
     assert [name for name, _ in processes(nodes, 'detectors')] == ['heatmap_detectors', 'association', 'bp_solver',
                                                                    'bag_player']
     assert [name for name, _ in processes(nodes)] == [n.name for n in nodes]
+    assert [name for name, _ in processes(nodes, 'none')] == [n.name for n in nodes]
+    front = processes(nodes, 'detectors+association')
+    assert [name for name, _ in front] == ['detectors_association', 'bp_solver', 'bag_player']
     (name, specs), player = processes(nodes, 'all')
     assert (name, player[0]) == ('composed', 'bag_player')
     assert [s.name for s in specs] == [n.name for n in nodes[:-1]]

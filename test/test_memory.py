@@ -6,6 +6,7 @@ import os
 import resource
 import subprocess
 import sys
+import textwrap
 import time
 
 import pytest
@@ -82,3 +83,20 @@ def test_startup_counts_from_the_command_to_the_first_skeleton():
     line = startup_line(started, {1: started + 9 * s, 2: started + 10 * s}, {2: started + 12 * s, 1: started + 11 * s})
     assert line == 'start-up: 11.0 s from the command to the first skeleton (first frame played at 9.0 s)'
     assert startup_line(started, {}, {}) is None
+
+
+def test_a_node_process_gives_the_heap_it_freed_back_to_the_system():
+    """What a start frees (a bag read into memory, say) leaves the process's resident size once
+    run_nodes has built its nodes; a fragmented heap keeps it otherwise."""
+    code = textwrap.dedent('''
+        from mvpose_ros.graph.memory import rss_kib
+        from mvpose_ros.nodes.runtime import release_free_heap
+        blocks = [bytes(1000 + i % 7) for i in range(100_000)]
+        kept = blocks[::100]  # the survivors pin the freed space between them
+        del blocks
+        before = rss_kib()
+        release_free_heap()
+        print(before - rss_kib())
+    ''')
+    freed_kib = int(subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True).stdout)
+    assert freed_kib > 50 * 1024

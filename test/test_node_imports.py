@@ -19,10 +19,13 @@ SCIPY = 'scipy.*'  # any public scipy subpackage
 SCIPY_BEYOND_NUMBA = 'scipy.* but linalg'
 
 # node module -> the heavy modules it must not load; the OpenPose detector runs compiled kernels
-# (grouping, heatmap rendering), association and bp_solver run the 3D stage.
+# (grouping, heatmap rendering), association and bp_solver run the 3D stage; the overlay decodes
+# and draws (OpenCV) and the live view forwards, neither computes on a heatmap.
 FORBIDDEN = {
     'bag_player': (NUMBA, SCIPY, ONNXRUNTIME, CV2),
     'skeleton_echo': (NUMBA, SCIPY, ONNXRUNTIME, CV2),
+    'overlay': (NUMBA, SCIPY, ONNXRUNTIME),
+    'foxglove_view': (NUMBA, SCIPY, ONNXRUNTIME, CV2),
     'heatmap_detector': (SCIPY_BEYOND_NUMBA, ONNXRUNTIME),
     'association': (ONNXRUNTIME, CV2),
     'bp_solver': (ONNXRUNTIME, CV2),

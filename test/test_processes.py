@@ -188,7 +188,8 @@ def _crash(tmp_path, monkeypatch, capsys, domain):
     monkeypatch.setattr(runner, 'node_command', dummy_node)
     t0 = time.monotonic()
     code = graph.main(['--config', str(REPO / 'config' / 'shelf.yaml'), '--bag', str(bag),
-                       '--predictions', str(tmp_path / 'out' / 'p.jsonl'), '--domain-id', str(domain)])
+                       '--predictions', str(tmp_path / 'out' / 'p.jsonl'), '--domain-id', str(domain),
+                       '--compose', 'none'])
     err = capsys.readouterr().err
     assert code == 1
     assert time.monotonic() - t0 < runner.STARTUP_TIMEOUT_S  # on the crash, not after waiting for the graph
@@ -326,7 +327,9 @@ def _fake_graph(tmp_path, monkeypatch, timeout):
 
     monkeypatch.setattr(runner, 'node_command', fake_command)
     predictions = tmp_path / 'out' / 'p.jsonl'
-    yield ['--config', str(config), '--bag', str(bag), '--predictions', str(predictions)], predictions, frames
+    # a process per node: each fake node stands for one
+    yield (['--config', str(config), '--bag', str(bag), '--predictions', str(predictions), '--compose', 'none'],
+           predictions, frames)
 
 
 def test_runner_plays_collects_and_scores(fake_graph, tmp_path, monkeypatch, capsys):

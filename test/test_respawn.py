@@ -194,7 +194,15 @@ def test_a_killed_bp_solver_in_a_real_graph_is_restarted_and_its_output_resumes(
     (['--respawn', '--respawn-delay', '-1'], '--respawn-delay must be >= 0 s, got -1'),
     (['--respawn', '--respawn-limit', '0'], '--respawn-limit must be >= 1, got 0'),
     (['--domain-id', '233'], '--domain-id must be in 0-232 (DDS has no port for a higher one), got 233'),
+    (['--respawn', '--compose', 'detectors'], 'not with --compose detectors'),
 ])
 def test_respawn_options_are_checked(args, problem, capsys):
     assert graph.main(['--config', str(REPO / 'config' / 'shelf.yaml'), '--bag', str(REPO / 'nowhere'), *args]) == 2
     assert problem in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('args, compose', [([], 'detectors+association'), (['--respawn'], 'none'),
+                                           (['--compose', 'all'], 'all'), (['--respawn', '--compose', 'none'], 'none')])
+def test_nodes_share_processes_by_default_and_each_has_its_own_with_respawn(args, compose):
+    parsed = graph.build_parser().parse_args(['--config', str(REPO / 'config' / 'shelf.yaml'), *args])
+    assert graph._compose(parsed) == compose

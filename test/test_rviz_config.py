@@ -11,7 +11,7 @@ from msg_adapters.skeleton_msg import SKELETON_DTYPE
 from mvpose_ros import topics
 from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
+from mvpose_ros.nodes.runtime import LATCHED_QOS
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -18,9 +18,8 @@ from msg_adapters.skeleton_msg import Skeletons, skeletons_to_msg
 from mvpose_ros.core.health.status import Level, Status
 from mvpose_ros.graph import topic_recorder
 from mvpose_ros.graph.topic_recorder import TopicRecorder, recorded_inputs, recorded_outputs
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
-from mvpose_ros.nodes.runtime import DATA_QOS
+from mvpose_ros.nodes.runtime import DATA_QOS, LATCHED_QOS
 from mcap_check import decoded_messages, decoded_skeletons, same_people
 from ros_harness import probe, spin_until
 

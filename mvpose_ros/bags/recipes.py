@@ -1,34 +1,12 @@
 """What goes into each bag the project ships recipes for, built from the real data.
 
-- `shelf`: Shelf test frames 300..600, per camera c `/cam{c}/camera_info` and `/cam{c}/openpose`
-  (the real OpenPose BODY25 output, encoding A), plus `/cam{c}/image_raw` for frame 572, the one
-  frame whose real images are available. With a CameraFault, one camera is bumped (turned about
-  its optical centre from a frame on, its calibration unchanged: its OpenPose candidates move as
-  the turned camera would see them) or unplugged (no message from it from a frame on).
-- `shelf_images`: frame 572 only, images and camera infos (input of image-based 2D backends).
-- `shelf_rig` / `shelf_rig_raw`: the five frame-572 images as a foreign rig's driver would record
-  them (see shelf_rig_recipe): 40 sets at 25 Hz, camera names, topics and frame ids of a driver,
-  images upscaled to 1548x1164, per-camera stamp offsets with jitter, a late camera and three
-  dropped frames; sensor_msgs/CompressedImage (jpeg) or, for `_raw`, sensor_msgs/Image (rgb8),
-  plus CameraInfo with every image. Its rig file (extrinsics only) is written by `rig_file_text`.
-- `shelf_rig_turned`: `shelf_rig` with its cameras turned on their mounts (ForeignRig.TURNS: three
-  upside down, as ceiling cameras hang, and two on their sides), images, CameraInfo and rig file
-  turned with them: the same scene, for upright detection (core.detection.upright).
-- `shelf_rig_lenses`: `shelf_rig` seen through the lenses of ForeignRig.LENSES (two fisheyes, two
-  rational_polynomial lenses, one barrel plumb_bob), each image remapped to what that lens takes
-  from the same pose, and its CameraInfo giving the lens (core.geometry.lens).
-- `shelf_crowd`: the `shelf` bag's camera infos and OpenPose output with the scene multiplied to
-  about CROWD_PEOPLE people per frame (core.scenarios.crowd_openpose: shifted copies of its people, the
-  crowd `mvpose-bench --people` builds), for the graph under a crowd; no images (they would not
-  show the copies).
-- `campus`: a user's CampusSeq1 folder; per test frame with images, `/cam{c}/image_raw`,
-  `/cam{c}/camera_info` and the annotated actors on `/ground_truth/skeletons` (encoding D,
-  person id = actor index).
-
-Frame f is stamped f / 25 s and logged at that time; camera c is rig index c (load_rig order)
-(except the shelf_rig bags, whose stamps are a driver's: each camera's own capture time).
+`shelf` (Shelf's frames 300..600 as OpenPose output, optionally a bumped or unplugged camera),
+`shelf_images` (frame 572's images), the `shelf_rig` family (frame 572's images as a foreign
+rig's driver records them: plain, raw, turned on their mounts, behind other lenses; with their rig
+file, rig_file_text), `shelf_crowd` (the scene multiplied to a crowd) and `campus` (a user's
+CampusSeq1). Frame f is stamped f / 25 s, but in the shelf_rig bags, whose stamps are a driver's.
 A recipe also names the files it reads, so a bag can tell whether it is still up to date.
-"""
+Each bag's content: docs/cli.md#the-bags."""
 from __future__ import annotations
 
 import hashlib

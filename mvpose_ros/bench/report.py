@@ -158,7 +158,7 @@ def print_paced(results: Sequence[dict], out: TextIO) -> None:
 
 def print_crowds(results: Sequence[dict], out: TextIO) -> None:
     """A line per run of the people sweep: time from 2D people on per frame and per 3D person (the
-    crowd scenes: issue 14's target is <= 1.2 ms per person at 20 people)."""
+    crowd scenes)."""
     rows = [r for r in results if r['config'].get('sweep') == 'people' and 'error' not in r and r['people_3d'] > 0]
     if rows:
         print('\ncrowd scenes (shifted copies of the Shelf scene), from 2D people on:', file=out)

@@ -4,16 +4,10 @@
                  [--cameras 1,2,3,4,5] [--people 3,10,20] [--windows 4,8,15] [--hypotheses 16,32,64]
                  [--profile] [--repeat N] [--no-two-processes] [--pace HZ]
 
-Prints the time per frame of each stage of the 3D stage (from the core's own timers; wall time
-they do not cover is 'other'), the frames per second of the whole 3D stage and of its part from
-2D people on, peak memory, and the PCP of the runs on the original scene; writes a JSON of every
-figure and PNG plots of the time per frame against people, cameras, M and window length into
---output. Last, the default row runs again with its two halves (grouping, heatmaps and
-association | sampling onward) in two processes, as the node graph splits them. With --pace, the
-default row also runs with its frames fed at a camera rate, as the graph's nodes get them. What a run is:
-bench.runs; what is printed: bench.report. Each configuration runs in a fresh process
-(`python -m mvpose_ros.cli.bench --one CONFIG`), so its peak RSS is its own.
-"""
+Prints the time per frame of each stage of the 3D stage, frames per second, peak memory and PCP,
+and writes every figure as JSON and the scaling plots into --output. Each configuration runs in a
+fresh process, so its peak RSS is its own. What a run is: bench.runs; what is printed:
+bench.report; every row and option: docs/cli.md#benchmarks."""
 from __future__ import annotations
 
 import argparse

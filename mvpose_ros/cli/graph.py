@@ -1,62 +1,14 @@
-"""`mvpose-graph`: run the whole ROS graph on a bag, each node its own process, and score it.
+"""`mvpose-graph`: run the whole ROS graph on a bag and score it.
 
-    mvpose-graph --config config/shelf.yaml [--data-root DIR] [--bag DIR] [--rate R] [--loops N]
-                 [--predictions FILE] [--domain-id N] [--log-dir DIR]
-                 [--respawn [--respawn-delay S] [--respawn-limit N]] [--report-every S] [--compose detectors|all]
-                 [--record DIR [--record-inputs]] [--foxglove-port PORT]
-    mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--loops N] [--qos sensor|reliable] [--config FILE]
-                 [--predictions FILE] [--ground-truth shelf --frame N] [--domain-id N] [--log-dir DIR]
+    mvpose-graph --config config/shelf.yaml [--bag DIR] [--loops N] [--respawn] [--compose MODE] ...
+    mvpose-graph --rig FILE --bag DIR [--lockstep | --rate R] [--ground-truth shelf --frame N] ...
 
-Starts the detectors, association and bp_solver (with the Fast DDS profile `fastdds.xml` beside
-the parameter file, when there is one), waits until the graph is connected, then plays
-the bag; a recorder node inside this process keeps every /skeletons message and times it from
-the arrival of the same stamp's /cam0/camera_info. The input frames are the bag's messages on
-the detectors' input topic, which follows their backend (/cam0/openpose for openpose,
-/cam0/image_raw for onnx). It stops when every input stamp has its output (or nothing came for
-`timeout` s), stops every process, writes the predictions file and prints counts, latency and
-the PCP table of those frames against Shelf's ground truth (actors 1-3, as `mvpose-eval shelf
---score` for the whole test clip). Exit code 1 with a one-line reason when a node crashes, the
-graph never connects, or outputs are missing. With --loops N (a soak run) the bag is replayed N
-times with its stamps moved on every loop; it then also prints each node's resident memory after
-the first loop and at the end, and one PCP line per loop. Ctrl-C stops every node and still
-writes the frames received so far (exit code 130). With --respawn a node that dies (not the
-player) is started again after --respawn-delay s, logged with its exit cause and count; one that
-dies more than --respawn-limit times within a minute ends the run (exit 1). The report then has a
-line per restart: when the node's output and the graph's came back, the frames lost (not counted
-as missing), the person ids before and after. --report-every S adds a table by S s of the run:
-frames in / out, latency p50 / p95 and each process's resident memory.
-Every run also prints the start-up time (the command to the first skeleton) and each node
-process's largest resident memory, RSS and PSS, with their totals. --compose detectors runs the
-heatmap detectors in one process, --compose all every node but the player (nodes.composed;
-docs/footprint.md); by default each node has its own.
-
-With --rig (any recorded rig: the bag's own topics, sqlite3 or mcap), the graph is ONE
-heatmap_detector for the whole rig (camera 'all', onnx backend), association and bp_solver, with
-the package's config/rig_template.yaml and then --config (a parameter file overriding it), the rig
-file given to every node; frame_rate is the bag's cameras' rate when that is more than 10 % off
-the template's and no file of the user's sets it. The player publishes as a camera driver (--qos
-sensor: best effort) at --rate R x recorded speed (default 1: sets the graph cannot keep up with
-are dropped), or with --lockstep one synchronised set at a time, the next once the previous set's
-bundle is out (every set processed). The bag's sets are the image messages grouped by approximate
-synchronisation of their stamps, with the graph's max_skew (association's; default half a period
-of frame_rate); a set's stamp is its earliest member stamp, the stamp its skeletons carry. It
-prints sets in / processed / dropped, the skew and the latency (first camera_info of a set ->
-skeletons), and writes one predictions line per processed set: {"frame": <set index from 0>,
-"stamp": <ns>, "people": [...]}.
-With --ground-truth shelf --frame N (a bag repeating Shelf frame N, as shelf_rig), every set is
-scored against that frame.
-
-With --record DIR the run's outputs are also written to DIR, a rosbag2 MCAP recording with its
-message definitions (`ros2 bag info DIR`, or open DIR/*.mcap in Foxglove): skeletons,
-skeletons/live, skeletons/dropped, skeletons/markers, cameras/markers, /diagnostics, the overlays
-with --overlay, and with --record-inputs the inputs played; the player starts once the
-recorder's readers have matched, so the first frame is in it (graph.topic_recorder).
-With --foxglove-port PORT the live view node (nodes.foxglove_view) runs beside the graph and
-serves it to the Foxglove app on ws://127.0.0.1:PORT (docs/visualize.md).
-
-The work is done in mvpose_ros.graph: `session` (one run, either kind), `runner` (processes,
-waits, play, collect), `recorder` (the recorder node) and `report` (what is printed).
-"""
+A Shelf-style run (--config) plays the Shelf bag through the detectors, association and bp_solver
+and prints counts, latency, memory and the PCP against Shelf's ground truth; a recorded rig
+(--rig) runs one whole-rig detector on any bag and prints sets in / processed / dropped. Either
+way the player starts only once the graph is connected, so the first frame reaches every node.
+Argument parsing only: the work is in mvpose_ros.graph (session, runner, recorder, report).
+What each option does, the exit codes and the start order: docs/cli.md#mvpose-graph."""
 from __future__ import annotations
 
 import argparse
@@ -64,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from mvpose_ros.graph.config import COMPOSED
+from mvpose_ros.graph.config import COMPOSED, DEFAULT_COMPOSE
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, RESPAWN_WINDOW_S
 from mvpose_ros.graph.session import PROG, run
 
@@ -118,9 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--foxglove-port', type=int, metavar='PORT',
                    help='also run the live view: the skeletons, frusta, overlays and diagnostics over Foxglove\'s '
                         'WebSocket protocol on ws://127.0.0.1:PORT (docs/visualize.md)')
-    p.add_argument('--compose', choices=sorted(COMPOSED),
-                   help='run nodes in one process (ROS composition): detectors, every heatmap_detector; all, every '
-                        'node but the player (default: each node its own process; docs/footprint.md)')
+    p.add_argument('--compose', choices=list(COMPOSED),
+                   help='which nodes share a process (ROS composition): none, a process per node; detectors, '
+                        'every heatmap_detector; detectors+association, those and association; all, every node but '
+                        f'the player (default: {DEFAULT_COMPOSE}, none with --respawn; docs/footprint.md)')
     p.add_argument('--report-every', type=float, metavar='SECONDS',
                    help='also print frames in / out, latency and memory per node by this many s of the run')
     return p
@@ -131,8 +84,9 @@ def _check_arguments(args: argparse.Namespace) -> None:
     for name in ('respawn_delay', 'respawn_limit'):
         if getattr(args, name) is not None and not args.respawn:
             raise ValueError(f'--{name.replace("_", "-")} needs --respawn')
-    if args.compose and args.respawn:
-        raise ValueError('--respawn restarts one node, not a process of composed nodes: not with --compose')
+    if args.respawn and args.compose not in (None, 'none'):
+        raise ValueError(f'--respawn restarts one node, not a process of composed nodes: not with --compose '
+                         f'{args.compose}')
     if args.respawn_delay is not None and not args.respawn_delay >= 0:
         raise ValueError(f'--respawn-delay must be >= 0 s, got {args.respawn_delay:g}')
     if args.respawn_limit is not None and args.respawn_limit < 1:
@@ -163,11 +117,20 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ValueError('--ground-truth and --frame go together')
 
 
+def _compose(args: argparse.Namespace) -> str:
+    """The run's --compose: the one given, else DEFAULT_COMPOSE, or 'none' with --respawn (a restart
+    is of one node's process)."""
+    if args.compose is not None:
+        return args.compose
+    return 'none' if args.respawn else DEFAULT_COMPOSE
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `mvpose-graph`."""
     args = build_parser().parse_args(argv)
     try:
         _check_arguments(args)
+        args.compose = _compose(args)
         return run(args)
     except (FileNotFoundError, ValueError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)

@@ -7,12 +7,8 @@
     mvpose-make-bag shelf --rotate-camera C --degrees D [--axis y] --from-frame F   (a bumped camera)
     mvpose-make-bag shelf --unplug-camera C --from-frame F                         (a camera that stops)
 
-A bag that is complete and made from the current inputs by the current recipe is left alone
-(exit 0), so scripts can call this every time; any other existing output needs --force. The
-shelf_rig bags (a foreign rig recorded by its driver; shelf_rig_turned: its cameras turned on their
-mounts; shelf_rig_lenses: behind fisheye and other lenses) also get their rig file, `rig.yaml`
-inside the bag folder: `mvpose-graph --rig bags/shelf_rig/rig.yaml --bag bags/shelf_rig`.
-"""
+A bag that is complete and up to date is left alone (exit 0); any other existing output needs
+--force. What each bag holds: docs/cli.md#the-bags."""
 from __future__ import annotations
 
 import argparse

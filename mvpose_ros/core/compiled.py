@@ -1,24 +1,12 @@
 """Compiled kernels: loops that numpy can only run as many small calls, each with its Python cost.
 
-Every kernel of the package is compiled the same way, by `kernel`:
-- for the signatures it names, when its module is imported: a call with other types is a
-  TypeError, never a compilation in the middle of a frame;
-- cached on disk beside its module: the first import after an install compiles (about a minute
-  for all of them on 2 cores), later processes load the machine code. numba renews a kernel's
-  cache only when its own file changes, and a kernel holds the code of the kernels it calls from
-  other modules: after editing such a kernel (rays' `*_into` and `line_distance`, projection's
-  `project_point` and the `distort_point` it inlines, `pairwise_sum`), delete the caches
-  (`find mvpose_ros -name '*.nbi' -delete`); an install rewrites every file, so it renews them all;
-- without the GIL, so a node's worker thread and its executor run side by side;
-- without fast-math and with numpy's error model (x / 0 is inf, not an exception): the same
-  arithmetic as the numpy it replaces, up to the order of sums.
-
-Callers hand kernels their arrays through `kernel_array` (the one place that says what a
-signature takes); kernels sum through `pairwise_sum` where numpy's bits must be kept.
-
-`python -m mvpose_ros.core.compiled` imports every module that holds kernels, so that a graph's
-nodes, started together, load the cache instead of each compiling the same code.
-"""
+Every kernel of the package is compiled the same way, by `kernel`: for the signatures it names,
+at import (another type is a TypeError, never a compilation mid-frame); cached on disk beside its
+module; without the GIL; with numpy's arithmetic and error model (no fast-math). Callers hand
+kernels their arrays through `kernel_array`; kernels sum through `pairwise_sum` where numpy's bits
+must be kept. `python -m mvpose_ros.core.compiled` imports every module that holds kernels
+(core.kernel_cache), so that a graph's nodes load the cache instead of each compiling the same code.
+When to delete the caches by hand: docs/development.md#compiled-kernels."""
 from __future__ import annotations
 
 import importlib
@@ -28,23 +16,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, DTypeLike
 
-# Every module that defines kernels (test_compiled checks that none is missing).
-KERNEL_MODULES: tuple[str, ...] = (
-    'mvpose_ros.core.association.associator',
-    'mvpose_ros.core.association.matching',
-    'mvpose_ros.core.association.tracking',
-    'mvpose_ros.core.association.view_consistency',
-    'mvpose_ros.core.detection.grouping',
-    'mvpose_ros.core.detection.openpose_detector',
-    'mvpose_ros.core.geometry.projection',
-    'mvpose_ros.core.geometry.rays',
-    'mvpose_ros.core.heatmap',
-    'mvpose_ros.core.inference.bp',
-    'mvpose_ros.core.inference.confidence',
-    'mvpose_ros.core.inference.factors',
-    'mvpose_ros.core.inference.hypotheses',
-    'mvpose_ros.core.inference.window',
-)
+from mvpose_ros.core.kernel_cache import KERNEL_MODULES
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:

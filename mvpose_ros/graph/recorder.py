@@ -1,33 +1,12 @@
 """The skeleton recorder: the node that keeps the graph's output, for the runner and on its own.
 
-`SkeletonRecorder` keeps the first skeletons message of every stamp, counts every message per
-stamp (duplicates), keeps the stamps the graph dropped (skeletons/dropped), and records
-when (middleware receipt time, ns of the system clock, so queueing in its executor does not count)
-each stamp's camera 0 camera_info (for a rig: the first camera_info of any camera with that
-stamp, i.e. the first member of a set) and skeletons arrived, for a rig every camera's people2d
-stamps (the achieved synchronisation skew), and, for a node that was restarted, when its output
-topic was heard again (`arm`, `first_after`); it can also append every skeletons message to a
-predictions file as it comes and record the serialized size of every message the nodes publish.
-`mvpose-graph` runs one inside its own process.
-
-On its own (e.g. on the compute host of a split graph, or inside a network namespace):
-
-    python -m mvpose_ros.graph.recorder --bag bags/shelf --predictions out/p.jsonl --ready /tmp/ready \\
-        --stats /tmp/stats.json [--cameras 5] [--measure] [--start-topic bag_player/start]
-
-It waits until every endpoint the graph needs before playback is visible (graph.config
-expected_connections), its own readers have matched their writers and the nodes report on
-/diagnostics every link between them matched (core.health.links), then creates
-the --ready file (and, with --start-topic, lets a bag_player started with that start_topic play
-once its camera_info reader has matched the player's writer). Every skeletons message is appended
-to --predictions as it arrives, as a predictions line, duplicates included. It exits 0 once every
-input stamp of --bag has its output and --drain s have passed (to catch duplicates), 1 once every
-stamp has its output or was dropped (skeletons/dropped) but some were, or after --timeout s
-without a new output; --stats is written either way:
-
-    {"complete": bool, "bad": ["<stamp> ns: <why>", ...], "dropped": [<stamp ns>, ...],
-     "topics": {"/cam0/people2d": [[<stamp ns>, <bytes>], ...], ...}}
-"""
+`SkeletonRecorder` keeps the first skeletons message of every stamp, counts duplicates, keeps the
+stamps the graph dropped, and records when (middleware receipt time, ns of the system clock) each
+stamp's first camera_info and its skeletons arrived: the graph's latency. `mvpose-graph` runs one
+inside its own process; `python -m mvpose_ros.graph.recorder` runs it alone (the compute host of a
+split graph), creating a ready file once every link of the graph is matched and exiting once
+every input stamp has its output. Options, exit codes and the stats file:
+docs/cli.md#the-recorder-on-its-own."""
 from __future__ import annotations
 
 import argparse
@@ -75,8 +54,8 @@ START_TOPIC = 'bag_player/start'  # the player's start signal (its parameter sta
 SPIN_S = 0.05
 # Readers and writers without rclpy's default QoS event handlers (a warning on an incompatible QoS
 # or type), but for the skeletons reader: each handler is a waitable that the Python executor
-# sets up at every wait: without them the runner took about half the CPU on a rig (five
-# camera_info readers at the cameras' rate; 9-11% of a core instead of 19%), which the nodes share.
+# sets up at every wait: with them the runner's camera_info readers, at the cameras' rate, cost
+# CPU the nodes need (the figure: docs/benchmarks.md#figures-behind-choices-in-the-code).
 NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
@@ -107,7 +86,7 @@ class SkeletonRecorder(Node):
         stamps are kept in `people_stamps` (by the topic as given), with when each stamp's last
         people2d and each set's bundles came (`people_at`, `bundles_at`); watch_topics: topics (as given,
         PointCloud2: the nodes' outputs) that `arm` can watch, each read from its first `arm` on
-        (reading every node's output all along cost the runner 8% of a core at 25 Hz);
+        (reading every node's output all along would cost the runner CPU at every frame);
         overlay_files: overlay topic (CompressedImage, the overlay node's) -> folder each of its
         images is written to as <stamp ns>.jpg (their stamps in `overlay_stamps`, None without
         overlay_files; the monotonic s of the last in `last_overlay`); the run waits for these

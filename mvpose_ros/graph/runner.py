@@ -1,22 +1,11 @@
 """Running the node graph on a bag: start the node processes, wait until the graph is connected
 and the recorder's readers have matched, play, collect every output, stop everything.
 
-The order makes start-up lossless: the player is started only once every endpoint the graph needs
-is visible, the recorder's skeletons reader has matched bp_solver's writer, and the nodes report
-on /diagnostics that each writer between them (the detectors' people2d, association's bundles)
-has matched its readers and each reader its writers (core.health.links: a volatile message sent
-before its writer and reader have matched each other is lost); the player then waits until its
-writers have matched their readers (the detectors', the recorder's) and for the recorder's start
-signal, which the recorder sends once its camera_info reader has matched the player's writer and
-the nodes report the player's links matched at their end too (`played`: the player's writer can
-match a reader before that reader has matched it). So the first frame reaches every node, and its
-camera_info and skeletons reach the recorder.
-
-With a Respawner, a node that dies is started again after its delay instead of ending the run
-(not the player: a new one would play the bag from its start again); the recorder is armed to
-note when the node's output topic is heard again, and the run ends once the player is done and
-the last frame's output is in (the frames lost in the restart never come).
-"""
+The order makes start-up lossless: a volatile message sent before its writer and reader have
+matched each other is lost, so the player starts only once every link between the nodes reports
+matched at both ends (core.health.links) and the recorder has signalled that its readers matched
+the player's writers. With a Respawner, a node that dies (not the player) is started again
+instead of ending the run. The whole order: docs/cli.md#mvpose-graph (Start order)."""
 from __future__ import annotations
 
 import os
@@ -35,8 +24,10 @@ from mvpose_ros.bags.replay import loop_offset_ns
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.window import FrameResult
+from mvpose_ros.core.kernel_cache import caches_fresh, import_root
 from mvpose_ros.graph.config import (GraphSettings, NodeSpec, composed_command, expected_connections, node_command,
                                      played_connections, processes)
+from mvpose_ros.graph.cpu import CpuLog
 from mvpose_ros.graph.memory import MemoryLog
 from mvpose_ros.graph.processes import Interrupted, ProcessGroup
 from mvpose_ros.graph.recorder import OUTPUT_TOPIC, TIMING_TOPIC, SkeletonRecorder
@@ -55,7 +46,7 @@ OVERLAY_QUIET_S = 0.2  # the last set's overlays are all in once none came for t
 # Node start-up (imports, calibration, models, DDS discovery, the player's wait for readers).
 STARTUP_TIMEOUT_S = 60.0
 LOG_TAIL = 15
-MEMORY_PERIOD_S = 1.0
+SAMPLE_PERIOD_S = 1.0
 
 
 Stamps = Sequence[int] | Future  # the input stamps (ns), or a future of them: see run_graph
@@ -77,10 +68,11 @@ class GraphFailure(Exception):
 @dataclass
 class Outcome:
     """How the run ended: why it stopped early if it did (a failure, a stall, or the signal that
-    interrupted it), the end of the failed node's log, and the nodes' memory, and every restart of
-    a node (with a Respawner)."""
+    interrupted it), the end of the failed node's log, the nodes' memory and CPU, and every restart
+    of a node (with a Respawner)."""
 
     memory: MemoryLog = field(default_factory=lambda: MemoryLog(0))
+    cpu: CpuLog = field(default_factory=CpuLog)
     failure: GraphFailure | None = None
     log_tail: str = ''
     stalled: bool = False
@@ -168,7 +160,7 @@ def _start_player(node: SkeletonRecorder, executor: SingleThreadedExecutor, grou
 
 
 def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: ProcessGroup, settings: GraphSettings,
-          stamps: Stamps, memory: MemoryLog, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
+          stamps: Stamps, outcome: Outcome, quiet: float = 0.0, watch: Supervision | None = None) -> bool:
     """Spin until every stamp has an output or was dropped (skeletons/dropped: a set short of
     min_cameras, or bp_solver behind the input); True when it stopped because nothing happened for
     `timeout` s since the last input or output seen or the player's exit (STARTUP_TIMEOUT_S
@@ -188,9 +180,11 @@ def _play(node: SkeletonRecorder, executor: SingleThreadedExecutor, group: Proce
         if wanted is None and (not isinstance(stamps, Future) or stamps.done()):
             wanted = set(_known(stamps))
         executor.spin_once(timeout_sec=SPIN_S)
-        if time.monotonic() - sampled > MEMORY_PERIOD_S:
+        if time.monotonic() - sampled > SAMPLE_PERIOD_S:
             sampled = time.monotonic()
-            memory.sample({name: p.pid for name, p in group.procs.items() if p.poll() is None}, len(node.outputs))
+            pids = {name: p.pid for name, p in group.procs.items() if p.poll() is None}
+            outcome.memory.sample(pids, len(node.outputs))
+            outcome.cpu.sample(pids)
         _check_crashes(group, (PLAYER,), watch, node)
         if unusable_since is None and node.unusable:
             unusable_since = time.monotonic()
@@ -252,7 +246,8 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
     # nodes started together on a fresh install would each compile the same kernels at once. In a
     # process of their own, started as the nodes are: run from a checkout, `python -m` takes the
     # checkout's modules, whose cache is not the installed package's
-    subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
+    if not caches_fresh(import_root()):
+        subprocess.run([sys.executable, '-m', 'mvpose_ros.core.compiled'], env=env, check=True)
     with ProcessGroup(log_dir, env) as group:
         try:
             for name, specs in processes(nodes, compose):
@@ -262,7 +257,7 @@ def run_graph(settings: GraphSettings, config: Path | Sequence[Path], nodes: Seq
                 else:
                     group.start(name, node_command(specs[0], config) if len(specs) == 1
                                 else composed_command(specs, config))
-            outcome.stalled = _play(node, executor, group, settings, stamps, outcome.memory, quiet, watch)
+            outcome.stalled = _play(node, executor, group, settings, stamps, outcome, quiet, watch)
         except GraphFailure as failure:
             outcome.failure = failure
         except Interrupted as exc:

@@ -459,12 +459,14 @@ def _recording(record: RecordPlan | None = None,
 
 
 def _print_footprint(outcome: Outcome, node: SkeletonRecorder, started_ns: int, out: TextIO) -> None:
-    """The start-up time to the first skeleton and the nodes' resident memory."""
+    """The start-up time to the first skeleton, the nodes' resident memory and their CPU."""
     line = startup_line(started_ns, node.info_at, node.output_at)
     if line:
         print(line, file=out)
     if outcome.memory.peak:
         print(outcome.memory.total_line(), file=out)
+    if outcome.cpu.shares():
+        print(outcome.cpu.total_line(), file=out)
 
 
 def _verdict(outcome, problems: list[str], timeout: float, err: TextIO) -> int:

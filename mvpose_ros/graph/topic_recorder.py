@@ -2,16 +2,10 @@
 topics (and, when asked, its inputs) as it arrives, message definitions included, so that
 `ros2 bag info/play` and Foxglove open the folder as it is.
 
-`mvpose-graph --record DIR` runs one inside its own process. On a live rig, as `ros2 bag record`
-would (stop with Ctrl-C):
-
-    mvpose-record DIR [--rig FILE | --cameras N] [--overlays] [--inputs] [--duration S]
-
-A message is written with its receipt time (ns, system clock) as the log time, its bytes as the
-middleware delivered them (CDR). Outputs are read as they are sent (reliable, keep-all; the
-frusta transient local, /diagnostics as diagnostic_updater sends it); overlays and inputs best
-effort, so that the recorder never holds up a camera or the overlay node.
-"""
+`mvpose-graph --record DIR` runs one inside its own process; `mvpose-record DIR [--rig FILE]`
+records a live rig, as `ros2 bag record` would. Each message is written as the middleware
+delivered it (CDR), its receipt time the log time. Outputs are read reliable, overlays and inputs
+best effort, so the recorder never holds up a camera. Topics and sizes: docs/visualize.md#record-a-run."""
 from __future__ import annotations
 
 import argparse
@@ -40,10 +34,9 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters.definitions import type_name, typestore
 from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.image_topics import image_type_by_name
-from mvpose_ros.nodes.runtime import DATA_QOS, VIEWER_QOS
+from mvpose_ros.nodes.runtime import DATA_QOS, LATCHED_QOS, VIEWER_QOS
 from mvpose_ros.topics import (CAMERA_INFO, CAMERA_MARKERS, DIAGNOSTICS, IMAGE, MARKERS, OPENPOSE, OVERLAY, SKELETONS,
                                SKELETONS_DROPPED, SKELETONS_LIVE, camera_namespace, camera_topic)
 

@@ -2,35 +2,13 @@
 camera, matches them across views and publishes the people seen by at least two cameras, each
 with a stable 3D id, as one bundle message per set (people/bundles, PointCloud2 encoding C).
 
-Inputs: `<camera name>/people2d` of each rig camera (names from the rig file, relative), whose
-frame_id must be that camera's: the rig file's `frame_id`, or without one the frame_id of the
-camera's first people2d (core.geometry.frame_id). Synchronisation is approximate
-(core.association.approximate_sync, message_filters' ApproximateTime semantics): a set holds at
-most one message per camera, their stamps within `max_skew` seconds (0: half a frame period of
-`frame_rate`); a camera missing from a set is waited for at most `sync_timeout` seconds, then the
-set goes on without it (logged). A set needs `min_cameras` members (default 2: a person must be
-seen twice to be triangulated, so a smaller set could only give an empty bundle); the messages of
-a smaller one are dropped, and that set's stamp is published on skeletons/dropped (std_msgs/Header,
-the world frame: that frame gets no skeletons, so a subscriber need not wait for it). Every set
-yields exactly one bundle message, empty when nobody is seen twice, stamped with the set's stamp
-(its earliest member stamp) in the rig's world frame.
-Frames are numbered by set order, not by stamp x rate. Only keypoints are matched: each view's
-record, heatmaps included, goes into the bundle as it came (people_msg.WirePerson), not decoded
-and encoded again. Inputs are read as bytes: the stamp,
-frame_id and size are checked before the message is deserialised. A message larger than a
-people2d of its camera can be (people_msg.max_people_bytes of the camera's image size) is dropped
-before it is deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD, else
-before it is decoded. Every dropped message is counted by
-reason (late, duplicate, unmatched, overflow, frame_id, oversize, malformed, no intrinsics) and logged,
-at most every few seconds per camera and reason; every REPORT_EVERY sets the achieved skew
-(median, max) and the drops so far are logged. A rig without intrinsics in its file takes them
-from each camera's CameraInfo: until every camera's is known, inputs are dropped (no intrinsics).
-
-Diagnostics (nodes.health, on /diagnostics): per camera its people2d rate, drops by reason, sync
-offset and silence; the node's ms per set, pending messages, set skew and latency. Live
-parameters: sync_timeout, max_skew, track_iou, match_distance, max_view_residual, single_view_people and
-the diagnostics thresholds.
-"""
+In: `<camera name>/people2d` of each rig camera, each under that camera's frame_id. A set holds at
+most one message per camera within `max_skew` (core.association.approximate_sync) and needs
+`min_cameras` members; a smaller set's stamp goes out on skeletons/dropped. Every set yields one
+bundle, empty when nobody is seen twice, stamped with the set's earliest member stamp. Each view's
+record goes into the bundle as it came, not decoded and encoded again.
+Behaviour in detail (synchronisation, what is dropped and why, intrinsics):
+docs/operations.md#association."""
 from __future__ import annotations
 
 import json

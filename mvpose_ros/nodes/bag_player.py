@@ -1,35 +1,12 @@
 """The bag_player node: replays any rosbag2 bag (sqlite3 or mcap) into the graph, on the bag's own
 topics.
 
-Every message of one log stamp (a frame) is published together, at the recorded rate times
-`rate` (wall-clock paced from the first stamp) or, with rate 0, as fast as downstream keeps up: at
-most `max_in_flight` frames ahead of the last stamp seen on `ack_topic`. With `sets`, the unit is
-a synchronised set instead (bags.replay.group_sets: the cameras' image messages grouped by
-approximate synchronisation of their header stamps within `max_skew`, each camera's CameraInfo
-with them; a set's stamp is its earliest member stamp, the stamp the graph's bundles and
-skeletons of that set carry): rate 0, sets and max_in_flight 1 is lockstep, the next set going out
-once the previous one is acknowledged; with rate 0 the player ends once the last frames are
-acknowledged too (or given up after `ack_timeout`). Messages go out as the bag's CDR bytes; for loop k >= 1
-only the header stamp bytes are rewritten (pacing and stamp arithmetic: mvpose_ros.bags.replay).
-Optionally publishes /clock with the bag stamp. `qos`: 'reliable' (the graph's DATA_QOS: every
-reader that keeps up gets every message) or 'sensor' (best-effort, keep-last 5, as a camera driver publishes:
-only best-effort readers match).
-
-Topics are published relative (the bag's '/cam0/openpose' as 'cam0/openpose'), so a namespace
-(`-r __ns:=/rig1`) moves the whole input. Nothing goes out before the readers are there: the player
-waits until each camera's detector input (cam<c>/openpose, else cam<c>/image_raw, else every
-Image or CompressedImage topic) has a matched reader and every
-reader visible in the ROS graph on any of its topics has matched its writer (up to
-`wait_subscribers` s, then it plays anyway with a warning). A writer's match does not mean the
-reader has matched it too, and a volatile reader drops what a writer sends before that: a reader
-that must not miss the first frames (a recorder) makes the player wait for it with `start_topic`:
-the player then also waits for one message there (reliable, transient local: START_QOS), which the
-recorder publishes once its own readers have matched the player's writers.
-
-Diagnostics (nodes.health, on /diagnostics): frames out, ms per frame published, how far behind
-its schedule it publishes (paced), frames in flight and given up (rate 0). Live parameters:
-wait_subscribers, ack_timeout and the diagnostics thresholds; the others are read-only.
-"""
+Frames (or, with `sets`, synchronised sets) go out as the bag's CDR bytes at the recorded rate
+times `rate`, or with rate 0 as fast as downstream acknowledges them on `ack_topic` (lockstep with
+`sets` and `max_in_flight` 1). Topics are relative, so a namespace moves the whole input. Nothing
+goes out before the graph's readers have matched, so the first frame reaches every node.
+Pacing and stamps: mvpose_ros.bags.replay. Behaviour in detail (QoS, the start wait, `start_topic`):
+docs/operations.md#bag_player."""
 from __future__ import annotations
 
 import time
@@ -177,7 +154,7 @@ class BagPlayerNode(Node):
             return group_frames(messages)
         if bag_size(self._bag) <= p['preload_mib'] * 2 ** 20:
             # Read while playing, a bag's chunks are decompressed between two frames on the cores the
-            # graph works on (Shelf: 27 ms at frame 271). Damage is then found before anything plays.
+            # graph works on, and delay them. Damage is then found before anything plays.
             frames = list(read_pass())
             self._frames = looped(lambda: frames, self._loops)
         else:

@@ -2,42 +2,13 @@
 belief propagation; publishes every frame's 3D skeletons `lag` frames after it arrives, and its
 causal estimate at once.
 
-In: people/bundles. Out: skeletons (PointCloud2 encoding D, frame_id the rig's world frame: one
-record per person joint with its confidence, empty when nobody is seen) and skeletons/markers
-(MarkerArray for RViz, living `marker_lifetime` s; built only while someone subscribes: 2 ms
-a frame of four people), both with the input bundle's stamp;
-skeletons/live (encoding D, the same ids) as soon as a bundle is in: its frame decoded from the
-frames up to it (no lag: for a robot that reacts, where skeletons, smoothed by the `lag` frames
-after it, is for analysis); and once, as soon as every camera's intrinsics are known,
-cameras/markers (the rig's frusta, transient local: RViz started later still gets them). Frames
-are numbered by arrival (the association's set order), not by stamp x rate; the temporal term
-uses the real time between the bundles' stamps, so sets dropped upstream (uneven gaps) are
-bridged, and a gap longer than `max_gap` seconds breaks the temporal chains. Every bundle message
-yields exactly one skeleton message, but for a late one (a stamp not after the last one taken: a
-duplicate, or out of order), which is logged and dropped; a message larger than the rig's views
-of people_msg.MAX_PEOPLE people is answered with no people, not decoded (logged), and not even
-deserialised when its bytes exceed that by more than cdr_header.CLOUD_OVERHEAD. With no input
-for `idle_flush` seconds (the end of a replay, or a stalled graph) every pending frame is
-decoded and published; by default (0) that wait is IDLE_PERIODS times the input's typical
-interval (the median between DDS receipts over the last PACE_WINDOW_S s, at least 1 / frame_rate),
-so a replay's last frames come out a few frame periods after its end, not a fixed second later,
-and a slow input (sets seconds apart) still gets its lag. A bundle that has waited more
-than `max_wait` seconds since DDS received it (solving slower than the input: a crowd on a small
-machine) is dropped unsolved, logged, counted, and its stamp published on skeletons/dropped
-(std_msgs/Header, the world frame: that frame gets no skeletons, so a subscriber need not wait for
-it), so the queue and the latency stay bounded (the node runs rclpy's single-threaded executor for
-that receipt time: nodes.runtime.run).
-A rig without intrinsics in its file waits for every camera's CameraInfo; bundles before that are
-published with no people (logged).
-
-Diagnostics (nodes.health, every `diagnostics.period` s on /diagnostics): the bundles input, the
-node (ms per stage, frames pending, latency), and per camera the reprojection residual of the
-skeletons it outputs: each camera's 2D keypoints of a person against the person's 3D joints
-projected into it (core.health.residual), WARN for a camera whose residual rises well above the
-others' (moved out of its calibration). Live parameters: idle_flush, marker_lifetime,
-collision_centre, collision_width, max_gap and the diagnostics thresholds; the others are
-read-only.
-"""
+In: people/bundles. Out: skeletons (`lag` frames late, for analysis) and skeletons/live (at once,
+for a robot that reacts), PointCloud2 encoding D in the rig's world frame with the bundle's stamp,
+one message per bundle; skeletons/markers and cameras/markers for RViz; skeletons/dropped for a
+bundle that waited longer than `max_wait` (solving slower than the input), so the queue and the
+latency stay bounded. Frames are numbered by arrival; the temporal term uses the real time
+between stamps, so frames dropped upstream are bridged.
+Behaviour in detail (bad input, idle flush, intrinsics): docs/operations.md#bp_solver."""
 from __future__ import annotations
 
 import time
@@ -47,7 +18,6 @@ import numpy as np
 import rclpy.logging
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
@@ -69,7 +39,7 @@ from mvpose_ros.core.stage import SOLVER_PARAMETERS, LiveStageParameters, StageC
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.core.types import Bundle, FrameResult
 from mvpose_ros.nodes.health import NodeHealth
-from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, live_parameters,
+from mvpose_ros.nodes.runtime import (DATA_QOS, LATCHED_QOS, RigIntrinsics, StartupError, declare, live_parameters,
                                       load_rig_parameter, rig_parameters, run)
 
 IDLE_CHECK_S = 0.1
@@ -78,8 +48,6 @@ IDLE_CHECK_S = 0.1
 IDLE_PERIODS = 3
 PACE_WINDOW_S = 5.0  # s of receipts the typical interval is the median over
 REPORT_EVERY = 100  # frames between timing lines
-# published once and kept for late subscribers (RViz opened after the solver)
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class _NotReady(ValueError):
@@ -330,8 +298,8 @@ class BpSolverNode(Node):
         self._skeletons.publish(skeletons_to_msg(ids, result.joints, header, confidence=result.confidence))
 
     def _after_output(self, result: FrameResult, stamp: Time) -> None:
-        """What follows an output frame, off the latency path: its markers (while anyone subscribes:
-        about 2 ms), diagnostics and counts."""
+        """What follows an output frame, off the latency path: its markers (while anyone subscribes),
+        diagnostics and counts."""
         if self._markers.get_subscription_count():
             ids = np.asarray(result.person_ids, dtype=np.int64)
             self._markers.publish(skeleton_markers(ids, result.joints, Header(stamp=stamp, frame_id=self._world_frame),

@@ -1,20 +1,10 @@
 """The live view node: the graph's outputs over Foxglove's WebSocket protocol, for the Foxglove app
 (no RViz needed), on `host`:`port` (default 127.0.0.1:8765: this machine only).
 
-Channels (Foxglove topics):
-- `<skeletons>/scene` (foxglove.SceneUpdate, protobuf): the skeletons of `skeletons` (default
-  /skeletons; /skeletons/live for no lag) as a 3D scene, an entity per person (view.scene);
-- /cameras/markers (visualization_msgs/msg/MarkerArray), the camera frusta, /diagnostics
-  (diagnostic_msgs/msg/DiagnosticArray) and every `<camera>/overlay/compressed`
-  (sensor_msgs/msg/CompressedImage) the ROS graph shows, found again every `discover_period`
-  s: forwarded as they come (CDR, with their ros2msg definitions), which the app's 3D, Image and
-  Diagnostics panels read as they are.
-
-It costs the graph nothing while no client listens: a channel's ROS subscription exists only
-while a client is subscribed to that channel (the SDK's Channel.has_sinks, looked at every
-`poll_period` s), so without a client no message is delivered to this node, decoded or
-converted. config/foxglove_layout.json is a layout for the app with these channels.
-"""
+It serves the skeletons as a 3D scene (foxglove.SceneUpdate) and forwards the camera frusta,
+/diagnostics and every overlay topic as they come. A channel's ROS subscription exists only while
+a client listens to it, so without a client it costs the graph nothing.
+Channels, parameters, cost and security: docs/visualize.md#the-live-view."""
 from __future__ import annotations
 
 import time
@@ -37,9 +27,8 @@ from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog
-from mvpose_ros.nodes.bp_solver import LATCHED_QOS
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
-from mvpose_ros.nodes.runtime import VIEWER_QOS, StartupError, declare, run
+from mvpose_ros.nodes.runtime import LATCHED_QOS, VIEWER_QOS, StartupError, declare, run
 from mvpose_ros.topics import CAMERA_MARKERS, DIAGNOSTICS, OVERLAY, SKELETONS
 from mvpose_ros.view.scene import skeleton_scene
 

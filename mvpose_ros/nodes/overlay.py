@@ -1,31 +1,13 @@
 """The overlay node: each camera's image with what the graph made of it, for rqt_image_view or
 RViz's Image display, while the graph runs.
 
-Per camera of the rig file (or of `cameras`), `<camera>/overlay/compressed` (CompressedImage,
-jpeg; the image's own stamp and frame_id): the image of a skeleton set, its 2D people as the
-detector found them (thin, white), the set's 3D skeletons from `skeletons/live` reprojected
-through the camera (each person in the colour of its RViz markers, labelled with its id) and a
-caption (camera, people, set stamp). A set announced on `skeletons/dropped` is drawn with its
-detections only and says so. Skeletons that land on a camera's people show that detection and
-calibration agree; skeletons beside them show a camera that has moved.
-
-Which image goes with a set: its 2D people's stamp, in [set stamp, set stamp + max_skew]
-(core.overlay_sets). Images wait for their set's skeletons for at most `keep` s and
-`max_image_mib` MiB per camera (raw images are large): what falls out, or arrives after its
-set, is not drawn (counted in the diagnostics). At most `max_rate` images per second per camera
-are drawn, each decoded at 1/`reduce` of its size; a dropped set only when a camera has had no
-image for a second (core.overlay_sets.due: under overload most sets are dropped). It still
-receives every image, held serialised and deserialised only when drawn: at 5 cameras x 25 Hz
-about 15% of a core with the drawing (docs/own_cameras.md). Bytes whose header stamp
-cannot be read are not held (logged once per camera).
-Every input is best effort, so this node never slows the graph's reliable publishers down, and a
-lost message only costs a picture. An image topic's type (Image or CompressedImage) is the
-detector's rule (nodes.image_topics.ImageTypes): its publishers', or the name's until a publisher
-shows, then subscribed again if it differs.
-
-Diagnostics: ms per image drawn; sets seen, images drawn, and cameras not drawn by cause ('no image
-held': no image of the camera in the set's window: not in the set, never came, or fallen out).
-"""
+Per camera, `<camera>/overlay/compressed` (CompressedImage, jpeg; the image's own stamp and
+frame_id): the image of a skeleton set with its 2D people as detected (thin, white) and the set's
+`skeletons/live` reprojected (each person in its RViz colour, with its id). Skeletons that land on
+a camera's people show that detection and calibration agree; skeletons beside them show a camera
+that has moved. Every input is best effort, so the node never slows the graph down.
+Which image goes with a set, and the limits on held and drawn images: docs/own_cameras.md#steps
+(step 5) and docs/operations.md#overlay."""
 from __future__ import annotations
 
 import time
@@ -148,7 +130,7 @@ class OverlayNode(Node):
         self._images[camera].add(stamp, (kind, cdr), len(cdr))
 
     def _on_people(self, camera: int, msg: PointCloud2) -> None:
-        # kept as it came: most are never drawn, and decoding each cost 0.13 ms (Shelf)
+        # kept as it came: most are never drawn, so most are never decoded
         self._people[camera].add(stamp_ns(msg.header.stamp), msg)
 
     def _detections(self, camera: int, msg: PointCloud2 | None) -> list:

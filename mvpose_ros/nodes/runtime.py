@@ -3,6 +3,7 @@ change applies live), the live-parameter callbacks, the data QoS and the camera 
 the `rig` parameter, one-line start-up errors, and the rclpy main loop."""
 from __future__ import annotations
 
+import ctypes
 import signal
 import sys
 import threading
@@ -37,7 +38,7 @@ DATA_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPol
 
 # The detector's recorded input (OpenPose output), reliable as recorded data but keep-last: the
 # graph's outside edge, where a foreign flood lands. Keep-all held up to Fast DDS's 5000 samples
-# there: a 1000/s junk flood of /cam1/openpose took its detector to 2.2 GB. 25 is 1 s at 25 Hz.
+# there, gigabytes under a junk flood. 25 is 1 s at 25 Hz.
 RECORDED_INPUT_DEPTH = 25
 RECORDED_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORDED_INPUT_DEPTH,
                                 reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
@@ -52,6 +53,8 @@ CAMERA_QUEUE_DEPTH = 2
 # to reliable publishers too and never holds them up, a few messages deep.
 VIEWER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE)
+# Published once and kept for late subscribers (RViz opened after the solver): the camera frusta.
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 SPIN_ONCE_S = 0.2  # s an idle node waits per executor turn: how long a stop signal can take to act
 
 
@@ -182,8 +185,7 @@ class RigIntrinsics:
     CameraInfo (its own topic from the rig file; sensor-data QoS, which reliable publishers reach
     too). `cameras` is None until every camera is known; a CameraInfo that cannot be used is
     logged once per camera and cause. A camera's subscription ends with its first usable
-    CameraInfo: a driver sends one with every image, and each would wake the node for nothing (in
-    bp_solver's executor 10% of a core for 5 cameras at 25 Hz)."""
+    CameraInfo: a driver sends one with every image, and each would wake the node for nothing."""
 
     def __init__(self, node: Node, rig: Rig) -> None:
         self._node = node
@@ -238,6 +240,18 @@ def run(factory: Callable[[], Node], args: list[str] | None = None, events: bool
     run_nodes([factory], args, events)
 
 
+def release_free_heap() -> None:
+    """Give the C heap's free pages back to the system (glibc's malloc_trim; nothing elsewhere).
+
+    A node's start leaves freed memory in the heap that glibc keeps mapped: the player reading a
+    bag into memory passes through the decompressed chunks, and that high-water mark would stay in
+    the process's resident size for the whole run."""
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None, events: bool = True) -> None:
     """rclpy main: spin the nodes (one executor, in this thread) until SIGINT (Ctrl-C) or SIGTERM,
     or, for a node with a `finished` future, until it completes (its result is the exit code). A
@@ -245,10 +259,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     parse) exits with code 2 after one fatal log line naming the parameter files, not a traceback.
 
     The executor is rclpy's C++ events executor: about half the CPU per message of the default
-    one (241 against 495 us for a PointCloud2 at 1000/s), which a flooded node, or a graph near
-    its CPU limit, needs (Shelf graph at 25 Hz: 12% less CPU in all). In these rclpy wheels its
-    spin() runs no callback and rclpy's signal handlers do not stop its spin_once, so the loop
-    is spin_once, ended by a flag the signals set. It cannot run a callback that takes message
+    one, which a flooded node, or a graph near its CPU limit, needs (docs/benchmarks.md). In
+    these rclpy wheels its spin() runs no callback and rclpy's signal handlers do not stop its
+    spin_once, so the loop is spin_once, ended by a flag the signals set. It cannot run a callback that takes message
     info (SystemError in these wheels): a node that needs the DDS receipt time passes
     events=False and gets rclpy's single-threaded executor."""
     files = params_files(sys.argv if args is None else args)
@@ -268,6 +281,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         for factory in factories:
             nodes.append(factory())
             executor.add_node(nodes[-1])
+        release_free_heap()
         finished = [f for node in nodes if (f := getattr(node, 'finished', None)) is not None]
         while not stop.is_set() and rclpy.ok() and not any(f.done() for f in finished):
             executor.spin_once(timeout_sec=SPIN_ONCE_S)

@@ -1,17 +1,10 @@
 """skeleton_echo: the example consumer of the skeletons topic. It prints each message's people,
-one line per joint with its name, position and confidence:
-
-    ros2 run mvpose_ros skeleton_echo [--ros-args -r skeletons:=/rig1/skeletons]
-
-    stamp 1.640000000 s, frame 'world', 2 people
-      person 1
-        r_ankle       x  -0.312  y  1.405  z  0.081 m  confidence 0.62
-        ...
+one line per joint with its name, position and confidence.
 
 Everything it does with a message is `msg_to_skeletons` (msg_adapters.skeleton_msg: ids, joints
 (P, 14, 3) metres, confidence (P, 14)) and the names of body.JOINT_NAMES: copy it to start a
 consumer of your own. A message it cannot decode is logged with the reason, and it goes on.
-"""
+Its output, and how to run it: docs/messages.md#python."""
 from __future__ import annotations
 
 from rclpy.node import Node

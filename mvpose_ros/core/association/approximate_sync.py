@@ -3,45 +3,12 @@ ApproximateTime policy, which PyPI lacks, with a timeout so that a silent camera
 rig). A drop-in for stamp_sync.StampSync: the same add / expire / flush calls, released sets are
 SyncedFrames (with more fields), and with max_skew = 0 the sets are exactly StampSync's frames.
 
-Semantics (stamps are integer nanoseconds, times monotonic seconds passed in by the caller):
-
-- A *set* holds at most one message per camera, all with stamps within `max_skew` of each other.
-  It is formed around its *pivot*, the oldest message pending from any camera: every camera's
-  oldest pending message with a stamp in [pivot, pivot + max_skew] joins it (ties: all cameras
-  with the pivot's stamp are members). A set's stamp is its pivot's stamp, the earliest of its
-  members' stamps; set stamps strictly increase. Its `skew_ns` is the achieved skew, newest minus
-  oldest member stamp (0 <= skew_ns <= max_skew).
-- A set is released, in stamp order, as soon as every camera is decided: a member, or *moved past*
-  (it has delivered a stamp after pivot + max_skew: its messages arrive in stamp order, so none
-  in the window is coming), or *absent* (an earlier set already waited the whole timeout for it
-  and it has sent nothing since). An undecided camera is waited for at most `timeout` s from the
-  arrival of the set's first member; the set then goes without it and the camera is absent until
-  its next message (a late one too), so a camera gone for good delays one set, not every set.
-  A camera that has sent nothing yet is waited for `first_wait` (a frame period, say) after the
-  set's last member arrived, within the timeout: a rig's first sets do not wait the whole timeout
-  for a camera that starts late, and the others' messages may still come spread out.
-  An absent camera is still waited for a *grace* of max_skew seconds after the set's last member
-  arrived (a capture's images arrive about as spread as their stamps), so a camera coming back
-  joins the first set it sends for; a dead camera delays each set by that much. Silence is not
-  judged by the clock alone: where sets arrive in bursts far apart (people from a detector that
-  needs a second per set), every camera is quiet between bursts, yet each burst is whole.
-  Cameras not in a set are listed in `missing`.
-- Sets are numbered in release order from 0 (`index`): frames count sets, not stamp x rate.
-- Each message is used at most once. Dropped messages are counted per reason (`dropped`, and per
-  camera `dropped_by_camera`), never silently lost:
-  'late': a stamp at or before one its camera already passed: its own member's stamp, or the
-  window end of a set released without it (out of order, or a duplicate of a released one);
-  'duplicate': the camera's stamp is already pending; both raise ValueError from add() (as
-  StampSync does) so the caller can log it.
-  'unmatched': a set with fewer than `min_cameras` members is not released: its members are
-  dropped (and do not take a set index), and its stamp is listed by take_lost() (a frame that
-  gets no set, which a subscriber waiting for every frame needs to know); 'overflow': more than
-  `queue_size` messages pending from one camera (e.g. a camera stamping far in the future): its
-  oldest is dropped. These two happen inside the release and are listed by take_drops().
-
-max_skew must cover the rig's stamp offsets plus their jitter (typically half a frame period, at
-most; the caller gives it): cameras offset by more than max_skew form separate sets.
-"""
+Stamps are integer nanoseconds; times are monotonic seconds passed in by the caller. A set holds
+at most one message per camera, their stamps within `max_skew` of each other; its stamp is its
+earliest member's, and sets are numbered in release order. Each message is used at most once, and
+every dropped one is counted by reason ('late', 'duplicate', 'unmatched', 'overflow'). max_skew
+must cover the rig's stamp offsets plus their jitter: cameras offset by more form separate sets.
+The rules (pivot, release, timeouts, drops): docs/method.md#camera-synchronisation."""
 from __future__ import annotations
 
 import bisect

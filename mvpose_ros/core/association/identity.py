@@ -1,42 +1,13 @@
 """Stable 3D person ids across frames.
 
 A person keeps its id while the per-camera tracks that make it up continue: each shared
-(camera, track) pair votes for the old id with the number of frames it has been part of that id
-(up to MAX_VOTES), so a person split for a few frames into two clusters (a duplicate detection in
-one camera) goes back to the id its tracks have long made up rather than to the newcomer's.
-An id goes only as far as a person can move: `max_jump` metres (how far rough centres of one
-person differ) plus `max_speed` m/s times a time. A person's tracks carry its id within the reach
-of the time since it was seen, so a stray two-view cluster holding one of a person's tracks
-cannot take that person's id from across the room. When the tracks all changed (a new box in
-every camera after an occlusion, or people crossing a view between two sets of a slow detector),
-the id is recovered from the 3D position alone within the reach of the time since the frame
-before: the motion of one step of the stream, not of the person's whole absence, so a newcomer
-does not take the id of someone lost a second ago a metre or two away. Only a person none of
-whose tracks has a history is placed so: one whose tracks vote for an id is that id's (or, below,
-its duplicate), not whoever was last seen nearby. Times are the frames' own (seconds): sets
-0.4 s apart keep walking people's ids as frames 40 ms apart do. An id is forgotten once the
-frames have gone more than `memory` seconds without it; a stream that stalls (no frame at all for a
-while: an overloaded graph, a paused bag) shows no one leaving, and the people of the frame after
-it keep their ids, found within the reach of the stall.
-
-A person the detector found twice in a camera splits into two clusters, each with one of that
-camera's two views. The part that gets no id of its own, but whose tracks vote for the id the
-other part took and which lies within `max_jump` of it, is that person seen twice: it gets the
-same id (its tracks count for it), and the associator merges the two. Without this the second
-part took a new id, which, where tracks restart often (frames dropped upstream), could then take
-over the person's (Shelf thinned 15 ways: 26 id changes, none with it and the pace limit).
-Telling a duplicate from someone close by is what the tracks are for: ray distances alone cannot
-(two people near each other, one seen by two cameras only, match on average as well).
-
-A person whose views all but one camera's lost (he walks out of the covered volume) is no longer
-matched, but that view's track still votes: it keeps his id (`continue_alone`), for at most
-`memory` seconds of frames after two cameras last saw him, as the solver places him from where he was.
-
-The keeper's state that outlives a restart is small: the next id and where each recent person
-was (`state` / `restore`). A restored keeper never hands out an id it handed out before, and a
-person found within reach of where it was last seen gets its old id back (its camera tracks
-are new after a restart, so only the position can match).
-"""
+(camera, track) pair votes for the id it has long been part of. An id reaches only as far as a
+person can move (`max_jump` metres plus `max_speed` m/s times the frames' own time), so a stray
+cluster cannot take an id from across the room; when all the tracks changed, the id is recovered
+from the 3D position alone. A person found twice in one camera keeps one id; a person one camera
+alone still sees keeps his (`continue_alone`) for `memory` seconds. The state that outlives a
+restart (`state` / `restore`) is the next id and where each recent person was: a restored keeper
+never hands out an id again. The rules and why: docs/method.md#stable-ids."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -76,7 +47,7 @@ class IdentityKeeper:
 
         members: per person the (camera, track id) pairs it was built from; centres: (P, 3)
         rough 3D centres in metres. Returns one id per person; people sharing an id are one
-        person seen twice (module doc).
+        person seen twice (docs/method.md#stable-ids).
         """
         for known in self._known.values():
             known.last_time = time_s if known.last_time is None else known.last_time
@@ -104,7 +75,7 @@ class IdentityKeeper:
             gap = max(time_s - self._last_time, 0.0) if self._last_time is not None else 0.0
             by_tracks = self.max_jump + self.max_speed * elapsed  # (K,) m
             by_position = self.max_jump + self.max_speed * gap
-            # by position alone only a person none of whose tracks has a history (module doc)
+            # by position alone only a person none of whose tracks has a history (docs/method.md#stable-ids)
             new_tracks = (shared == 0).all(axis=1, keepdims=True)
             allowed = np.where(shared > 0, jump <= by_tracks[None], new_tracks & (jump <= by_position))
             # Shared track history dominates; distance breaks ties and decides when no track survives.
@@ -137,7 +108,7 @@ class IdentityKeeper:
         """Ids for views no other camera's matched this frame, after `assign`: each (camera, track
         id) gets the id its track has been part of for the most frames, unless that id is in
         `taken` (the frame's people's: the view is then a duplicate of one of them), each id once,
-        or -1. A person who walks out of all but one camera's view so keeps his id (module doc); the
+        or -1. A person who walks out of all but one camera's view so keeps his id (docs/method.md#stable-ids); the
         keeper's state is left as it was, so he keeps it until the frames have gone `memory` seconds
         without two cameras seeing him."""
         votes = [max(((known.members.get(t, 0), k) for k, known in self._known.items()), default=(0, -1))
@@ -153,7 +124,7 @@ class IdentityKeeper:
     def _join_duplicates(self, ids: list[int], shared: np.ndarray, known_ids: list[int],
                          centres: np.ndarray) -> set[int]:
         """Give each person left without an id (-1 in ids) the id its tracks vote for most among
-        those another person of the frame took within max_jump of it (module doc); returns the
+        those another person of the frame took within max_jump of it (docs/method.md#stable-ids); returns the
         people given one so."""
         host = {pid: row for row, pid in enumerate(ids) if pid >= 0}
         twice = set()

@@ -1,21 +1,12 @@
 """Views of a matched person that the other views contradict, left out before 3D.
 
-Matching accepts a view when its rays pass within `match_distance` of the person's other views on
-average, a bound loose enough for calibration error and for people near the image edge. A camera
-that sees the person half hidden behind someone else can give a skeleton drawn partly on the
-other body: close enough on average to match, yet its joints sit tens of pixels from where the other
-views put them. With many views the data term outvotes it; with few, two views that agree by chance
-(the bad one and one other) make hypotheses the data term prefers to the true point, which three
-views see only roughly (frame 572 of Shelf without camera 3: actor 3's hip and knee 0.36-0.44 m off).
-
-For a person seen by three or more cameras, its joints are triangulated once without each view
-and every view is measured against each such triangulation: the median pixel distance between
-its keypoints and the projected joints, over its size (the diagonal of its keypoints' box). The
-view whose removal leaves the others most consistent (the smallest worst residual among them) is
-left out when its own residual exceeds `max_residual` and theirs. Measuring each view only
-against the others' triangulation would blame a good view: the bad one drags that triangulation
-too. The check repeats while three or more views remain.
-"""
+A camera that sees a person half hidden behind someone else can give a skeleton drawn partly on
+the other body: close enough on average to match, yet its joints tens of pixels from where the
+other views put them; with few views it outvotes the truth. For a person seen by three or more
+cameras, the view whose removal leaves the others most consistent is left out when its residual
+(median pixel distance to the others' triangulation, over its size) exceeds `max_residual` and
+theirs; the check repeats while three or more views remain. Why and how it was chosen:
+docs/method.md#views-the-others-contradict."""
 from __future__ import annotations
 
 from typing import Sequence

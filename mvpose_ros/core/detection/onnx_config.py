@@ -22,12 +22,12 @@ class OnnxDetectorConfig:
     min_person_score: MultiPose people below it are dropped. min_joint_score, heatmap_floor, stride:
     see the module docstring. ears: fill the ear joints from MultiPose's COCO ears, rendered as
     Gaussians of std sigma px. max_batch: EfficientPose crops per run (0 = all crops of a set in one
-    run): on two CPU cores runs of 1 to 4 crops were as fast as one run of a set's 19 (the larger
-    batch's tensors leave the cache); a GPU gains from 0. heatmaps: one of HEATMAP_SOURCES, see the
+    run): on a CPU small runs are as fast as one large one, whose tensors leave the cache; a GPU
+    gains from 0. heatmaps: one of HEATMAP_SOURCES, see the
     module docstring; keypoint_sigma: the std of the Gaussians of MultiPose's keypoints there, as a
     fraction of the person's box diagonal. multipose_workers: images of a set MultiPose runs on at
-    once, each run with `threads` intra-op threads: on two CPU cores two workers of threads 1 took
-    0.8x the time of one worker of threads 0 (one run keeps both cores busy only part of the time).
+    once, each run with `threads` intra-op threads: one run keeps a CPU's cores busy only part of the
+    time, so two workers of one thread each beat one worker of every core.
     region_margin: with heatmaps 'multipose' and given boxes, each box grows by this fraction of its
     size before MultiPose searches the region holding them all (tracked_crops.people_region).
     tile_levels: a MultiPose run that comes back full (6 people, all scoring min_person_score) is

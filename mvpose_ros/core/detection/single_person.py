@@ -2,18 +2,9 @@
 Thunder (256 px), BlazePose GHUM Full and Heavy (256 px). Each gives one person's COCO-17
 keypoints (u, v, score) in its input's pixels (pixel-centre coordinates, as letterbox.Letterbox's)
 from its own decoding, and its raw heatmap, whose read-out (heatmap_keypoints) is checked against
-that decoding.
-
-MoveNet: `keypoints` (y, x, score), y and x normalised to the input (1.0 is its far edge); the
-heatmap (sigmoid) and offsets: joint k at ((row + dy) / n, (col + dx) / n) of the map's argmax
-cell, dy, dx in offsets' channels (2k, 2k + 1). BlazePose: 33 of its 39 landmarks are BlazePose-33
-(x, y in input pixel edges, visibility a logit); COCO-17 takes its nose, eye centres (2, 5),
-ears and 12 limb joints, with sigmoid(visibility) as score. Its heatmap (64 x 64, raw) has channel k's peak
-within a few input pixels of landmark k.
-
-The four files have a batch axis fixed at 1: a set's crops run one per run, on `workers` threads
-at once (onnxruntime's run is thread-safe on one session).
-"""
+that decoding. The four files have a batch axis fixed at 1: a set's crops run one per run, on
+`workers` threads at once (onnxruntime's run is thread-safe on one session).
+How each model's outputs are read: docs/crop_models.md#how-each-models-output-is-read."""
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor

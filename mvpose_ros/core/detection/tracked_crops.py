@@ -4,14 +4,10 @@ takes them by the next set (predicted_joints), and the ears (which only MoveNet 
 carried from the camera's previous people along with their neck.
 
 Between two runs of MultiPose on the whole image (every `person_detector_every`-th set), the crop
-model (EfficientPose, or a single-person keypoint model) works on these boxes as its crops, or,
-with heatmaps 'multipose', MultiPose searches only the region around them (people_region).
-Someone who enters the view is found at the next whole-image run, within K sets. A camera where
-that run found someone no skeleton explains (unexplained: his limb joints far from every
-projected skeleton's) runs MultiPose on its whole image at every set until
-a run there finds only people the skeletons explain: a new person is kept in view while the 3D
-stage takes him up.
-"""
+model works on these boxes as its crops, or, with heatmaps 'multipose', MultiPose searches only
+the region around them (people_region). A camera where a whole-image run found someone no
+skeleton explains (unexplained) stays on whole-image runs until the 3D stage takes him up.
+The rules in full: docs/crop_models.md#tracked-crops."""
 from __future__ import annotations
 
 from typing import Sequence

@@ -1,18 +1,15 @@
 """Lens distortion: the models a ROS CameraInfo names (sensor_msgs/distortion_models.hpp), with
 their coefficients in D's order, between normalised coordinates (x/z, y/z) and distorted ones.
 
-- plumb_bob: OpenCV's radial-tangential model, D = k1 k2 p1 p2 k3 (most drivers, camera_calibration);
-- rational_polynomial: the same with a rational radial factor, D = k1 k2 p1 p2 k3 k4 k5 k6
-  (OpenCV's CALIB_RATIONAL_MODEL; OAK and Azure Kinect drivers publish it); plumb_bob is its
-  k4 = k5 = k6 = 0 case, and is computed as such, to the bit of the 5-coefficient formula;
-- equidistant: the fisheye model of cv2.fisheye (camera_calibration's fisheye, RealSense T265),
-  D = k1 k2 k3 k4: a ray at angle theta from the optical axis lands at radius
-  theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8). Never the identity: zero
-  coefficients still map angles, not tangents, to radii.
+- plumb_bob: OpenCV's radial-tangential model, D = k1 k2 p1 p2 k3; computed as
+  rational_polynomial with k4 = k5 = k6 = 0, to the bit of the 5-coefficient formula;
+- rational_polynomial: the same with a rational radial factor, D = k1 k2 p1 p2 k3 k4 k5 k6;
+- equidistant: cv2.fisheye's model, D = k1 k2 k3 k4: a ray at angle theta from the optical axis
+  lands at radius theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8); never the
+  identity (zero coefficients map angles, not tangents, to radii).
 
 Kernels (core.geometry.projection) take a lens as KERNEL_SIZE numbers (kernel_form): the
-coefficients in KERNEL_SLOTS slots, then its kind (NONE, RADIAL_TANGENTIAL, FISHEYE).
-"""
+coefficients in KERNEL_SLOTS slots, then its kind (NONE, RADIAL_TANGENTIAL, FISHEYE)."""
 from __future__ import annotations
 
 import numpy as np

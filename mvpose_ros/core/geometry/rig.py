@@ -1,40 +1,10 @@
 """Rig files: the one description of a camera rig (YAML), or a calibration file plus an image size.
 
-A rig file lists, per camera, its name, topics, frame id and extrinsics; intrinsics are optional
-(else they come from each camera's CameraInfo, see RigCamera.with_info)::
-
-    world_frame: world            # frame_id of the skeletons and markers (default 'world')
-    up: [0.0, 0.0, 1.0]           # the world's up direction (default +z); normalised
-    cameras:
-      - name: left                # logs, diagnostics, namespaces: [A-Za-z_][A-Za-z0-9_]*
-        image: /rig/left/image_raw/compressed   # default <name>/image_raw
-        camera_info: /rig/left/camera_info      # default <name>/camera_info
-        frame_id: left_optical                  # optional: default, the frame id of its first
-                                                # CameraInfo or image (core.geometry.frame_id)
-        position: [x, y, z]                     # optical centre in the world, metres
-        orientation: [qx, qy, qz, qw]           # rotation world <- camera optical frame (REP-103
-                                                # optical: x right, y down, z forward), unit
-        rectified: false                        # true: `image` is image_proc's rectified image
-                                                # (image_rect): its intrinsics are CameraInfo's P,
-                                                # turned by its R (a stereo pair's)
-        # optional intrinsics, all of width, height, K or none of them:
-        width: 1920                             # pixels
-        height: 1080
-        K: [fx, fy, cx, cy]                     # or 9 numbers / 3x3 rows; pixels
-        distortion_model: plumb_bob             # default; or rational_polynomial, equidistant (core.geometry.lens)
-        D: [k1, k2, p1, p2, k3]                 # the model's coefficients in CameraInfo's order; default zeros
-
-or, for a rig calibrated in the Shelf layout (see camera.load_rig)::
-
-    world_frame: world
-    calibration: '{data_root}/data/shelf/calibration/calibration_shelf.json'  # or relative to this file
-    width: 1032                   # image size, pixels: the calibration does not record it
-    height: 776
-    cameras:                      # optional; one entry per calibration camera, in its order
-      - {name: cam0, image: cam0/image_raw, camera_info: cam0/camera_info, frame_id: cam0_optical}
-
-Every error is a ValueError of one line naming the file, the camera and the field.
-"""
+A rig file gives the rig's `world_frame` and `up`, and per camera its name, image and camera_info
+topics, frame id and extrinsics (`position`, metres, and `orientation`, world <- camera optical
+frame); intrinsics are optional, else they come from each camera's CameraInfo
+(RigCamera.with_info). Every error is a ValueError of one line naming the file, the camera and the
+field. The format, field by field: docs/own_cameras.md#the-rig-file-format."""
 from __future__ import annotations
 
 import dataclasses

@@ -1,17 +1,13 @@
 """How sure the solver is of each decoded joint: the product of two numbers in [0, 1].
 
 - support: how much 2D evidence there is, the joint's detection scores (each clipped to 1)
-  summed over the views that saw it, over the number of cameras of the rig. A joint seen
-  clearly by every camera has 1; one hidden from most cameras little.
+  summed over the views that saw it, over the number of cameras of the rig.
 - agreement: how concentrated the joint's BP marginal is around the decoded point,
   exp(-E[distance from the decoded point] / SPREAD_SCALE_M) under the marginal. Hypotheses are
-  samples and several of them often lie within centimetres of one another, so the belief of the
-  decoded hypothesis alone (or the marginal's entropy) says little; its spread in metres does.
+  samples, often within centimetres of one another, so the belief of the decoded hypothesis
+  alone says little; its spread in metres does.
 
-Chosen on Shelf (docs/results.md, "Confidence against error") against the belief of the decoded hypothesis,
-the marginal's entropy, its mass within 5, 10, 20 cm, the number of views and the spread of the
-data term, each alone: the product ranked errors and wrong limbs best.
-"""
+Why this product, against the other measures tried: docs/results.md#confidence-against-error."""
 from __future__ import annotations
 
 import math

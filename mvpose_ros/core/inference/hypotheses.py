@@ -417,8 +417,8 @@ def _plan(n_cams: int, m: int, with_peaks: bool, width: int) -> tuple[np.ndarray
     draws 0 .. used - 1. Subsets largest first: one peak triangulation per subset (when more
     subsets than m, of the first half of m), then the m - peaks draws shared evenly over the
     subsets, each camera's draws used once."""
-    # at most m subsets get a peak or a draw: listing all 2^n took 12 s and 0.8 GB at 22 cameras,
-    # four times more with every two more
+    # at most m subsets get a peak or a draw: listing all 2^n would grow fourfold with every two
+    # more cameras
     subsets = camera_subsets(range(n_cams), limit=m)
     # past 6 cameras (M 64) not every subset's peak fits: the largest subsets' come first, so the
     # all-camera triangulation is always one (the anchor of joints seen once), and draws fill half
