@@ -15,7 +15,7 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
 from mvpose_ros.graph.static_tf import static_transform_nodes

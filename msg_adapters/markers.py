@@ -12,8 +12,8 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.skeleton_msg import check_skeletons
-from mvpose_ros.core.evaluation.colours import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
-                                                person_colour)
+from mvpose_ros.core.drawing.colours import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
+                                             person_colour)
 from mvpose_ros.core.geometry.body import BONES
 from mvpose_ros.core.geometry.camera import Camera, image_corners
 

@@ -6,7 +6,7 @@ from fractions import Fraction
 
 from builtin_interfaces.msg import Time
 
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE
 
 NS_PER_S = 1_000_000_000
 MAX_SEC = (1 << 31) - 1  # Time.sec is INT32

@@ -23,12 +23,12 @@ from ros_harness import STARTED, acquire_domain, release_domain, stop
 
 # Modules whose tests read nothing under the data root; a new module needs it until listed here.
 NO_DATA = {
-    'test_bp', 'test_cdr_header', 'test_compiled', 'test_confidence', 'test_cpu', 'test_crop_prediction',
-    'test_diagnostics_recorder', 'test_error_sources', 'test_factors', 'test_frame_id', 'test_heatmap',
-    'test_identities', 'test_kernel_cache', 'test_letterbox', 'test_lint', 'test_memory', 'test_msg_records',
-    'test_newest_queue', 'test_overlay', 'test_overlay_node', 'test_overlay_sets', 'test_refusals', 'test_replay',
-    'test_run_nodes', 'test_skeleton_echo', 'test_stamp_sync', 'test_throttled_log', 'test_view_scene',
-    'test_workers',
+    'test_bp', 'test_cdr_header', 'test_clips', 'test_compiled', 'test_confidence', 'test_cpu',
+    'test_crop_prediction', 'test_diagnostics_recorder', 'test_error_sources', 'test_factors', 'test_frame_id',
+    'test_heatmap', 'test_identities', 'test_kernel_cache', 'test_letterbox', 'test_lint', 'test_memory',
+    'test_msg_records', 'test_newest_queue', 'test_overlay', 'test_overlay_node', 'test_overlay_sets',
+    'test_refusals', 'test_replay', 'test_run_nodes', 'test_runtime_imports', 'test_skeleton_echo', 'test_stamp_sync',
+    'test_throttled_log', 'test_view_scene', 'test_workers',
 }
 MARKERS = {'ros': 'starts nodes or an rclpy context', 'data': 'needs the data root (../shared)',
            'slow': 'takes seconds without starting nodes'}

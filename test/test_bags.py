@@ -20,12 +20,12 @@ from msg_adapters.camera_info_msg import check_info
 from msg_adapters.image_msg import msg_to_image
 from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.skeleton_msg import msg_to_skeletons
-from mvpose_ros.core.evaluation.datasets import shelf_cameras, dataset_cameras, calibration_file
 from mvpose_ros.bags import recipes
 from mvpose_ros.bags.io import bag_size, bag_summary, has_header, read_bag, typestore, write_bag
 from mvpose_ros.bags.recipes import campus_image, campus_recipe, shelf_recipe
 from mvpose_ros.cli.make_bag import main as make_bag
-from mvpose_ros.core.evaluation.datasets import CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, calibration_file,
+                                                   dataset_cameras, dataset_dir, shelf_cameras)
 from mvpose_ros.core.detection.openpose import read_body25
 
 S = 1_000_000_000

@@ -11,23 +11,21 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import shelf_cameras
+from mvpose_ros.bench import report as bench_report, runs as bench_runs
 from mvpose_ros.bench.pipelined import run_two_processes
-from mvpose_ros.core.evaluation.plot import Series, line_plot, nice_ticks
-from mvpose_ros.core.evaluation.crowd import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene,
-                                              scene_people, triangulate)
 from mvpose_ros.cli import bench
-from mvpose_ros.graph.config import load_params
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.geometry.camera import Camera
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, shelf_cameras
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.types import Person2D
+from mvpose_ros.core.drawing.plot import Series, line_plot, nice_ticks
+from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.scenarios.crowd import (ScenePerson, choose_offsets, copy_person, copy_view, multiply_scene,
+                                             scene_people, triangulate)
 from mvpose_ros.core.stage import Stage3D, StageConfig
-from mvpose_ros.bench import runs as bench_runs
-from mvpose_ros.bench import report as bench_report
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.types import Person2D
+from mvpose_ros.graph.config import load_params
 
 REPO = Path(__file__).resolve().parents[1]
 N_JOINTS = 16
@@ -174,8 +172,18 @@ GRAPH = bench_runs.default_graph_config()
 def test_the_default_row_is_the_graph_config():
     params = load_params(REPO / 'config' / 'shelf.yaml')['bp_solver']
     assert GRAPH.stage() == StageConfig.from_params(params)
-    assert (GRAPH.window, GRAPH.lag) == (params['window'], params['lag'])
+    assert (GRAPH.settings['window'], GRAPH.settings['lag']) == (params['window'], params['lag'])
     assert bench_runs.OFFLINE.stage() == StageConfig()
+
+
+def test_a_runs_stage_settings_are_the_stage_parameters_and_survive_json():
+    assert set(GRAPH.settings) == set(StageConfig().to_params())
+    wider = GRAPH.with_settings(window=10, lag=5)
+    assert wider.stage().solver.inference.window == 10 and GRAPH.settings['window'] == 6  # a copy changed
+    assert bench_runs.RunConfig.from_dict(json.loads(json.dumps(asdict(wider)))) == wider
+    assert GRAPH.with_settings(window=6).key() == GRAPH.key() != wider.key()
+    with pytest.raises(ValueError, match='windows'):
+        GRAPH.with_settings(windows=10)
 
 
 def test_plan_measures_each_setting_once():

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, load_actors_gt
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry import body
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, data_root, load_actors_gt
 
 
 def _side_swapped(name: str) -> str:

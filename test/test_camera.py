@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import scipy.optimize
 
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt, load_actors_gt_2d
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 from mvpose_ros.core.geometry.projection import rig_directions, rig_project
 from mvpose_ros.core.geometry.rays import (closest_point_to_rays, closest_points_of_ray_sets, line_terms,
                                            ray_ray_distance, solve_line_terms)
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt, load_actors_gt_2d
 
 SHELF_FRAMES = list(SHELF_TEST_FRAMES)[::10]
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from mvpose_ros.cli.evaluate import build_parser, main, run
-from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
+from mvpose_ros.core.datasets.shelf_campus import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.pcp import evaluate
 from mvpose_ros.core.evaluation.predictions import read_predictions
-from mvpose_ros.core.evaluation.ring import RingConfig, ring_cameras
+from mvpose_ros.core.scenarios.ring import RingConfig, ring_cameras
 
 
 @pytest.fixture(scope='module')
@@ -83,7 +83,7 @@ def test_joints_three_cameras_miss_are_put_on_the_body(capsys):
 
 def test_a_ring_misses_its_share_of_keypoints():
     """miss_share: each view misses each keypoint on its own with that probability."""
-    from mvpose_ros.core.evaluation.ring import ring_sequence
+    from mvpose_ros.core.scenarios.ring import ring_sequence
     seen = []
     for miss in (0.0, 0.3):
         seq = ring_sequence(None, RingConfig(cameras=3, miss_share=miss))[0]
@@ -95,7 +95,7 @@ def test_a_ring_misses_its_share_of_keypoints():
 
 def test_a_walking_ring_moves_its_scene_at_its_speed():
     """walk_speed: the scene goes round a 1 m circle at that speed, annotation and keypoints alike."""
-    from mvpose_ros.core.evaluation.ring import WALK_RADIUS, ring_sequence, walked
+    from mvpose_ros.core.scenarios.ring import WALK_RADIUS, ring_sequence, walked
     frames = np.arange(300, 326)
     path = walked(frames, 1.4)
     np.testing.assert_allclose(np.linalg.norm(np.diff(path, axis=0), axis=1), 1.4 / 25, rtol=1e-3)

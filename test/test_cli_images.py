@@ -16,8 +16,8 @@ import pytest
 
 from mvpose_ros.bench.still_sets import stage_config
 from mvpose_ros.cli import images
-from mvpose_ros.core.evaluation.datasets import calibration_file, dataset_dir, load_actors_gt, shelf_cameras
-from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR
+from mvpose_ros.core.datasets.shelf_campus import calibration_file, dataset_dir, load_actors_gt, shelf_cameras
+from mvpose_ros.core.drawing.overlay import GROUND_TRUTH_BGR
 from mvpose_ros.core.geometry.body import JOINT_NAMES
 from mvpose_ros.graph.config import load_params, node_section
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
 from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
-from mvpose_ros.core.evaluation.datasets import GroundTruth
 from mvpose_ros.core.geometry.body import (L_EAR, LIMB_BONES, LIMB_LENGTHS, NECK, NUM_INFERENCE_JOINTS, R_EAR,
                                            SYMMETRIC_PAIRS, finalize_confidence)
 from mvpose_ros.core.inference.confidence import SPREAD_SCALE_M, joint_confidence, joint_support

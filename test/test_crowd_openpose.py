@@ -1,17 +1,17 @@
-"""The crowd at the level of OpenPose output (core.evaluation.crowd_openpose), which the shelf_crowd bag
+"""The crowd at the level of OpenPose output (core.scenarios.crowd_openpose), which the shelf_crowd bag
 carries: copies group into people of their own, where the copied 3D people would be seen."""
 import numpy as np
 import pytest
 
 from mvpose_ros.bags.recipes import make_recipe
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_grouped, detect_people
-from mvpose_ros.core.evaluation.crowd_openpose import (ANCHORS, candidate_displacements, copy_candidates,
-                                                       crowd_openpose, with_copies)
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.body import BODY25_NAMES, INFERENCE_NAMES
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.scenarios.crowd_openpose import (ANCHORS, candidate_displacements, copy_candidates, crowd_openpose,
+                                                      with_copies)
 
 DETECTOR = OpenPoseDetectorConfig()
 

@@ -1,51 +1,16 @@
-"""Data root resolution and actorsGT loading on the real Shelf and Campus files."""
+"""actorsGT loading and the datasets' facts on the real Shelf and Campus files."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation import datasets
-from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, data_root, dataset_dir,
-                                                 load_actors_gt, load_actors_gt_2d)
+from mvpose_ros.core.datasets.shelf_campus import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt,
+                                                   load_actors_gt_2d)
 
 
 @pytest.fixture(scope='module')
 def shelf_mat():
     return dataset_dir('shelf') / 'actorsGT.mat'
-
-
-def test_data_root_default_finds_shared(monkeypatch):
-    monkeypatch.delenv(datasets.DATA_ROOT_ENV, raising=False)
-    root = data_root()
-    assert (root / 'data' / 'shelf' / 'actorsGT.mat').is_file()
-
-
-def test_data_root_override_and_env(monkeypatch, tmp_path):
-    env_root, flag_root = tmp_path / 'env', tmp_path / 'flag'
-    env_root.mkdir()
-    flag_root.mkdir()
-    monkeypatch.setenv(datasets.DATA_ROOT_ENV, str(env_root))
-    assert data_root() == env_root
-    assert data_root(str(flag_root)) == flag_root  # the flag beats the environment
-
-
-def test_data_root_missing_names_what_was_tried(monkeypatch, tmp_path):
-    monkeypatch.delenv(datasets.DATA_ROOT_ENV, raising=False)
-    with pytest.raises(FileNotFoundError, match='nowhere'):
-        data_root(str(tmp_path / 'nowhere'))
-    monkeypatch.setenv(datasets.DATA_ROOT_ENV, str(tmp_path / 'unset_env'))
-    with pytest.raises(FileNotFoundError, match='unset_env'):
-        data_root()
-    # Neither beside a (fake) checkout nor beside the cwd.
-    monkeypatch.delenv(datasets.DATA_ROOT_ENV)
-    checkout = tmp_path / 'checkout'
-    monkeypatch.setattr(datasets, '__file__', str(checkout / 'mvpose_ros' / 'core' / 'evaluation' / 'datasets.py'))
-    (tmp_path / 'a' / 'cwd').mkdir(parents=True)
-    monkeypatch.chdir(tmp_path / 'a' / 'cwd')
-    with pytest.raises(FileNotFoundError) as info:
-        data_root()
-    assert str(tmp_path / 'shared') in str(info.value)
-    assert str(tmp_path / 'a' / 'shared') in str(info.value)
 
 
 def test_test_ranges():

@@ -24,8 +24,9 @@ from msg_adapters.camera_info_msg import camera_to_info
 from msg_adapters.cdr_header import deserialise
 from msg_adapters.image_msg import ENCODINGS, check_camera_image, image_to_compressed_msg, image_to_msg
 from mvpose_ros.core.detection.detector_settings import PARAMETERS, SPECS
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, shelf_cameras
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.encoded_image import max_image_bytes
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.nodes import detector_cameras
 from mvpose_ros.nodes.detector_cameras import DetectorCamera, camera_indices, in_namespace, rig_namespace

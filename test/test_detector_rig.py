@@ -27,8 +27,9 @@ from msg_adapters.people_msg import msg_to_people
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros.bags.recipes import turned_camera
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, shelf_cameras
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, shelf_cameras
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.runtime import DATA_QOS

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import DATA_ROOT_ENV, data_root
+from mvpose_ros.core.defaults import DATA_ROOT_ENV, data_root
 
 REPO = Path(__file__).resolve().parents[1]
 PAGES = [REPO / 'README.md', *sorted((REPO / 'docs').glob('*.md'))]

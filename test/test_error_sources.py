@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import GroundTruth
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
+from mvpose_ros.core.drawing.video import look_at
 from mvpose_ros.core.evaluation.error_sources import format_error_sources, head_offsets, wrong_endpoints
 from mvpose_ros.core.evaluation.pcp import match_actors
-from mvpose_ros.core.evaluation.video import look_at
 from mvpose_ros.core.types import Person2D, Sequence2D
 
 UP = np.array([0.0, 0.0, 1.0])

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import (SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth, dataset_dir,
-                                                 load_actors_gt)
+from mvpose_ros.core.datasets.shelf_campus import (SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth, dataset_dir,
+                                                   load_actors_gt)
 from mvpose_ros.core.evaluation.pcp import (FORMS, GROUPS, LIMBS, PAPER_SHELF_PCP, evaluate,
                                             format_table)
 

@@ -18,13 +18,12 @@ from msg_adapters.cdr_header import CLOUD_OVERHEAD
 from msg_adapters.people_msg import bundles_to_msg, max_bundles_bytes, msg_to_bundles, people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
-from mvpose_ros.core.evaluation.datasets import calibration_file
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import calibration_file, dataset_dir
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.nodes.runtime import DATA_QOS
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from ros_harness import probe, spin_until, start_node, stop
 
 FIRST = 300  # first frame of the OpenPose files

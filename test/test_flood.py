@@ -19,7 +19,7 @@ from std_msgs.msg import Header
 
 from msg_adapters.image_msg import image_to_compressed_msg
 from msg_adapters.stamp import stamp_ns
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir
 from mvpose_ros.graph.memory import rss_kib
 from mvpose_ros.nodes.runtime import DATA_QOS
 from ros_harness import REPO, node_env, probe, spin_until, start_node, stop

@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from mvpose_ros import topics
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.nodes.foxglove_view import SCENE_SUFFIX
 

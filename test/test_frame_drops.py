@@ -1,11 +1,11 @@
 """Frames dropped upstream, imitated: the same frames offline (mvpose-eval) and in a bag (mvpose-make-bag)."""
 import pytest
 
+from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import bag_summary, write_bag
 from mvpose_ros.bags.recipes import make_recipe, shelf_recipe
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
-from msg_adapters.stamp import stamp_ns, stamp_of_frame
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
 
 
 def test_every_nth_position_is_left_out():

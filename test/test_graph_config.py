@@ -18,7 +18,8 @@ from sensor_msgs.msg import PointCloud2
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.graph.config import (ALL_NODES, RUNNER_SECTION, GraphSettings, NodeSpec, expected_connections,
                                      graph_nodes, graph_settings, load_params, node_command, played_connections,
-                                     composed_command, processes, unknown_nodes)
+                                     composed_command, node_section, processes, rig_sync,
+                                     section_keys, unknown_nodes)
 from mvpose_ros.nodes import composed
 from mvpose_ros.graph.report import frame_ranges, latency_ms, print_latency, report
 from ros_harness import ros_domain
@@ -205,6 +206,16 @@ def test_expected_connections_and_unknown_sections():
     params = {'bag_player': {}, '/**/heatmap_detector': {}, '/cam1/heatmap_detector': {}, '/**/heatmap_detectr': {},
               'association': {}, 'bpsolver': {}, RUNNER_SECTION: {}}
     assert unknown_nodes(params, nodes) == ['/**/heatmap_detectr', 'bpsolver']
+
+
+def test_a_node_takes_the_sections_ros_hands_it_and_a_later_one_wins():
+    assert section_keys('heatmap_detector', 'cam1') == {'/**', 'heatmap_detector', '/cam1/heatmap_detector',
+                                                        '/**/heatmap_detector'}
+    first = {'/**': {'frame_rate': 15.0, 'seed': 1}, 'association': {'max_skew': 0.01}, 'bp_solver': {'seed': 2}}
+    second = {'/**/association': {'max_skew': 0.03}, '/cam0/association': {'max_skew': 9.0}}
+    assert node_section([first, second], 'association') == {'frame_rate': 15.0, 'seed': 1, 'max_skew': 0.03}
+    # association's own defaults where the files say nothing: max_skew 0 is half a period of frame_rate
+    assert rig_sync([{'/**': {'frame_rate': 10.0}}]) == (0.05, 0.5)
 
 
 def _edited(tmp_path: Path, **changes) -> Path:

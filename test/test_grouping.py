@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from mvpose_ros.core.evaluation.datasets import data_root, load_actors_gt_2d
+from mvpose_ros.core.datasets.shelf_campus import load_actors_gt_2d
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.grouping import BODY25_REDUNDANT_LIMBS, group_body25
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame, read_body25
 

@@ -7,12 +7,12 @@ import pytest
 from builtin_interfaces.msg import Time
 
 from msg_adapters.diagnostics_msg import msg_to_statuses, statuses_to_msg
+from mvpose_ros.core.association.approximate_sync import stamp_rate
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES
 from mvpose_ros.core.detection.openpose import OpenPoseFrame
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES
 from mvpose_ros.core.geometry.bump import axis_rotation, bumped_camera, bumped_pixels
 from mvpose_ros.core.health.links import links_status, unmatched_links
-from mvpose_ros.core.association.approximate_sync import stamp_rate
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, frame_rate_status, input_statuses, node_status
 from mvpose_ros.core.health.residual import ResidualMonitor, frame_residuals, residual_levels
 from mvpose_ros.core.health.status import Level, Status

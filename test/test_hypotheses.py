@@ -7,14 +7,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
+from mvpose_ros.core.drawing.video import look_at
 from mvpose_ros.core.geometry.body import (HANGING, INFERENCE_MIRROR, INFERENCE_NAMES, INFERENCE_PARENT,
                                            PRIOR_BONE_LENGTH, UNSEEN_FROM, UNSEEN_FROM_SEEN, UNSEEN_RISE, UP)
-from mvpose_ros.core.inference.factors import data_terms
-from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
 from mvpose_ros.core.geometry.projection import rig_directions
 from mvpose_ros.core.geometry.rays import line_terms, solve_line_terms
-from mvpose_ros.core.evaluation.video import look_at
+from mvpose_ros.core.heatmap import MARGIN_SIGMAS, HeatmapStack, PersonHeatmap, render_heatmap
+from mvpose_ros.core.inference.factors import data_terms
 from mvpose_ros.core.inference.hypotheses import (SamplingConfig, _anchors, _depth, _plan, bone_scales,
                                                   camera_subsets, own_bone_lengths, sample_people, split_draws,
                                                   subset_count)

@@ -1,7 +1,7 @@
 """Identity counts over a clip: switches, missed actors, people who are no annotated actor."""
 import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import GroundTruth
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
 from mvpose_ros.core.evaluation.identities import identity_report
 from mvpose_ros.core.types import FrameResult
 

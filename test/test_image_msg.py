@@ -17,8 +17,8 @@ from std_msgs.msg import Header
 
 from msg_adapters.image_msg import (ENCODINGS, compressed_to_image, image_to_compressed_msg,
                                     image_to_msg, msg_to_image, to_bgr)
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir
 from mvpose_ros.core.detection.encoded_image import declared_size, max_image_bytes
-from mvpose_ros.core.evaluation.datasets import dataset_dir
 
 HEADER = Header(frame_id='left_optical')
 LOSSLESS = ('bgr8', 'rgb8', 'bgra8', 'rgba8', 'bgr16', 'rgb16')

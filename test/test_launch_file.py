@@ -229,7 +229,7 @@ def test_rig_launch_tf_starts_one_static_transform_publisher_per_camera_when_ask
     """tf:=true (default false) runs the launch file's camera_frames: the rig file, read when the
     launch runs, gives one static_transform_publisher per camera, in the graph's namespace and
     respawned like the graph's nodes, with static_tf's arguments."""
-    from mvpose_ros.core.evaluation.datasets import data_root
+    from mvpose_ros.core.defaults import data_root
     from mvpose_ros.core.geometry.rig import load_rig_file
     from mvpose_ros.graph.respawn import RESPAWN_DELAY_S
     from mvpose_ros.graph.static_tf import static_transform_nodes

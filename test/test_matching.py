@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.association.associator import AssociationConfig, Associator, rough_centres
+from mvpose_ros.core.association.identity import IdentityKeeper
+from mvpose_ros.core.association.matching import TIE_M, MatchingConfig, ViewRays, all_view_distances, cluster_views
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, TOP_HEAD
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rays import closest_point_to_rays, ray_ray_distance
-from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
 from mvpose_ros.core.heatmap import render_heatmap
-from mvpose_ros.core.association.identity import IdentityKeeper
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
-from mvpose_ros.core.association.matching import TIE_M, MatchingConfig, ViewRays, all_view_distances, cluster_views
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
 from mvpose_ros.core.types import Person2D
 
 SHELF = dataset_dir('shelf')

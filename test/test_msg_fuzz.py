@@ -26,11 +26,11 @@ from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles
                                      people_dtype, people_to_msg)
 from msg_adapters.records import to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
+from mvpose_ros.core.datasets.shelf_campus import shelf_cameras
 from mvpose_ros.core.detection.encoded_image import MAX_PIXELS, decode_encoded, max_image_bytes
-from mvpose_ros.core.evaluation.datasets import shelf_cameras
+from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.geometry import lens
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.types import Person2D
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -10,7 +10,7 @@ from std_msgs.msg import Header
 from msg_adapters.openpose_msg import OPENPOSE_DTYPE, msg_to_openpose, openpose_to_msg
 from msg_adapters.records import from_cloud, to_cloud
 from msg_adapters.stamp import stamp_of_frame
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, OpenPoseFrame, read_body25
 
 LINES = (0, 4, 100, 272, 300)  # actorsGT frames 300, 304, 400, 572, 600

@@ -13,15 +13,15 @@ from msg_adapters.people_msg import (BUNDLE_KEYS, bundles_to_msg, msg_to_bundles
                                      msg_to_wire_people, people_dtype, people_to_msg, wire_bundles_to_msg)
 from msg_adapters.records import from_cloud, to_cloud
 from mvpose_ros.core.association.associator import Associator
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
-from mvpose_ros.core.evaluation.offline import detect_sequence
-from mvpose_ros.core.inference.solver import Inference3D
-from mvpose_ros.core.stage import StageConfig
-from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
+from mvpose_ros.core.evaluation.offline import detect_sequence
+from mvpose_ros.core.heatmap import PersonHeatmap
+from mvpose_ros.core.inference.solver import Inference3D
+from mvpose_ros.core.stage import StageConfig
 from mvpose_ros.core.types import Person2D
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 
 TOL = 0.5 / 255 + 1e-7  # quantisation to 1/255 steps, plus float32 rounding
 

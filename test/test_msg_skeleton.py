@@ -12,9 +12,9 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.markers import camera_markers, frustum, person_colour, skeleton_markers
-from mvpose_ros.core.evaluation.colours import MIN_ALPHA
 from msg_adapters.records import from_cloud, to_cloud
 from msg_adapters.skeleton_msg import SKELETON_DTYPE, msg_to_skeletons, skeletons_to_msg
+from mvpose_ros.core.drawing.colours import MIN_ALPHA
 from mvpose_ros.core.geometry.body import BONES
 
 WORLD = Header(frame_id='world')
@@ -181,7 +181,7 @@ def test_marker_id_range():
 
 
 def test_camera_frusta_reach_the_image_corners():
-    from mvpose_ros.core.evaluation.datasets import shelf_cameras
+    from mvpose_ros.core.datasets.shelf_campus import shelf_cameras
     cameras = shelf_cameras(None)
     array = camera_markers(cameras, [f'cam{c}' for c in range(len(cameras))], WORLD)
     lines = [m for m in array.markers if m.ns == 'frusta']

@@ -35,7 +35,7 @@ import ros_harness
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import read_bag, write_bag
 from mvpose_ros.bags.recipes import shelf_recipe
-from mvpose_ros.core.evaluation.datasets import dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir
 from mvpose_ros.graph.config import graph_nodes, node_command
 from mvpose_ros.graph.processes import ProcessGroup
 

@@ -51,9 +51,35 @@ def test_bp_solver_publishes_diagnostics_and_takes_live_parameters(domain, tmp_p
             assert applied.successful, applied.reason
             arrays.clear()
             assert spin_until(executor, lambda: bundles_input(Level.OK), 10.0), log.read_text()  # applied live
+            for name, value in (('collision_width', 0.2), ('max_gap', 0.5)):  # the stage's, via StageConfig
+                stage = _set(node, executor, client, name,
+                             ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+                assert stage.successful, stage.reason
         finally:
             stop(proc)
-    assert 'parameters changed: diagnostics.stale_error = 1000.0' in log.read_text()
+    text = log.read_text()
+    assert 'parameters changed: diagnostics.stale_error = 1000.0' in text
+    assert 'parameters changed: collision_width = 0.2' in text and 'parameters changed: max_gap = 0.5' in text
+
+
+def test_association_takes_its_stage_and_sync_parameters_live_and_refuses_a_bad_one(domain, tmp_path):
+    log = tmp_path / 'association.log'
+    with probe(domain, 'association_probe') as (node, executor):
+        client = node.create_client(SetParameters, '/association/set_parameters')
+        proc = start_node('association', domain, log)
+        try:
+            assert client.wait_for_service(20.0), log.read_text()
+            double = ParameterType.PARAMETER_DOUBLE
+            for name, value in (('track_iou', 0.4), ('max_skew', 0.03)):
+                applied = _set(node, executor, client, name, ParameterValue(type=double, double_value=value))
+                assert applied.successful, applied.reason
+            refused = _set(node, executor, client, 'single_view_people',
+                           ParameterValue(type=ParameterType.PARAMETER_STRING, string_value='yes'))
+            assert not refused.successful
+        finally:
+            stop(proc)
+    text = log.read_text()
+    assert 'parameters changed: track_iou = 0.4' in text and 'parameters changed: max_skew = 0.03' in text
 
 
 def test_a_node_reports_on_diagnostics_the_endpoints_its_writers_and_readers_have_matched(domain, tmp_path):

@@ -24,11 +24,11 @@ from msg_adapters.people_msg import bundles_to_msg, max_people_bytes, msg_to_bun
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns, stamp_of_frame
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.stage import StageConfig
 from mvpose_ros.nodes.runtime import DATA_QOS
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
 from ros_harness import NodeLinks, matched, node_env, probe, spin_until, start_node, stop
 
 FIRST = 300  # first frame of the OpenPose files

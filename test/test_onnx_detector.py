@@ -10,13 +10,14 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt_2d
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt_2d
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.onnx_detector import (OnnxDetectorConfig, OnnxPoseDetector, crowd_tiles,
                                                      keypoint_people, region_input_side, without_duplicates)
+from mvpose_ros.core.detection.onnx_models import EFFICIENTPOSE, MULTIPOSE, ModelError
+from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
 from mvpose_ros.core.heatmap import PersonHeatmap
 from mvpose_ros.core.types import Person2D
-from mvpose_ros.core.detection.onnx_models import EFFICIENTPOSE, MULTIPOSE, ModelError
 
 MODELS = data_root() / 'models'
 FRAME, CAMERA = 572, 4

@@ -15,8 +15,8 @@ from std_msgs.msg import Header
 from msg_adapters.image_msg import image_to_msg
 from msg_adapters.people_msg import msg_to_people
 from msg_adapters.stamp import frame_of_stamp, stamp_of_frame
-from mvpose_ros.core.evaluation.datasets import calibration_file
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import calibration_file, dataset_dir
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.onnx_models import MULTIPOSE
 from mvpose_ros.graph.config import (NodeSpec, detector_backend, expected_connections, graph_settings, load_params,

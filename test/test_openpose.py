@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.openpose import BODY25_PAF_PAIRS, read_body25
 
 WIDTH, HEIGHT = 1032, 776

@@ -6,13 +6,13 @@ import time
 import numpy as np
 import pytest
 
-from mvpose_ros.core.geometry.body import (BODY25_INFERENCE_JOINTS, HEAD, INFERENCE_MIRROR, L_EAR, NECK,
-                                           NUM_INFERENCE_JOINTS, R_EAR)
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.grouping import group_body25
 from mvpose_ros.core.detection.openpose import read_body25
 from mvpose_ros.core.detection.openpose_detector import (OpenPoseDetectorConfig, detect_grouped, detect_people,
                                                          grouped_keypoints)
+from mvpose_ros.core.geometry.body import (BODY25_INFERENCE_JOINTS, HEAD, INFERENCE_MIRROR, L_EAR, NECK,
+                                           NUM_INFERENCE_JOINTS, R_EAR)
 from mvpose_ros.core.heatmap import render_heatmaps
 
 LINE = 272  # actorsGT frame 572

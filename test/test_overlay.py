@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.colours import person_colour
-from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR, overlay
-from mvpose_ros.core.evaluation.video import look_at
+from mvpose_ros.core.drawing.colours import person_colour
+from mvpose_ros.core.drawing.overlay import GROUND_TRUTH_BGR, overlay
+from mvpose_ros.core.drawing.video import look_at
 
 
 def _person(x: float) -> np.ndarray:
@@ -66,7 +66,7 @@ def test_an_image_drawn_at_half_its_size_gets_everything_at_half_the_pixels_and_
 
 
 def test_the_caption_is_white_on_a_darkened_band_at_the_top_left():
-    from mvpose_ros.core.evaluation.overlay import draw_caption
+    from mvpose_ros.core.drawing.overlay import draw_caption
     image = np.full((300, 400, 3), 150, np.uint8)
     draw_caption(image, 'left  set 1.000 s  2 people')
     band = image[:12, :150]

@@ -16,8 +16,8 @@ from msg_adapters.image_msg import image_to_compressed_msg, image_to_msg
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_ns
-from mvpose_ros.core.evaluation.colours import person_colour
-from mvpose_ros.core.evaluation.video import look_at
+from mvpose_ros.core.drawing.colours import person_colour
+from mvpose_ros.core.drawing.video import look_at
 from mvpose_ros.core.types import Person2D
 from mvpose_ros.nodes.runtime import DATA_QOS, VIEWER_QOS
 from mvpose_ros.topics import OVERLAY, PEOPLE2D, SKELETONS_DROPPED, SKELETONS_LIVE, camera_topic

@@ -87,7 +87,8 @@ def test_the_members_are_those_the_synchroniser_put_in_each_set():
     gets from set_members exactly its members' stamps, people and images."""
     import numpy as np
 
-    from mvpose_ros.core.association.approximate_sync import ApproximateSync, default_max_skew
+    from mvpose_ros.core.association.approximate_sync import ApproximateSync
+    from mvpose_ros.core.defaults import default_max_skew
     rng = np.random.default_rng(3)
     max_skew = default_max_skew(25.0)
     offsets = rng.uniform(-8, 8, 5) * MS

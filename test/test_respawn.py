@@ -20,7 +20,7 @@ from msg_adapters.stamp import stamp_ns, stamp_of_frame
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.bags.recipes import shelf_recipe
 from mvpose_ros.cli import graph
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir
 from mvpose_ros.core.evaluation.predictions import read_predictions
 from mvpose_ros.graph import runner, session
 from mvpose_ros.graph.config import GraphSettings, NodeSpec, graph_nodes, output_topics

@@ -10,7 +10,8 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.camera import load_rig
 from mvpose_ros.core.geometry.rig import (RigCamera, load_rig_file, matrix_to_quaternion,
                                           quaternion_to_matrix)

@@ -12,17 +12,17 @@ import numpy as np
 import pytest
 import yaml
 
+from msg_adapters.cdr_header import header_stamp_ns
 from msg_adapters.skeleton_msg import Skeletons
 from mvpose_ros.bags.io import read_bag
 from mvpose_ros.bags.recipes import ForeignRig, shelf_rig_stamps
-from msg_adapters.cdr_header import header_stamp_ns
 from mvpose_ros.bags.replay import InFlight, group_sets
 from mvpose_ros.cli.graph import main as graph_main
-from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.graph.config import (LOCKSTEP_ACK, RIG_TEMPLATE, RigRun, load_params, rig_connections,
                                      rig_graph_nodes, rig_played_connections, rig_sync, write_overrides)
 from mvpose_ros.graph.report import (count_under_sets, frame_rate_note, rig_prediction_lines, rig_report,
                                      set_skews_ms)
+from mvpose_ros.graph.session import rig_run_plan
 from mvpose_ros.package_files import package_path
 
 S = 1_000_000_000
@@ -308,7 +308,7 @@ def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
 
 
 def test_sets_are_scored_one_line_each_against_the_frame_they_show(tmp_path):
-    from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt
+    from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
     from mvpose_ros.graph.report import score_sets
     truth = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', [572]).poses[0]  # (A, 14, 3)
     actors = [a for a in range(len(truth)) if not np.isnan(truth[a]).any()]

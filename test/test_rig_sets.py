@@ -152,7 +152,7 @@ class _Detector:
 
 def test_a_set_of_images_is_decoded_side_by_side_then_detected_once():
     from mvpose_ros.core.detection.image_sets import TRACK_MAX_AGE_S, ImageSetDetector
-    from mvpose_ros.core.evaluation.datasets import shelf_cameras
+    from mvpose_ros.core.datasets.shelf_campus import shelf_cameras
     cameras = shelf_cameras()[:3]
     detector = _Detector()
 

@@ -9,7 +9,7 @@ import yaml
 
 from msg_adapters.skeleton_msg import SKELETON_DTYPE
 from mvpose_ros import topics
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.nodes.runtime import LATCHED_QOS
 

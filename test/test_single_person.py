@@ -8,10 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt_2d
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.letterbox import letterbox
 from mvpose_ros.core.detection.onnx_models import ModelError
 from mvpose_ros.core.detection.single_person import COCO_KEYPOINTS, SINGLE_POSE, SinglePoseModel
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt_2d
 from mvpose_ros.core.geometry.body import SOURCE_INDEX
 
 MODELS = data_root() / 'models'

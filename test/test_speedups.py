@@ -9,7 +9,7 @@ The reference, test/data/speedups_reference.npz, is written by
 
 Regenerate it only for a change that is meant to alter results, in a commit of its own that says why.
 Cases: the graph's settings (window 6, lag 3, heatmap stride 8) on 40 frames of 3-5 people; a
-crowd (20 of those frames, the scene with six shifted copies: about 16 people, core.evaluation.crowd) at
+crowd (20 of those frames, the scene with six shifted copies: about 16 people, core.scenarios.crowd) at
 those settings; the whole clip at once with every term (loopy BP, limb tables); windows re-solved
 from scratch.
 """
@@ -21,15 +21,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mvpose_ros.core.evaluation.crowd import multiply_scene
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES
 from mvpose_ros.core.evaluation.offline import detect_sequence, shelf_openpose_raw
+from mvpose_ros.core.scenarios.crowd import multiply_scene
 from mvpose_ros.core.stage import Stage3D, StageConfig
 
 REFERENCE = Path(__file__).parent / 'data' / 'speedups_reference.npz'
 GRAPH = {'window': 6, 'lag': 3}
-# copies of the scene (metres in the floor plane), as core.evaluation.crowd.choose_offsets picks them for
+# copies of the scene (metres in the floor plane), as core.scenarios.crowd.choose_offsets picks them for
 # about 16 people on the crowd's frames
 CROWD_OFFSETS = [(0.0, 0.0, 0.0), (0.5, -0.5, 0.0), (1.0, -1.0, 0.0), (2.0, 0.5, 0.0), (2.5, 0.0, 0.0),
                  (-1.0, -1.5, 0.0), (3.0, -0.5, 0.0)]

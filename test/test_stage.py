@@ -11,7 +11,7 @@ from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, 
 from mvpose_ros.core.evaluation.offline import shelf_openpose_raw
 from mvpose_ros.core.geometry.body import UP
 from mvpose_ros.core.heatmap import HeatmapStack, PersonHeatmap
-from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig, parameter_specs
+from mvpose_ros.core.stage import ALL_PARAMETERS, LiveStageParameters, Stage3D, StageConfig, parameter_specs
 
 
 def test_a_frame_with_nobody_is_output_empty_and_the_others_go_on():
@@ -137,7 +137,7 @@ def _both(raw: list, stages: tuple[Stage3D, Stage3D], second_input) -> tuple[lis
 def _children(frames: list[int], scale: float):
     """Shelf's annotated actors of `frames` shrunk about their ankles' midpoint by `scale` (0.5 of
     a 1.75 m adult is 0.9 m), and the Shelf cameras."""
-    from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt, shelf_cameras
+    from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt, shelf_cameras
     gt = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', frames)
     feet = 0.5 * (gt.poses[:, :, 0] + gt.poses[:, :, 5])[:, :, None]  # (F, A, 1, 3)
     return replace(gt, poses=feet + scale * (gt.poses - feet)), shelf_cameras()
@@ -170,7 +170,7 @@ def test_a_child_keeps_his_own_bone_lengths(scale):
     noise: the limb factor, on by default, costs them no accuracy against the paper's terms. With
     its flat range from 0.7 times the adult lengths it pulled their limbs longer: 15.4 against
     12.2 mm at 0.5, 13.4 against 12.1 at 0.65 (every third frame of the clip)."""
-    from mvpose_ros.core.evaluation.campus import oracle_people
+    from mvpose_ros.core.datasets.campus import oracle_people
     frames = list(range(300, 601, 10))
     children, cameras = _children(frames, scale)
     views = [oracle_people(cameras, poses) for poses in children.poses]
@@ -185,7 +185,7 @@ def test_a_childs_joints_seen_by_one_camera_keep_his_own_bone_lengths():
     hide them): with the person's own bone lengths ('own_limb', default) those joints lie where
     the child's limbs reach; with the adult lengths ('limb') up to a bone's length off along the
     ray (every fifth frame of the clip: 18.1 against 43.4 mm over all joints)."""
-    from mvpose_ros.core.evaluation.campus import oracle_people
+    from mvpose_ros.core.datasets.campus import oracle_people
     frames, hidden = list(range(300, 601, 5)), [0, 5, 6, 11]  # ankles and wrists
     children, cameras = _children(frames, 0.6)
     views_of_frames = []
@@ -211,8 +211,8 @@ def test_legs_seen_by_one_camera_hang_along_the_rigs_up():
     their wrists by none (Shelf's annotated poses projected): the skeletons are those of the z-up
     world turned, so a knee or ankle seen once (hanging_legs) and a wrist seen by none
     (unseen_joints) hang along the rig's up, not along z."""
-    from mvpose_ros.core.evaluation.campus import oracle_people
-    from mvpose_ros.core.evaluation.datasets import dataset_dir, load_actors_gt, shelf_cameras
+    from mvpose_ros.core.datasets.campus import oracle_people
+    from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt, shelf_cameras
     from mvpose_ros.core.types import Person2D
     frames = [300, 310, 320]
     gt = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', frames)
@@ -252,7 +252,7 @@ def test_a_person_walking_out_of_all_views_but_one_stays_where_he_is(single_view
     """The narrow ring (cameras close above the actors): in frames 577-584 one camera alone sees
     actor 3. The streaming stage (the graph's bp_solver) keeps him under his id, placed from where
     he was, within 0.3 m of his annotated joints on average; without single_view_people he is gone."""
-    from mvpose_ros.core.evaluation.ring import RingConfig, ring_sequence
+    from mvpose_ros.core.scenarios.ring import RingConfig, ring_sequence
     seq, gt, head_model = ring_sequence(None, RingConfig(cameras=5, radius=2.5, fov_deg=40, heights=(1.2, 1.5)))
     stage = Stage3D(seq.cameras, StageConfig.from_params({'window': 6, 'lag': 3, 'head_model': head_model,
                                                           'single_view_people': single_view_people}))
@@ -272,3 +272,13 @@ def test_a_person_walking_out_of_all_views_but_one_stays_where_he_is(single_view
         else:
             assert not near
     assert len(set(ids)) == 1
+
+
+def test_live_changes_take_one_route_and_a_bad_one_is_refused_and_not_kept():
+    live = LiveStageParameters({**StageConfig().to_params(), 'idle_flush': 0.0})
+    assert live.refusal({'collision_width': 0.2}) is None
+    assert 'hanging_legs' in live.refusal({'hanging_legs': 'false'})
+    config = live.apply({'collision_width': 0.2, 'max_gap': 0.5, 'track_iou': 0.4})
+    assert config.solver.inference.factors.collision_width == 0.2 and config.solver.inference.max_gap == 0.5
+    assert config.association.track_iou == 0.4 and live.values['idle_flush'] == 0.0
+    assert live.values['hanging_legs'] is StageConfig().solver.sampling.hanging_legs

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file, quaternion_to_matrix
 from mvpose_ros.graph.static_tf import TF_EXECUTABLE, TF_PACKAGE, static_transform_nodes
 

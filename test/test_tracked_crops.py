@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
+from mvpose_ros.core.datasets.shelf_campus import calibration_file, dataset_dir, load_actors_gt, load_actors_gt_2d
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.tracked_crops import (CropPlanner, carried_ears, people_region, predicted_joints,
                                                      projected_boxes, unexplained)
-from mvpose_ros.core.evaluation.datasets import calibration_file, data_root, dataset_dir, load_actors_gt, \
-    load_actors_gt_2d
 from mvpose_ros.core.geometry.body import L_EAR, NECK, NUM_INFERENCE_JOINTS, R_EAR
 from mvpose_ros.core.geometry.camera import Camera, load_rig
 from mvpose_ros.core.types import Person2D

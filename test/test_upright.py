@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPoseDetector
 from mvpose_ros.core.detection.upright import MIN_UP_IN_IMAGE, upright_turns
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir
 from mvpose_ros.core.geometry.camera import load_rig
 
 UP = np.array([0.0, 0.0, 1.0])

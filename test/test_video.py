@@ -9,10 +9,10 @@ import cv2
 import numpy as np
 
 from mvpose_ros.cli.render import main
-from mvpose_ros.core.evaluation.datasets import shelf_cameras
-from mvpose_ros.core.evaluation.colours import person_colour
-from mvpose_ros.core.evaluation.overlay import GROUND_TRUTH_BGR
-from mvpose_ros.core.evaluation.video import Scene, look_at, render_frame, virtual_camera
+from mvpose_ros.core.datasets.shelf_campus import shelf_cameras
+from mvpose_ros.core.drawing.colours import person_colour
+from mvpose_ros.core.drawing.overlay import GROUND_TRUTH_BGR
+from mvpose_ros.core.drawing.video import Scene, look_at, render_frame, virtual_camera
 from mvpose_ros.core.types import FrameResult
 
 

@@ -15,7 +15,8 @@ import pytest
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
 from mvpose_ros.core.association.matching import ViewRays
 from mvpose_ros.core.association.view_consistency import consistent_views, leave_one_out_residuals
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rays import closest_point_to_rays, line_terms, solve_line_terms
 from mvpose_ros.core.stage import Stage3D, StageConfig

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from foxglove.messages import SceneUpdate
 
-from mvpose_ros.core.evaluation.colours import MIN_ALPHA, person_colour
+from mvpose_ros.core.drawing.colours import MIN_ALPHA, person_colour
 from mvpose_ros.core.geometry.body import BONES, TOP_HEAD
 from mvpose_ros.view.scene import LABEL_CLEARANCE_M, skeleton_scene
 from foxglove_decode import decode

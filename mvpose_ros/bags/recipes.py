@@ -25,18 +25,17 @@ from msg_adapters.image_msg import image_to_compressed_msg, image_to_msg
 from msg_adapters.openpose_msg import openpose_to_msg
 from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_frame
+from mvpose_ros.core.datasets.shelf_campus import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
+                                                   load_actors_gt)
 from mvpose_ros.core.detection.image_file import read_image
-from mvpose_ros.core.evaluation.crowd_openpose import crowd_openpose
-from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, SHELF_TEST_FRAMES, dataset_cameras, dataset_dir,
-                                                 load_actors_gt)
-from mvpose_ros.core.detection.openpose import read_body25
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
-from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.geometry import lens
-from mvpose_ros.core.detection.openpose import OpenPoseFrame
+from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.bump import axis_rotation, bumped_camera, bumped_pixels
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
+from mvpose_ros.core.scenarios.crowd_openpose import crowd_openpose
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
 
 # Part of every bag's fingerprint: bump it when a recipe's output changes for the same inputs,
 # so bags made by older code count as out of date.

@@ -18,7 +18,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 
 from msg_adapters.cdr_header import NS, header_stamp_ns
 from mvpose_ros.core.association.approximate_sync import ApproximateSync
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE
 
 FRAME_PERIOD_NS = round(1e9 / FRAME_RATE)  # the datasets' frame f has stamp f * FRAME_PERIOD_NS
 

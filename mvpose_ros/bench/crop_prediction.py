@@ -85,7 +85,7 @@ def frame_coverage(cameras: Sequence[Camera], before: FrameResult, earlier: Fram
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: print the coverage of the Shelf clip's crops."""
     from mvpose_ros.bench.runs import graph_config_from
-    from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt_2d
+    from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir, load_actors_gt_2d
     from mvpose_ros.core.evaluation.offline import shelf_openpose
     from mvpose_ros.core.stage import Stage3D
     from mvpose_ros.package_files import package_path

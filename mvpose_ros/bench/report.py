@@ -59,13 +59,14 @@ def print_tables(results: Sequence[dict], out: TextIO) -> None:
     print('-' * len(head), file=out)
     for r in results:
         c = r['config']
-        win = str(c['window']) if c['window'] else 'all'
+        win = str(c['settings']['window']) if c['settings']['window'] else 'all'
         if 'error' in r:
             print(f'{c["name"]:24s} failed: {r["error"]}', file=out)
             continue
         f = figures(r)
         cells = ' '.join(f'{f["ms"][n]:9.2f}' if n in f['ms'] else f'{"-":>9s}' for n in names)
-        print(f'{c["name"]:24s} {r["cameras"]:4d} {r["people_3d"]:6.1f} {c["hypotheses"]:3d} {win:>4s} {cells} '
+        m = c['settings']['hypotheses']
+        print(f'{c["name"]:24s} {r["cameras"]:4d} {r["people_3d"]:6.1f} {m:3d} {win:>4s} {cells} '
               f'{f["total_ms"]:8.2f} {f["fps"]:7.1f} {f["fps_from_2d"]:7.1f}', file=out)
     print('stages: ' + '; '.join(f'{SHORT.get(n, n)} = {stage_label(n, names)}' for n in names), file=out)
     notes = []
@@ -115,9 +116,10 @@ def print_default(result: dict, out: TextIO) -> None:
     f = figures(result)
     names = stage_order(result['stages_s'])
     c = result['config']
+    stage = c['settings']
     print(f'\n{c["name"]}: {result["frames"]} frames, {result["cameras"]} cameras, {result["people_3d"]:.2f} 3D people '
-          f'per frame; window {c["window"]}, lag {c["lag"]}, M {c["hypotheses"]}, {c["bp_hypotheses"]} in BP, '
-          f'heatmap cells {c["stride"]:g} px', file=out)
+          f'per frame; window {stage["window"]}, lag {stage["lag"]}, M {stage["hypotheses"]}, '
+          f'{stage["bp_hypotheses"]} in BP, heatmap cells {c["stride"]:g} px', file=out)
     for n in names:
         ms = f['ms'][n]
         print(f'  {stage_label(n, names):32s} {ms:8.2f} ms/frame {100 * ms / f["total_ms"]:5.1f} %', file=out)
@@ -167,14 +169,14 @@ def print_crowds(results: Sequence[dict], out: TextIO) -> None:
 
 
 def _sweep_value(result: dict, sweep: str) -> float:
-    c = result['config']
-    return {'cameras': result['cameras'], 'people': result['people_3d'], 'window': c['window'] or result['frames'],
-            'M': c['hypotheses']}[sweep]
+    stage = result['config']['settings']
+    return {'cameras': result['cameras'], 'people': result['people_3d'], 'window': stage['window'] or result['frames'],
+            'M': stage['hypotheses']}[sweep]
 
 
 def write_plots(results: Sequence[dict], output: Path) -> list[Path]:
     """One PNG per sweep run: time per frame of each stage and the total against the setting."""
-    from mvpose_ros.core.evaluation.plot import Series, line_plot
+    from mvpose_ros.core.drawing.plot import Series, line_plot
     titles = {'cameras': ('cameras', 'cameras (the first k of Shelf\'s 5)'),
               'people': ('people', '3D people per frame (scene copies; measured)'),
               'window': ('window', 'window length (frames; lag = window // 2)'),

@@ -6,7 +6,7 @@ the node graph streams it: grouping and per-person heatmaps (the detector nodes'
 network), then core.stage.Stage3D (association, sampling, data term, factor tables, BP and
 decoding over the sliding window). Rows: the graph's settings (config/shelf.yaml) and the
 defaults (the offline evaluator's window); sweeps change one setting of the graph row: the first k
-cameras; people multiplied by shifted copies of the scene (core.evaluation.crowd); window length (lag =
+cameras; people multiplied by shifted copies of the scene (core.scenarios.crowd); window length (lag =
 window // 2); M, hypotheses per joint. A paced row feeds the graph row's 2D people at a camera rate
 and sleeps between frames, as a node waits for its next message: code that has not just run takes
 longer than back to back, and that is the time a frame costs in the graph.
@@ -20,18 +20,20 @@ import resource
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.crowd import multiply_scene
+from mvpose_ros.core.datasets.shelf_campus import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.offline import GROUPING, as_predictions, detect_sequence, shelf_openpose_raw
 from mvpose_ros.core.evaluation.pcp import Evaluation, evaluate
+from mvpose_ros.core.scenarios.crowd import multiply_scene
 from mvpose_ros.core.stage import ALL_PARAMETERS, Stage3D, StageConfig
 from mvpose_ros.graph.memory import rss_kib
+from mvpose_ros.package_files import package_path
 
 OTHER = 'other (untimed)'  # wall time no core timer covers
 
@@ -43,49 +45,44 @@ RESULT_TAG = 'MVPOSE-BENCH-RESULT '
 # The graph's parameter file, in the checkout or where colcon / pip install the package's config.
 GRAPH_CONFIG = 'config/shelf.yaml'
 
-_STAGE = StageConfig().to_params()
-
 
 @dataclass(frozen=True)
 class RunConfig:
-    """One benchmark run: which frames, cameras and people, and the stage's flat parameters
-    (core.stage names; window 0 = the whole clip) and heatmap cell size. Defaults: the
-    configuration dataclasses' own."""
+    """One benchmark run: which frames, cameras and people, the heatmap cell size, and `settings`,
+    the 3D stage's flat parameters as the nodes take them (every core.stage name; window 0 = the
+    whole clip; by default StageConfig's own)."""
 
     name: str = 'offline (mvpose-eval)'
     sweep: str = ''  # '' for the main rows, else the swept setting
     frames: int = len(SHELF_TEST_FRAMES)
     cameras: int = 5
     people: float | None = None  # target 3D people per frame (scene copies); None = the scene
-    window: int = _STAGE['window']
-    lag: int = _STAGE['lag']
-    hypotheses: int = _STAGE['hypotheses']
-    bp_hypotheses: int = _STAGE['bp_hypotheses']
-    slide_iterations: int = _STAGE['slide_iterations']
-    iterations: int = _STAGE['iterations']
-    threads: int = _STAGE['threads']
     stride: float = OpenPoseDetectorConfig.stride
-    terms: tuple[str, ...] = tuple(_STAGE['terms'])
-    head_model: str = _STAGE['head_model']
-    seed: int = _STAGE['seed']
     pcp: bool = True
     pace: float = 0.0  # Hz the 2D people are fed at, sleeping between frames; 0: back to back
+    settings: dict[str, Any] = field(default_factory=lambda: StageConfig().to_params())
 
     @classmethod
     def from_dict(cls, d: dict) -> RunConfig:
         known = {f.name for f in fields(cls)}
-        d = {k: v for k, v in d.items() if k in known}
-        if 'terms' in d:
-            d['terms'] = tuple(d['terms'])
-        return cls(**d)
+        return cls(**{k: v for k, v in d.items() if k in known})
+
+    def with_settings(self, **changes: Any) -> RunConfig:
+        """This run with some of the stage's parameters changed."""
+        unknown = set(changes) - set(ALL_PARAMETERS)
+        if unknown:
+            raise ValueError(f'not parameters of the 3D stage: {sorted(unknown)}')
+        return replace(self, settings={**self.settings, **changes})
 
     def key(self) -> tuple:
         """What makes two runs the same measurement (name and sweep aside)."""
-        return tuple(v for k, v in sorted(asdict(self).items()) if k not in ('name', 'sweep'))
+        run = tuple(v for k, v in sorted(asdict(self).items()) if k not in ('name', 'sweep', 'settings'))
+        stage = self.stage().to_params()
+        return run + tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in sorted(stage.items()))
 
     def stage(self) -> StageConfig:
         """The 3D stage's configuration of this run."""
-        return StageConfig.from_params({k: v for k, v in asdict(self).items() if k in ALL_PARAMETERS})
+        return StageConfig.from_params(self.settings)
 
     def detector(self) -> OpenPoseDetectorConfig:
         return replace(OpenPoseDetectorConfig(), stride=self.stride)
@@ -97,18 +94,13 @@ def graph_config_from(path: str | Path) -> RunConfig:
     params = load_params(path)
     det = next((v for k, v in params.items() if k.endswith('heatmap_detector')), {})
     bp = params.get('bp_solver', {})
-    known = {f.name for f in fields(RunConfig)} & set(ALL_PARAMETERS)
-    settings = {k: tuple(v) if k == 'terms' else v for k, v in bp.items() if k in known}
-    return RunConfig(name='graph (default)', stride=float(det.get('stride', RunConfig.stride)), **settings)
+    return RunConfig(name='graph (default)', stride=float(det.get('stride', RunConfig.stride))).with_settings(
+        **{k: v for k, v in bp.items() if k in ALL_PARAMETERS})
 
 
 def default_graph_config() -> RunConfig:
     """The graph row from the package's config/shelf.yaml (checkout or installed share folder)."""
-    checkout = Path(__file__).resolve().parents[2] / GRAPH_CONFIG
-    if checkout.is_file():
-        return graph_config_from(checkout)
-    from ament_index_python.packages import get_package_share_directory
-    return graph_config_from(Path(get_package_share_directory('mvpose_ros')) / GRAPH_CONFIG)
+    return graph_config_from(package_path(GRAPH_CONFIG))
 
 
 OFFLINE = RunConfig()
@@ -241,9 +233,9 @@ def plan(base: RunConfig, frames: int, scaling: str, given: dict[str, tuple[int,
                 target = None if v <= SCENE_PEOPLE else float(v)
                 cfg = replace(sweep_base, people=target, name=f'people~{v}')
             elif sweep == 'window':
-                cfg = replace(sweep_base, window=v, lag=v // 2, name=f'window={v}')
+                cfg = replace(sweep_base.with_settings(window=v, lag=v // 2), name=f'window={v}')
             else:
-                cfg = replace(sweep_base, hypotheses=v, name=f'M={v}')
+                cfg = replace(sweep_base.with_settings(hypotheses=v), name=f'M={v}')
             runs.append(replace(cfg, sweep=sweep))
     return runs
 

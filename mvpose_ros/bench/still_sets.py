@@ -18,9 +18,10 @@ import numpy as np
 from mvpose_ros.core.detection.image_file import read_image
 from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector, PendingSet
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
-from mvpose_ros.core.evaluation.colours import person_colour
-from mvpose_ros.core.evaluation.datasets import GroundTruth, data_root
-from mvpose_ros.core.evaluation.overlay import overlay
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
+from mvpose_ros.core.defaults import data_root
+from mvpose_ros.core.drawing.colours import person_colour
+from mvpose_ros.core.drawing.overlay import overlay
 from mvpose_ros.core.evaluation.pcp import FORMS, evaluate, format_table, match_actors
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.geometry.body import JOINT_NAMES, NUM_JOINTS, UP

@@ -25,7 +25,7 @@ import numpy as np
 from mvpose_ros.bench import report
 from mvpose_ros.bench.runs import (QUICK_FRAMES, RESULT_TAG, SCENE_PEOPLE, RunConfig, default_graph_config,
                                    graph_config_from, plan, profile_run, run_config, run_in_process, two_processes)
-from mvpose_ros.core.evaluation.datasets import SHELF_TEST_FRAMES, dataset_dir
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir
 
 
 def _ints(text: str) -> tuple[int, ...]:

@@ -19,32 +19,23 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Sequence, TextIO
 
-import numpy as np
-
+from mvpose_ros.core.datasets.shelf_campus import SHELF_ACTORS, GroundTruth
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig
-from mvpose_ros.core.evaluation.campus import campus_sequence
-from mvpose_ros.core.evaluation.error_sources import format_error_sources, head_offsets, wrong_endpoints
-from mvpose_ros.core.evaluation.datasets import (CAMPUS_ACTORS, SHELF_ACTORS, SHELF_TEST_FRAMES, GroundTruth,
-                                                 dataset_dir, load_actors_gt)
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
+from mvpose_ros.core.evaluation.clips import load_clip, shelf_ground_truth, thinned
 from mvpose_ros.core.evaluation.identities import identity_report
-from mvpose_ros.core.evaluation.offline import Prepared, as_predictions, drop_frames, infer, prepare, shelf_openpose
-from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table, match_actors
-from mvpose_ros.core.evaluation.confidence import confidence_samples, format_confidence_report, plot_confidence_report
+from mvpose_ros.core.evaluation.offline import as_predictions, infer, prepare, shelf_openpose
+from mvpose_ros.core.evaluation.pcp import PAPER_CAMPUS_AVERAGE, PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.predictions import read_results, write_predictions
-from mvpose_ros.core.evaluation.ring import RingConfig, ring_sequence
+from mvpose_ros.core.evaluation.reports import (ablation_lines, confidence_report, error_sources_report, speed_report,
+                                                summary)
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.inference.hypotheses import SINGLE_VIEW_DEPTHS, UNSEEN_JOINTS
 from mvpose_ros.core.inference.window import TERMS
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
+from mvpose_ros.core.scenarios.ring import RingConfig
 from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, SOLVER_PARAMETERS, StageConfig
 from mvpose_ros.core.timing import StageTimer
-from mvpose_ros.core.types import Sequence2D
-
-# The paper's ablation rows (its "all terms" is data + temporal + collision).
-ABLATION = (('data only', ('data',)), ('+temporal', ('data', 'temp')), ('+collision', ('data', 'col')),
-            ('all (data+temp+col)', ('data', 'temp', 'col')), ('+limb (ours)', ('data', 'temp', 'col', 'limb')))
-PAPER_ABLATION = {'data only': (86.75, 84.52, 90.68), '+temporal': (88.31, 85.26, 91.30),
-                  '+collision': (86.66, 84.77, 90.68), 'all (data+temp+col)': (88.34, 85.26, 91.30)}
+from mvpose_ros.core.types import FrameResult, Sequence2D
 
 
 def _terms(text: str) -> tuple[str, ...]:
@@ -64,7 +55,7 @@ def _heights(text: str) -> tuple[float, ...]:
 
 # `mvpose-eval ring` options -> (RingConfig field, type, help)
 RING_OPTIONS: dict[str, tuple[str, Any, str]] = {
-    '--ring-cameras': ('cameras', int, 'cameras on the circle around the actors (core.evaluation.ring)'),
+    '--ring-cameras': ('cameras', int, 'cameras on the circle around the actors (core.scenarios.ring)'),
     '--ring-noise': ('noise_px', float, "std of every projected keypoint's noise, px"),
     '--ring-radius': ('radius', float, "the cameras' distance from the actors' centre, horizontally, m"),
     '--ring-heights': ('heights', _heights, "the cameras' heights above the actors' centre, m, comma separated, "
@@ -136,60 +127,24 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _summary(ev) -> str:
-    return (f'strict {ev.frame_weighted("strict"):6.2f} frame-weighted / {ev.actor_average("strict"):6.2f} '
-            f'actor-average | lenient {ev.frame_weighted("lenient"):6.2f} / {ev.actor_average("lenient"):6.2f}'
-            f' | MPJPE {ev.mpjpe_all:5.1f} mm')
-
-
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     out = out or sys.stdout
     config = StageConfig.from_params(vars(args))
-    if args.dataset == 'shelf':
-        gt = load_actors_gt(dataset_dir('shelf', args.data_root) / 'actorsGT.mat', SHELF_TEST_FRAMES)
-        actors, reference = SHELF_ACTORS, PAPER_SHELF_PCP
+    detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
     drop = FrameDrop(args.drop_every, args.drop_fraction, args.drop_seed)
     if args.score:
-        if args.dataset != 'shelf':
-            raise ValueError('--score is for shelf')
-        results = [r for r, _ in read_results(args.score)]
-        ev = evaluate(as_predictions(results), gt, actors)
-        print(f'{args.score}\n{format_table(ev, reference)}\n{_summary(ev)}', file=out)
-        print('\n'.join(identity_report(results, gt, actors).lines()), file=out)
-        if args.confidence_report:
-            _confidence_report(results, gt, actors, args.confidence_report, out)
-        if args.error_sources:
-            detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
-            _error_sources(results, gt, actors, shelf_openpose(args.data_root, detector), out)
-        return 0
+        return _score(args, detector, out)
     t0 = time.perf_counter()
-    if args.dataset == 'shelf':
-        detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
-        seq = shelf_openpose(args.data_root, detector)
-    elif args.dataset == 'campus':
-        seq, gt, head_model = campus_sequence(args.data_root, args.campus_dir)
-        actors, reference = CAMPUS_ACTORS, None
-        if args.campus_dir is None:
-            print('campus: no CampusSeq1 folder given; 2D people are the 3 ground-truth frames projected into '
-                  'the cameras (an oracle: checks geometry, inference and scoring, not detection)', file=out)
-    else:
-        ring = RingConfig(**{name: getattr(args, option[2:].replace('-', '_'))
-                             for option, (name, _, _) in RING_OPTIONS.items()})
-        seq, gt, head_model = ring_sequence(args.data_root, ring)
-        actors, reference = SHELF_ACTORS, None
-        heights = ', '.join(f'{h:g}' for h in ring.heights)
-        print(f'ring: {ring.cameras} synthetic cameras {ring.radius:g} m around the actors of the Shelf test frames '
-              f'({heights} m above their centre, {ring.fov_deg:g} degrees), the annotated '
-              f'joints projected with {ring.noise_px:g} px of noise and one of them {ring.outlier_px:g} px off in '
-              f'{100 * ring.outlier_share:g} % of the views, {100 * ring.miss_share:g} % of the keypoints missed, '
-              f'walking at {ring.walk_speed:g} m/s '
-              f'(an oracle: checks how the 3D stage scales with cameras, not detection)', file=out)
-    if args.dataset != 'shelf':  # their 2D people come with the head model they need
-        config = replace(config, solver=replace(config.solver, head_model=head_model))
-    if drop:
-        n_all = len(seq.frames)
-        seq = drop_frames(seq, drop)
-        gt = _restricted(gt, seq.frames)
+    ring = RingConfig(**{name: getattr(args, option[2:].replace('-', '_'))
+                         for option, (name, _, _) in RING_OPTIONS.items()}) if args.dataset == 'ring' else None
+    clip = load_clip(args.dataset, args.data_root, detector, args.campus_dir, ring)
+    if clip.note:
+        print(clip.note, file=out)
+    if clip.head_model is not None:  # an oracle's 2D people come with the head model they need
+        config = replace(config, solver=replace(config.solver, head_model=clip.head_model))
+    n_all = len(clip.seq.frames)
+    clip = thinned(clip, drop) if drop else clip
+    seq, gt, actors = clip.seq, clip.gt, clip.actors
     prepared = prepare(seq, config)
     bp_timer = StageTimer()
     real_time = not args.evenly_spaced
@@ -203,77 +158,46 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
               f'fraction {args.drop_fraction}, seed {args.drop_seed}), scored on the {len(seq.frames)} left; '
               f'temporal term {"with the real times" if real_time else "blind to the times (evenly spaced)"}, '
               f'max gap {args.max_gap} s', file=out)
-    print(format_table(ev, reference), file=out)
-    print(_summary(ev), file=out)
+    print(f'{format_table(ev, clip.reference)}\n{summary(ev)}', file=out)
     print('\n'.join(identity_report(results, gt, actors).lines()), file=out)
     if args.dataset == 'campus':
         print(f'paper: Campus average {PAPER_CAMPUS_AVERAGE}', file=out)
-    _print_speed(seq, prepared, bp_timer, out)
+    print(speed_report(seq, prepared, bp_timer), file=out)
     if args.predictions:
         args.predictions.parent.mkdir(parents=True, exist_ok=True)
         with open(args.predictions, 'w', encoding='utf-8') as f:
             n = write_predictions(results, f)
         print(f'wrote {n} frames to {args.predictions}', file=out)
-    if args.confidence_report:
-        if args.dataset != 'shelf':
-            raise ValueError('--confidence-report is for shelf')
-        _confidence_report(results, gt, actors, args.confidence_report, out)
-    if args.error_sources:
-        if args.dataset != 'shelf':
-            raise ValueError('--error-sources is for shelf')
-        _error_sources(results, gt, actors, seq, out)
+    _shelf_reports(args, results, gt, seq, out)
     if not args.no_ablation:
-        _print_ablation(prepared, config, gt, actors, args.dataset == 'shelf', out, real_time)
+        for line in ablation_lines(prepared, config, gt, actors, args.dataset == 'shelf', real_time):
+            print(line, file=out)
     print(f'total {time.perf_counter() - t0:.1f} s', file=out)
     return 0
 
 
-def _print_speed(seq: Sequence2D, prepared: Prepared, bp_timer: StageTimer, out) -> None:
-    stages = {**seq.seconds, **prepared.timer.seconds, **bp_timer.seconds}
-    n = len(seq.frames)
-    total = sum(stages.values())
-    print('3D stage time per frame (all cameras):', file=out)
-    for name, sec in stages.items():
-        print(f'  {name:24s} {1000 * sec / n:7.2f} ms', file=out)
-    print(f'  {"total":24s} {1000 * total / n:7.2f} ms  -> {n / total:.1f} frames/s', file=out)
+def _score(args: argparse.Namespace, detector: OpenPoseDetectorConfig, out: TextIO) -> int:
+    """--score: the predictions file scored against Shelf's annotation, with the reports asked for."""
+    if args.dataset != 'shelf':
+        raise ValueError('--score is for shelf')
+    gt = shelf_ground_truth(args.data_root)
+    results = [r for r, _ in read_results(args.score)]
+    ev = evaluate(as_predictions(results), gt, SHELF_ACTORS)
+    print(f'{args.score}\n{format_table(ev, PAPER_SHELF_PCP)}\n{summary(ev)}', file=out)
+    print('\n'.join(identity_report(results, gt, SHELF_ACTORS).lines()), file=out)
+    _shelf_reports(args, results, gt, shelf_openpose(args.data_root, detector) if args.error_sources else None, out)
+    return 0
 
 
-def _confidence_report(results, gt: GroundTruth, actors: Sequence[int], folder: Path, out) -> None:
-    samples = confidence_samples(results, gt, actors)
-    print('\n' + format_confidence_report(samples), file=out)
-    for path in plot_confidence_report(samples, folder):
-        print(f'wrote {path}', file=out)
-
-
-def _error_sources(results, gt: GroundTruth, actors: Sequence[int], seq: Sequence2D, out) -> None:
-    matches = match_actors(as_predictions(results), gt, actors)
-    endpoints = wrong_endpoints(matches, actors, seq, gt.frames)
-    print('\n' + format_error_sources(endpoints, head_offsets(matches, actors), actors), file=out)
-
-
-def _restricted(gt: GroundTruth, frames: Sequence[int]) -> GroundTruth:
-    """The ground truth of `frames` only (a subset of gt.frames)."""
-    rows = np.searchsorted(gt.frames, frames)
-    if not np.array_equal(gt.frames[rows], frames):
-        raise ValueError('frames to score are not all in the ground truth')
-    return replace(gt, frames=gt.frames[rows], poses=gt.poses[rows])
-
-
-def _print_ablation(prepared: Prepared, config: StageConfig, gt, actors: Sequence[int], paper: bool, out,
-                    real_time: bool = True) -> None:
-    print('\nAblation (All PCP per actor, strict | lenient; same hypotheses, same window):', file=out)
-    header = f'{"terms":22s} ' + ' '.join(f'A{a + 1:d} str  A{a + 1:d} len' for a in actors)
-    print(header + '   avg-fw str/len   avg-act str/len' + ('   paper A1/A2/A3' if paper else ''), file=out)
-    for name, terms in ABLATION:
-        results = infer(prepared, replace(config.solver.inference, terms=terms), config.solver.head_model,
-                        real_time=real_time)
-        ev = evaluate(as_predictions(results), gt, actors)
-        cells = ' '.join(f'{ev.pcp("strict", a):6.2f} {ev.pcp("lenient", a):6.2f}' for a in actors)
-        row = (f'{name:22s} {cells}   {ev.frame_weighted("strict"):6.2f}/{ev.frame_weighted("lenient"):6.2f}'
-               f'   {ev.actor_average("strict"):6.2f}/{ev.actor_average("lenient"):6.2f}')
-        if paper and name in PAPER_ABLATION:
-            row += '   ' + '/'.join(f'{v:.2f}' for v in PAPER_ABLATION[name])
-        print(row, file=out)
+def _shelf_reports(args: argparse.Namespace, results: list[FrameResult], gt: GroundTruth, seq: Sequence2D | None,
+                   out: TextIO) -> None:
+    """--confidence-report and --error-sources (Shelf only: they need its detections and annotation)."""
+    if (args.confidence_report or args.error_sources) and args.dataset != 'shelf':
+        raise ValueError(f'--{"confidence-report" if args.confidence_report else "error-sources"} is for shelf')
+    if args.confidence_report:
+        print(confidence_report(results, gt, SHELF_ACTORS, args.confidence_report), file=out)
+    if args.error_sources:
+        print(error_sources_report(results, gt, SHELF_ACTORS, seq), file=out)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

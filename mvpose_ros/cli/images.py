@@ -22,7 +22,8 @@ from mvpose_ros.core.detection.detector_settings import ONNX_PARAMETERS, Detecto
 from mvpose_ros.core.detection.onnx_detector import OnnxPoseDetector
 from mvpose_ros.core.detection.tracked_crops import CropPlanner
 from mvpose_ros.core.detection.upright import upright_turns
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.body import HEAD_MODELS
 from mvpose_ros.core.stage import SOLVER_PARAMETERS, Stage3D, StageConfig
 

@@ -20,8 +20,8 @@ from typing import Sequence, TextIO
 
 from mvpose_ros.bags.io import bag_size, bag_summary, write_bag
 from mvpose_ros.bags.recipes import RECIPES, RIG_FILE, CameraFault, Recipe, make_recipe
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.bump import AXES
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
 
 RECIPE_KEY = 'mvpose_recipe'
 FINGERPRINT_KEY = 'mvpose_fingerprint'

@@ -22,9 +22,10 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import data_root, dataset_dir, load_actors_gt
+from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
+from mvpose_ros.core.defaults import data_root
+from mvpose_ros.core.drawing.video import Scene, render_frame, virtual_camera, write_video
 from mvpose_ros.core.evaluation.predictions import read_results
-from mvpose_ros.core.evaluation.video import Scene, render_frame, virtual_camera, write_video
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.package_files import package_path
 

@@ -148,6 +148,28 @@ def parameter_specs(names: Mapping[str, str]) -> list[Param]:
                   live=name in LIVE_PARAMETERS) for name, description in names.items()]
 
 
+class LiveStageParameters:
+    """A node's parameter values as they change while it runs, through the one route of every
+    node that runs part of the stage: the values with a change must give a StageConfig
+    (from_params), or the change is refused with from_params' reason."""
+
+    def __init__(self, values: Mapping[str, Any]) -> None:
+        self.values = dict(values)
+
+    def refusal(self, changes: Mapping[str, Any]) -> str | None:
+        """Why `changes` cannot be taken (None: they can)."""
+        try:
+            StageConfig.from_params({**self.values, **changes})
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    def apply(self, changes: Mapping[str, Any]) -> StageConfig:
+        """Take `changes` (checked by refusal) and return the configuration they give."""
+        self.values = {**self.values, **changes}
+        return StageConfig.from_params(self.values)
+
+
 class Stage3D:
     """Associate and solve, streaming: push each frame's 2D people of every camera, get the
     decoded frames that are due. `timer` holds the time of every step ('association', then the

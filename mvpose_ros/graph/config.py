@@ -15,8 +15,7 @@ from typing import Mapping, Sequence, get_type_hints
 
 import yaml
 
-from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, max_skew_or_default
 from mvpose_ros.core.geometry.rig import Rig
 from mvpose_ros.topics import BUNDLES, OPENPOSE, PEOPLE2D, SKELETONS, camera_namespace, camera_topic
 
@@ -240,9 +239,7 @@ def played_connections(cameras: int, input_topic: str = OPENPOSE) -> dict[str, S
 
 def unknown_nodes(params: Mapping[str, object], nodes: Sequence[NodeSpec]) -> list[str]:
     """Sections of the parameter file that match none of `nodes` (typos) besides the runner's."""
-    known = {RUNNER_SECTION, ALL_NODES}
-    for spec in nodes:
-        known |= {spec.executable, f'/{spec.name}', f'/**/{spec.executable}'}
+    known = {RUNNER_SECTION}.union(*(section_keys(spec.executable, spec.namespace) for spec in nodes))
     return sorted(set(params) - known)
 
 
@@ -296,7 +293,7 @@ def rig_sync(params_list: Sequence[Mapping[str, Mapping[str, object]]],
     sync_timeout 0.5 s)."""
     section = node_section(params_list, 'association')
     rate = rig_frame_rate(params_list) if frame_rate is None else frame_rate
-    max_skew = float(section.get('max_skew', 0.0)) or default_max_skew(rate)
+    max_skew = max_skew_or_default(float(section.get('max_skew', 0.0)), rate)
     return max_skew, float(section.get('sync_timeout', SYNC_TIMEOUT_S))
 
 
@@ -311,12 +308,20 @@ def sets_frame_rate(params_list: Sequence[Mapping[str, Mapping[str, object]]]) -
                if node != RUNNER_SECTION)
 
 
+def section_keys(node: str, namespace: str = '') -> set[str]:
+    """The keys of a parameter file's sections that ROS hands the node `node` in `namespace`: every
+    node's '/**', its bare name, its full name and '/**/<node>' (any namespace)."""
+    full = f'/{namespace}/{node}' if namespace else f'/{node}'
+    return {ALL_NODES, node, full, f'/**/{node}'}
+
+
 def node_section(params_list: Sequence[Mapping[str, Mapping[str, object]]], node: str) -> dict[str, object]:
-    """The parameters these files give the node `node` (in any namespace), a later section winning."""
+    """The parameters these files give the node `node` (in the root namespace), a later section winning."""
+    keys = section_keys(node)
     section: dict[str, object] = {}
     for params in params_list:
         for key, values in params.items():
-            if key in (ALL_NODES, node, f'/{node}', f'/**/{node}'):
+            if key in keys:
                 section |= dict(values)
     return section
 

@@ -35,7 +35,7 @@ from msg_adapters.diagnostics_msg import msg_to_statuses
 from msg_adapters.skeleton_msg import Skeletons, msg_to_skeletons
 from msg_adapters.stamp import frame_of_stamp, stamp_ns
 from mvpose_ros.bags.io import read_bag
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.evaluation.predictions import frame_line
 from mvpose_ros.core.health.links import unmatched_links
 from mvpose_ros.core.health.refusals import refusals_of

@@ -16,9 +16,9 @@ import numpy as np
 
 from msg_adapters.skeleton_msg import Skeletons
 from mvpose_ros.core.association.approximate_sync import FRAME_RATE_EFFECT, rate_differs
-from mvpose_ros.core.evaluation.datasets import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
+from mvpose_ros.core.datasets.shelf_campus import SHELF_ACTORS, SHELF_TEST_FRAMES, dataset_dir, load_actors_gt
 from mvpose_ros.core.evaluation.identities import identity_report
+from mvpose_ros.core.evaluation.pcp import PAPER_SHELF_PCP, evaluate, format_table
 from mvpose_ros.core.evaluation.predictions import frame_line, read_predictions, read_results
 from mvpose_ros.core.inference.window import FrameResult
 from mvpose_ros.graph.config import GraphSettings

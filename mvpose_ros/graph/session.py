@@ -32,7 +32,7 @@ from msg_adapters.definitions import message_class
 from mvpose_ros.bags.io import bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import SyncSet, group_sets, loop_offset_ns
 from mvpose_ros.core.association.approximate_sync import rate_differs, stamp_rate
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
+from mvpose_ros.core.defaults import FRAME_RATE, data_root
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.graph.config import (RIG_RUNNER_KEYS, RIG_TEMPLATE, RUNNER_SECTION, GraphSettings, NodeSpec, RigRun,
                                      detector_backend, graph_nodes, graph_settings, load_params, output_topics,
@@ -45,9 +45,9 @@ from mvpose_ros.graph.report import (OUTPUT_NAME, count_under_sets, frame_of, fr
 from mvpose_ros.graph.respawn import RESPAWN_DELAY_S, RESPAWN_LIMIT, Respawner
 from mvpose_ros.graph.runner import PLAYER, Outcome, Supervision, input_stamps, run_graph, save_predictions
 from mvpose_ros.graph.startup import process_start_ns, startup_line
+from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
 from mvpose_ros.nodes.heatmap_detector import INPUT_TOPICS
 from mvpose_ros.package_files import package_path
-from mvpose_ros.graph.topic_recorder import Recorded, TopicRecorder, recorded_inputs, recorded_outputs
 from mvpose_ros.topics import CAMERA_INFO, OVERLAY, PEOPLE2D, camera_namespace, camera_topic
 
 PROG = 'mvpose-graph'

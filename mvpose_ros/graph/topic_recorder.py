@@ -32,7 +32,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.definitions import type_name, typestore
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.image_topics import image_type_by_name

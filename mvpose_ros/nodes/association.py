@@ -29,16 +29,15 @@ from msg_adapters.cdr_header import CLOUD_OVERHEAD, Oversize, deserialise_cloud,
 from msg_adapters.people_msg import max_people_bytes, msg_to_wire_people, wire_bundles_to_msg
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros import topics
-from mvpose_ros.core.association.approximate_sync import (SYNC_TIMEOUT_S, ApproximateSync, Drop, SyncedSet,
-                                                          default_max_skew)
+from mvpose_ros.core.association.approximate_sync import ApproximateSync, Drop, SyncedSet
 from mvpose_ros.core.association.associator import Associator
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, max_skew_or_default
 from mvpose_ros.core.geometry.frame_id import CameraFrameId
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.parameters import Param
-from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, StageConfig, parameter_specs
+from mvpose_ros.core.stage import ASSOCIATION_PARAMETERS, LiveStageParameters, StageConfig, parameter_specs
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.nodes.health import NodeHealth
 from mvpose_ros.nodes.runtime import (DATA_QOS, RigIntrinsics, StartupError, declare, live_parameters,
@@ -81,8 +80,8 @@ class AssociationNode(Node):
         self._rig = rig
         self._names = rig.names
         self._frame_rate = p['frame_rate']
-        self._params = p
-        max_skew = p['max_skew'] or default_max_skew(p['frame_rate'])
+        self._live = LiveStageParameters(p)
+        max_skew = max_skew_or_default(p['max_skew'], p['frame_rate'])
         # a camera whose intrinsics are still unknown (no CameraInfo yet) is left out of the sets
         self._intrinsics = None if rig.calibrated else RigIntrinsics(self, rig)
         self._associator = Associator(rig.calibrated_cameras() if rig.calibrated else self._intrinsics.known,
@@ -100,7 +99,7 @@ class AssociationNode(Node):
         self._health = NodeHealth(self, self._statuses)
         live_parameters(self, ['sync_timeout', 'max_skew',
                                *[s.name for s in parameter_specs(ASSOCIATION_PARAMETERS) if s.live]],
-                        self._check, self._retune)
+                        self._live.refusal, self._retune)
         self._state = Path(p['state_dir'], self.get_fully_qualified_name().strip('/').replace('/', '_') + '.json') \
             if p['state_dir'] else None
         self._state_saved = -float('inf')
@@ -116,21 +115,11 @@ class AssociationNode(Node):
                                f'sync timeout {p["sync_timeout"]} s, sets of >= {p["min_cameras"]} cameras'
                                + ('' if rig.calibrated else ', intrinsics from CameraInfo'))
 
-    def _retuned(self, changes: dict[str, Any]) -> dict[str, Any]:
-        """The parameter values with the live changes."""
-        return {**self._params, **changes}
-
-    def _check(self, changes: dict[str, Any]) -> str | None:
-        try:
-            StageConfig.from_params(self._retuned(changes))
-        except ValueError as exc:
-            return str(exc)
-        return None
-
     def _retune(self, changes: dict[str, Any]) -> None:
-        self._params = p = self._retuned(changes)
-        self._sync.retune(p['sync_timeout'], p['max_skew'] or default_max_skew(self._frame_rate))
-        self._associator.retune(StageConfig.from_params(p).association)
+        config = self._live.apply(changes)
+        p = self._live.values
+        self._sync.retune(p['sync_timeout'], max_skew_or_default(p['max_skew'], self._frame_rate))
+        self._associator.retune(config.association)
 
     def _restore_ids(self, max_age: float) -> None:
         """Take over the ids' state a previous process of this node left in state_dir."""

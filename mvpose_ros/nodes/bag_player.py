@@ -28,8 +28,7 @@ from msg_adapters.definitions import message_class
 from msg_adapters.stamp import stamp_of_ns
 from mvpose_ros.bags.io import bag_size, bag_summary, has_header, read_bag
 from mvpose_ros.bags.replay import Frame, InFlight, due_s, group_frames, group_sets, looped
-from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, default_max_skew
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, default_max_skew
 from mvpose_ros.core.health.monitor import NodeMonitor, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds

@@ -12,7 +12,6 @@ Behaviour in detail (bad input, idle flush, intrinsics): docs/operations.md#bp_s
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -36,7 +35,7 @@ from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
 from mvpose_ros.core.inference.solver import Inference3D
 from mvpose_ros.core.parameters import Param
-from mvpose_ros.core.stage import SOLVER_PARAMETERS, StageConfig, parameter_specs
+from mvpose_ros.core.stage import SOLVER_PARAMETERS, LiveStageParameters, StageConfig, parameter_specs
 from mvpose_ros.core.throttled_log import ThrottledLog
 from mvpose_ros.core.types import Bundle, FrameResult
 from mvpose_ros.nodes.health import NodeHealth
@@ -85,7 +84,7 @@ class BpSolverNode(Node):
             raise StartupError(f'parameters: {exc}') from None
         if config.solver.inference.window is None:
             raise StartupError('parameter window: must be >= 1 (0, the whole clip, is for offline runs)')
-        self._config = config.solver
+        self._live = LiveStageParameters(p)
         self._world_frame = rig.world_frame
         self._n_cameras = len(rig.cameras)
         self._names = rig.names
@@ -113,7 +112,7 @@ class BpSolverNode(Node):
         live_names = [s.name for s in parameter_specs(SOLVER_PARAMETERS) if s.live] + ['idle_flush', 'marker_lifetime',
                                                                                        'max_wait']
         live_parameters(self, live_names,
-                        self._check, self._retune)
+                        self._live.refusal, self._retune)
         self._skeletons = self.create_publisher(PointCloud2, topics.SKELETONS, DATA_QOS)
         self._live_skeletons = self.create_publisher(PointCloud2, topics.SKELETONS_LIVE, DATA_QOS)
         self._dropped = self.create_publisher(Header, topics.SKELETONS_DROPPED, DATA_QOS)
@@ -133,24 +132,14 @@ class BpSolverNode(Node):
                 self._inference.cameras[c] = self._intrinsics.known[c]
         return [self._names[c] for c in sorted(cameras) if self._inference.cameras[c] is None]
 
-    def _check(self, changes: dict[str, Any]) -> str | None:
-        try:
-            self._retuned(changes)
-        except ValueError as exc:
-            return str(exc)
-        return None
-
     def _retune(self, changes: dict[str, Any]) -> None:
-        self._idle = changes.get('idle_flush', self._idle)
-        self._marker_lifetime = changes.get('marker_lifetime', self._marker_lifetime)
-        self._max_wait = changes.get('max_wait', self._max_wait)
-        self._inference.window.config = self._retuned(changes)
-
-    def _retuned(self, changes: dict[str, Any]) -> Any:
-        """The window's InferenceConfig with the live changes (ValueError when invalid)."""
-        config = self._inference.window.config
-        factors = replace(config.factors, **{k: v for k, v in changes.items() if k.startswith('collision_')})
-        return replace(config, factors=factors, max_gap=changes.get('max_gap', config.max_gap))
+        config = self._live.apply(changes)
+        p = self._live.values
+        self._idle = p['idle_flush']
+        self._marker_lifetime = p['marker_lifetime']
+        self._max_wait = p['max_wait']
+        # the stage's live parameters (collision_*, max_gap) take effect through the window's config
+        self._inference.window.config = config.solver.inference
 
     def _on_bundles(self, cdr: bytes, info: dict[str, int]) -> None:
         """A bundles message as bytes with its DDS receipt time: dropped unread when it waited longer

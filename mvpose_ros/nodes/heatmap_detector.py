@@ -42,12 +42,12 @@ from msg_adapters.openpose_msg import msg_to_openpose
 from msg_adapters.people_msg import people_to_msg
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns, stamp_of_ns
-from mvpose_ros.core.association.approximate_sync import SYNC_TIMEOUT_S, SyncedSet, default_max_skew, stamp_rate
+from mvpose_ros.core.association.approximate_sync import SyncedSet, stamp_rate
+from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, data_root, default_max_skew
 from mvpose_ros.core.detection.detector_settings import PARAMETERS, SPECS, DetectorConfig
 from mvpose_ros.core.detection.image_sets import ImageSetDetector
 from mvpose_ros.core.detection.openpose_detector import detect_people
 from mvpose_ros.core.detection.rig_sets import RigSets, SetCallbacks, SetSettings
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE, data_root
 from mvpose_ros.core.health.monitor import (InputMonitor, NodeMonitor, frame_rate_status, input_statuses,
                                             node_status)
 from mvpose_ros.core.health.refusals import Refusals

@@ -29,15 +29,14 @@ from msg_adapters.people_msg import msg_to_people
 from msg_adapters.skeleton_msg import msg_to_skeletons
 from msg_adapters.stamp import stamp_ns
 from mvpose_ros import topics
-from mvpose_ros.core.association.approximate_sync import default_max_skew
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
-from mvpose_ros.core.evaluation.colours import person_colour
-from mvpose_ros.core.evaluation.overlay import draw_caption, overlay
+from mvpose_ros.core.defaults import FRAME_RATE, max_skew_or_default
+from mvpose_ros.core.drawing.colours import person_colour
+from mvpose_ros.core.drawing.overlay import draw_caption, overlay
+from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.health.monitor import NodeMonitor, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
-from mvpose_ros.core.geometry.body import NUM_JOINTS
-from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.overlay_sets import Member, RecentByStamp, due, set_members
 from mvpose_ros.core.parameters import Param
 from mvpose_ros.core.throttled_log import ThrottledLog
@@ -79,7 +78,7 @@ class OverlayNode(Node):
         self._period = 1.0 / p['max_rate'] if p['max_rate'] else 0.0
         self._reduce = p['reduce']
         self._quality = p['jpeg_quality']
-        self._max_skew_ns = round(1e9 * (p['max_skew'] or default_max_skew(p['frame_rate'])))
+        self._max_skew_ns = round(1e9 * max_skew_or_default(p['max_skew'], p['frame_rate']))
         keep_ns, max_bytes = round(1e9 * p['keep']), round(p['max_image_mib'] * 2 ** 20)
         n = len(rig.cameras)
         self._images = [RecentByStamp(keep_ns, max_bytes) for _ in range(n)]

@@ -21,8 +21,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from mvpose_ros.bags.io import write_bag
 from mvpose_ros.bags.recipes import ForeignRig, make_recipe, rig_file_text
+from mvpose_ros.core.datasets.shelf_campus import calibration_file
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.rig import load_rig_file
-from mvpose_ros.core.evaluation.datasets import calibration_file, data_root
 from mvpose_ros.nodes.runtime import DEFAULT_RIG
 from mvpose_ros.package_files import package_path
 

@@ -25,7 +25,7 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo
 
 from msg_adapters.camera_info_msg import info_camera
-from mvpose_ros.core.evaluation.datasets import data_root
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.core.parameters import Param

@@ -13,8 +13,8 @@ from foxglove.messages import (Color, Duration, KeyValuePair, LinePrimitive, Lin
                                Quaternion, SceneEntity, SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate,
                                SpherePrimitive, TextPrimitive, Timestamp, Vector3)
 
-from mvpose_ros.core.evaluation.colours import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
-                                                person_colour)
+from mvpose_ros.core.drawing.colours import (BONE_WIDTH_M, JOINT_DIAMETER_M, TEXT_HEIGHT_M, confidence_alpha,
+                                             person_colour)
 from mvpose_ros.core.geometry.body import BONES, NUM_JOINTS, UP
 
 LABEL_CLEARANCE_M = 0.15  # the id label this far above the person's highest joint

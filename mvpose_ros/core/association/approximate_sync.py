@@ -21,12 +21,6 @@ import numpy as np
 from mvpose_ros.core.association.stamp_sync import SyncedFrame
 
 REASONS = ('late', 'duplicate', 'unmatched', 'overflow')
-SYNC_TIMEOUT_S = 0.5  # the default wait for a camera missing from a set
-
-
-def default_max_skew(frame_rate: float) -> float:
-    """The default max_skew, seconds: half a frame period of cameras running at frame_rate Hz."""
-    return 0.5 / frame_rate
 
 
 def stamp_rate(stamps: Sequence[Sequence[int]]) -> float | None:

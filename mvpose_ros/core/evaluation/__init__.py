@@ -1,1 +1,2 @@
-"""Evaluation: datasets and ground truth, PCP and MPJPE, offline runs, predictions files, overlays."""
+"""Evaluation: offline runs of the 3D stage, the predictions file, scoring (PCP, MPJPE, identities,
+confidence, error sources)."""

@@ -15,9 +15,9 @@ from typing import Sequence
 import numpy as np
 import scipy.stats
 
-from mvpose_ros.core.evaluation.datasets import GroundTruth
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
+from mvpose_ros.core.drawing.plot import Series, line_plot
 from mvpose_ros.core.evaluation.pcp import FORMS, LIMBS, _padded, limb_correct, match_actors
-from mvpose_ros.core.evaluation.plot import Series, line_plot
 from mvpose_ros.core.types import FrameResult
 
 BINS = 10

@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from mvpose_ros.core.evaluation.datasets import GroundTruth
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
 from mvpose_ros.core.types import FrameResult
 
 MAX_DISTANCE = 0.5  # m of mean joint distance: beyond it a person is not that actor

@@ -14,14 +14,15 @@ from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.detection.openpose import OpenPoseFrame, read_body25
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_people
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, dataset_dir, shelf_cameras
-from mvpose_ros.core.evaluation.frame_drops import FrameDrop
 from mvpose_ros.core.geometry.body import LIMB_BONES, LIMB_LENGTHS, SYMMETRIC_PAIRS, finalize_confidence, finalize_head
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.inference.solver import frame_centres, person_frames
 from mvpose_ros.core.inference.window import InferenceConfig, SlidingWindow
+from mvpose_ros.core.scenarios.frame_drops import FrameDrop
 from mvpose_ros.core.stage import Stage3D, StageConfig
 from mvpose_ros.core.timing import StageTimer
 from mvpose_ros.core.types import FrameResult, PersonFrame, Sequence2D

@@ -12,7 +12,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import GroundTruth
+from mvpose_ros.core.datasets.shelf_campus import GroundTruth
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 
 FORMS = ('strict', 'lenient')

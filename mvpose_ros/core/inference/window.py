@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mvpose_ros.core.compiled import kernel, kernel_array, pairwise_sum
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS
 from mvpose_ros.core.inference.bp import ChainBP, PairwiseGroup, loopy_bp, run_chains
 from mvpose_ros.core.inference.confidence import joint_confidence
@@ -49,7 +50,7 @@ class InferenceConfig:
     bp_hypotheses: int | None = 16
     slide_iterations: int | None = 1
     factors: FactorConfig = field(default_factory=FactorConfig)
-    frame_rate: float = 25.0
+    frame_rate: float = FRAME_RATE
     max_gap: float = 0.2
     threads: int = 2
 

@@ -12,8 +12,8 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from mvpose_ros.core.evaluation.colours import person_colour
-from mvpose_ros.core.evaluation.overlay import draw_ground_truth, draw_skeletons
+from mvpose_ros.core.drawing.colours import person_colour
+from mvpose_ros.core.drawing.overlay import draw_ground_truth, draw_skeletons
 from mvpose_ros.core.geometry.body import NUM_JOINTS, TOP_HEAD
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import FrameResult

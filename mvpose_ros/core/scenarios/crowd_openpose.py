@@ -1,6 +1,6 @@
 """A recorded scene's OpenPose output with shifted copies of its people: a crowd for the node graph.
 
-core.evaluation.crowd multiplies a scene at the level of 2D people, what the 3D stage takes; a
+core.scenarios.crowd multiplies a scene at the level of 2D people, what the 3D stage takes; a
 bag for the node graph carries what its detectors take, OpenPose candidates and part affinities.
 Here the same copies (crowd.choose_offsets on the same associated people) are made of those: copy k of a
 person moves each of the person's BODY25 candidates in a view by the pixel displacement of a 3D
@@ -22,9 +22,9 @@ import numpy as np
 from mvpose_ros.core.association.associator import AssociationConfig
 from mvpose_ros.core.detection.openpose import BODY25_NUM_JOINTS, BODY25_PAF_PAIRS, OpenPoseFrame
 from mvpose_ros.core.detection.openpose_detector import OpenPoseDetectorConfig, detect_grouped
-from mvpose_ros.core.evaluation.crowd import ScenePerson, choose_offsets, scene_people
 from mvpose_ros.core.geometry.body import BODY25_NAMES, INFERENCE_NAMES, SOURCE_INDEX
 from mvpose_ros.core.geometry.camera import Camera
+from mvpose_ros.core.scenarios.crowd import ScenePerson, choose_offsets, scene_people
 
 # The inference joints whose displacement the BODY25 joints without one of their own take.
 _BORROWED: dict[str, tuple[str, ...]] = {
@@ -52,7 +52,7 @@ ANCHORS = _anchors()
 class CrowdOpenPose:
     """frames[f][c]: camera c's OpenPose output of frame f with the copies; offsets (K, 3) metres,
     row 0 the original (zeros); expected and original: 3D people per frame with and without the
-    copies (as core.evaluation.crowd.MultipliedScene)."""
+    copies (as core.scenarios.crowd.MultipliedScene)."""
 
     frames: list[list[OpenPoseFrame]]
     offsets: np.ndarray

@@ -27,7 +27,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.association.associator import AssociationConfig, Associator
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE
+from mvpose_ros.core.defaults import FRAME_RATE
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rays import closest_point_to_rays
 from mvpose_ros.core.heatmap import PersonHeatmap

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mvpose_ros.core.evaluation.datasets import FRAME_RATE, SHELF_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
-from mvpose_ros.core.evaluation.video import look_at
+from mvpose_ros.core.datasets.shelf_campus import SHELF_TEST_FRAMES, GroundTruth, dataset_dir, load_actors_gt
+from mvpose_ros.core.defaults import FRAME_RATE
+from mvpose_ros.core.drawing.video import look_at
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, NUM_JOINTS, UP
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import Person2D, Sequence2D

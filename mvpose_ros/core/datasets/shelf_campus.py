@@ -1,4 +1,4 @@
-"""The Shelf and Campus datasets: where the data lives, their fixed facts, and ground-truth loading.
+"""The Shelf and Campus datasets: where their files live, their fixed facts, and ground-truth loading.
 
 Ground truth comes from the datasets' `actorsGT.mat` (MATLAB cell arrays): `actor3D{p}{f}` is a
 (14, 3) array in metres, `actor2D{p}{f}{c}` a (14, 2) array in pixels, and an absent actor is an
@@ -6,50 +6,22 @@ empty (1, 0) array. Here absence becomes NaN so that frames stack into dense arr
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from mvpose_ros.core.defaults import data_root
 from mvpose_ros.core.geometry.body import NUM_JOINTS
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.geometry.rig import Rig, load_rig_file
 from mvpose_ros.package_files import package_path
 
-DATA_ROOT_ENV = 'MVPOSE_DATA_ROOT'
-
 SHELF_TEST_FRAMES = range(300, 601)
 CAMPUS_TEST_FRAMES = [*range(350, 471), *range(650, 751)]
 SHELF_ACTORS = (0, 1, 2)
 CAMPUS_ACTORS = (0, 1, 2)
-
-FRAME_RATE = 25.0  # Hz, both datasets; frame f is stamped f / FRAME_RATE s in the bags
-
-
-def data_root(override: str | None = None) -> Path:
-    """Folder holding the shared data (`data/`, `models/`).
-
-    An explicit `override` (CLI flag) or the MVPOSE_DATA_ROOT variable is used as given and is an
-    error when missing: silently falling back to another data set would hide a typo. Without
-    either, try `../shared` beside the repository checkout, then `../shared` beside the cwd.
-    """
-    if override is not None:
-        tried = [Path(override).expanduser()]
-    elif os.environ.get(DATA_ROOT_ENV):
-        tried = [Path(os.environ[DATA_ROOT_ENV]).expanduser()]
-    else:
-        checkout = Path(__file__).resolve().parents[3]
-        tried = [checkout.parent / 'shared', Path.cwd().parent / 'shared']
-    for path in tried:
-        if path.is_dir():
-            return path
-    source = ('override' if override is not None
-              else DATA_ROOT_ENV if os.environ.get(DATA_ROOT_ENV) else 'default locations')
-    raise FileNotFoundError(
-        f'mvpose data root not found ({source}); tried: {", ".join(str(p) for p in tried)}. '
-        f'Pass a data root or set {DATA_ROOT_ENV}.')
 
 
 def dataset_dir(name: str, root: str | None = None) -> Path:
@@ -111,7 +83,7 @@ class GroundTruth:
 
 def _cells(mat_path: str | Path, key: str, frames: Sequence[int] | None) -> tuple[np.ndarray, list]:
     """Frame indices (F,) and per-actor lists of the selected cells of `key`."""
-    import scipy.io  # the one reader of MATLAB files; every node imports this module for data_root
+    import scipy.io  # the one reader of MATLAB files, loaded only where ground truth is read
     actors = scipy.io.loadmat(str(mat_path), variable_names=[key])[key][0]
     n_frames = actors[0].shape[0]
     idx = np.arange(n_frames) if frames is None else np.asarray(list(frames), dtype=int)

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from mvpose_ros.core.datasets.shelf_campus import (CAMPUS_TEST_FRAMES, GroundTruth, dataset_cameras, dataset_dir,
+                                                   load_actors_gt)
 from mvpose_ros.core.geometry.body import NUM_INFERENCE_JOINTS, NUM_JOINTS, to_inference
 from mvpose_ros.core.geometry.camera import Camera
-from mvpose_ros.core.evaluation.datasets import (CAMPUS_TEST_FRAMES, GroundTruth, dataset_cameras, dataset_dir,
-                                                 load_actors_gt)
 from mvpose_ros.core.types import Person2D, Sequence2D
 
 DETECTIONS_FILE = 'pred_campus_maskrcnn_hrnet_coco.pkl'
