@@ -29,6 +29,7 @@ def stage_order(names: Iterable[str]) -> list[str]:
 
 
 def stage_label(name: str, names: Sequence[str]) -> str:
+    """The printed name of stage `name` among the stages `names` of a run."""
     if name == 'bp' and 'factors' not in names:
         return 'BP (with factors and decoding)'
     return LABELS.get(name, name)
@@ -49,6 +50,7 @@ def _mib(kib: float) -> float:
 
 
 def print_tables(results: Sequence[dict], out: TextIO) -> None:
+    """The tables of the runs, a row each: time per frame of each stage, then memory and PCP."""
     ok = [r for r in results if 'error' not in r]
     names = stage_order([k for r in ok for k in r['stages_s']])
     head = (f'{"run":24s} {"cams":>4s} {"people":>6s} {"M":>3s} {"win":>4s} '
@@ -211,6 +213,7 @@ def write_plots(results: Sequence[dict], output: Path) -> list[Path]:
 
 
 def print_two_processes(result: dict, out: TextIO) -> None:
+    """The two-process run: each side's time per frame, the wall time per frame and its PCP."""
     front = ('grouping and heatmaps', 'association')
     ms = result['stages_ms']
     p = result['pcp']

@@ -64,6 +64,7 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> RunConfig:
+        """A run from its dict (bench.json's `config`), keys that are not fields ignored."""
         known = {f.name for f in fields(cls)}
         return cls(**{k: v for k, v in d.items() if k in known})
 
@@ -85,6 +86,7 @@ class RunConfig:
         return StageConfig.from_params(self.settings)
 
     def detector(self) -> OpenPoseDetectorConfig:
+        """The OpenPose detector's configuration of this run (its heatmap cells)."""
         return replace(OpenPoseDetectorConfig(), stride=self.stride)
 
 

@@ -49,6 +49,7 @@ def _rate(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line of `mvpose-bench`."""
     p = argparse.ArgumentParser(prog='mvpose-bench', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--data-root', help='folder holding data/ (default: $MVPOSE_DATA_ROOT or ../shared)')
@@ -83,6 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None) -> int:
+    """Do what the parsed command line `args` of `mvpose-bench` says; returns the exit code."""
     out = out or sys.stdout
     err = err or sys.stderr
     shelf = dataset_dir('shelf', args.data_root)
@@ -146,6 +148,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `mvpose-bench`; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         if args.one:

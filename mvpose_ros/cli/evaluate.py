@@ -68,6 +68,7 @@ RING_OPTIONS: dict[str, tuple[str, Any, str]] = {
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line of `mvpose-eval`."""
     d = StageConfig().to_params()
     p = argparse.ArgumentParser(prog='mvpose-eval', description=__doc__.split('\n')[0])
     p.add_argument('dataset', choices=('shelf', 'campus', 'ring'))
@@ -128,6 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Do what the parsed command line `args` of `mvpose-eval` says; returns the exit code."""
     out = out or sys.stdout
     config = StageConfig.from_params(vars(args))
     detector = OpenPoseDetectorConfig(stride=args.heatmap_stride, secondary_radius=args.secondary_radius)
@@ -201,6 +203,7 @@ def _shelf_reports(args: argparse.Namespace, results: list[FrameResult], gt: Gro
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `mvpose-eval`; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         return run(args)

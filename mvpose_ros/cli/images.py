@@ -32,6 +32,7 @@ HEAD_MODEL = StageConfig().solver.head_model
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line of `mvpose-images`."""
     p = argparse.ArgumentParser(prog=PROG, description=__doc__.split('\n')[0])
     rig = p.add_mutually_exclusive_group(required=True)
     rig.add_argument('--rig', type=Path, help='rig file (YAML, with every camera\'s intrinsics; see '
@@ -56,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Do what the parsed command line `args` of `mvpose-images` says; returns the exit code."""
     out = out or sys.stdout
     if args.sets < 1:
         raise ValueError(f'--sets {args.sets} must be >= 1')
@@ -82,6 +84,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `mvpose-images`; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         return run(args)

@@ -30,6 +30,7 @@ _BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-shm', '.db3-wal', '.db3-journal', '
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line of `mvpose-make-bag`."""
     p = argparse.ArgumentParser(prog='mvpose-make-bag', description=__doc__.split('\n')[0])
     p.add_argument('recipe', choices=RECIPES)
     p.add_argument('--data-root', help='folder holding data/ (default: $MVPOSE_DATA_ROOT or ../shared)')
@@ -102,6 +103,7 @@ def _write_rig(output: Path, recipe: Recipe, out: TextIO) -> None:
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Do what the parsed command line `args` of `mvpose-make-bag` says; returns the exit code."""
     """Make the bag `args` name; returns the exit code."""
     out = out or sys.stdout
     drop = FrameDrop(args.drop_every, args.drop_fraction, args.drop_seed)
@@ -131,6 +133,7 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `mvpose-make-bag`; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         return run(args)

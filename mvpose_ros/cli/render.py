@@ -33,6 +33,7 @@ SHELF_RIG = 'config/rigs/shelf.yaml'
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line of `mvpose-render`."""
     p = argparse.ArgumentParser(prog='mvpose-render', description=__doc__.split('\n')[0])
     p.add_argument('predictions', type=Path, help='predictions file (JSON lines)')
     p.add_argument('--output', type=Path, default=Path('out/skeletons.mp4'), help='video file, .mp4 or .avi')
@@ -52,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Do what the parsed command line `args` of `mvpose-render` says; returns the exit code."""
     try:
         width, height = (int(v) for v in args.size.lower().split('x'))
     except ValueError:
@@ -96,6 +98,7 @@ def _annotations(frames: Sequence[int], root: str | None) -> Callable[[int], tup
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `mvpose-render`; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         return run(args)

@@ -276,6 +276,7 @@ class AssociationNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros association`."""
     run(AssociationNode, args)
 
 

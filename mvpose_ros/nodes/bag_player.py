@@ -345,6 +345,7 @@ class BagPlayerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros bag_player`."""
     run(BagPlayerNode, args)
 
 

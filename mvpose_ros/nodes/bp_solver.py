@@ -345,6 +345,7 @@ class BpSolverNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros bp_solver`."""
     run(BpSolverNode, args, events=EVENTS_EXECUTOR)
 
 

@@ -413,6 +413,7 @@ def _onnx_detector(settings: DetectorConfig) -> OnnxPoseDetector:
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros heatmap_detector`."""
     run(HeatmapDetectorNode, args)
 
 

@@ -215,6 +215,7 @@ class OverlayNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Entry point of `ros2 run mvpose_ros overlay`."""
     run(OverlayNode, args)
 
 
