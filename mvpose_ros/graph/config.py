@@ -178,9 +178,9 @@ COMPOSED = {'none': ('', ()),
             'detectors': ('heatmap_detectors', ('heatmap_detector',)),
             'detectors+association': ('detectors_association', ('heatmap_detector', 'association')),
             'all': ('composed', ('heatmap_detector', 'association', 'bp_solver'))}
-# The 2D half in one process, the solver in its own: as fast as a process per node at 25 Hz, and
-# a process less for each node it takes in (docs/footprint.md).
-DEFAULT_COMPOSE = 'detectors+association'
+# Every node but the player in one process: as fast as a process per node, on less CPU and a
+# fraction of the memory (docs/footprint.md).
+DEFAULT_COMPOSE = 'all'
 
 
 def processes(nodes: Sequence[NodeSpec], compose: str | None = None) -> list[tuple[str, list[NodeSpec]]]:
