@@ -202,7 +202,8 @@ def test_respawn_options_are_checked(args, problem, capsys):
 
 
 @pytest.mark.parametrize('args, compose', [([], 'all'), (['--respawn'], 'none'),
-                                           (['--compose', 'detectors'], 'detectors'), (['--respawn', '--compose', 'none'], 'none')])
+                                           (['--compose', 'detectors'], 'detectors'),
+                                           (['--respawn', '--compose', 'none'], 'none')])
 def test_nodes_share_processes_by_default_and_each_has_its_own_with_respawn(args, compose):
     parsed = graph.build_parser().parse_args(['--config', str(REPO / 'config' / 'shelf.yaml'), *args])
     assert graph._compose(parsed) == compose

@@ -19,6 +19,12 @@ def compiled() -> ModuleType:
     return module
 
 
+def load_kernels() -> None:
+    """Load the compiled kernels now, at the start of a node that computes on heatmaps: its first
+    frame must not wait for numba to load them."""
+    heatmap_kernels()
+
+
 def heatmap_kernels() -> ModuleType:
     """core.heatmap_kernels, imported at the first computation on a heatmap (see compiled)."""
     from mvpose_ros.core import heatmap_kernels as module

@@ -33,6 +33,7 @@ from mvpose_ros.core.association.approximate_sync import ApproximateSync, Drop, 
 from mvpose_ros.core.association.associator import Associator
 from mvpose_ros.core.defaults import FRAME_RATE, SYNC_TIMEOUT_S, max_skew_or_default
 from mvpose_ros.core.geometry.frame_id import CameraFrameId
+from mvpose_ros.core.heatmap import load_kernels
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
 from mvpose_ros.core.health.status import Status
 from mvpose_ros.core.health.thresholds import HealthThresholds
@@ -54,6 +55,7 @@ class AssociationNode(Node):
     def __init__(self, **options: Any) -> None:
         """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
         super().__init__('association', **options)
+        load_kernels()
         p = declare(self, [
             *rig_parameters(),
             Param('sync_timeout', SYNC_TIMEOUT_S, 's to wait for a camera missing from a set before going on without '

@@ -29,6 +29,7 @@ from msg_adapters.skeleton_msg import skeletons_to_msg
 from msg_adapters.stamp import stamp_ns, stamp_of_ns
 from mvpose_ros import topics
 from mvpose_ros.core.geometry.body import NUM_JOINTS
+from mvpose_ros.core.heatmap import load_kernels
 from mvpose_ros.core.health.monitor import InputMonitor, NodeMonitor, input_statuses, node_status
 from mvpose_ros.core.health.residual import ResidualMonitor, frame_residuals, residual_levels
 from mvpose_ros.core.health.status import Status
@@ -64,6 +65,7 @@ class BpSolverNode(Node):
     def __init__(self, **options: Any) -> None:
         """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
         super().__init__('bp_solver', **options)
+        load_kernels()
         p = declare(self, [
             *rig_parameters(),
             *parameter_specs(SOLVER_PARAMETERS),

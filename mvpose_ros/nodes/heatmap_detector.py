@@ -48,6 +48,7 @@ from mvpose_ros.core.detection.detector_settings import PARAMETERS, SPECS, Detec
 from mvpose_ros.core.detection.image_sets import ImageSetDetector
 from mvpose_ros.core.detection.openpose_detector import detect_people
 from mvpose_ros.core.detection.rig_sets import RigSets, SetCallbacks, SetSettings
+from mvpose_ros.core.heatmap import load_kernels
 from mvpose_ros.core.health.monitor import (InputMonitor, NodeMonitor, frame_rate_status, input_statuses,
                                             node_status)
 from mvpose_ros.core.health.refusals import Refusals
@@ -77,6 +78,7 @@ class HeatmapDetectorNode(Node):
     def __init__(self, **options: Any) -> None:
         """options: rclpy Node's (cli_args: this node's own --ros-args, as in a composed process)."""
         super().__init__('heatmap_detector', **options)
+        load_kernels()
         p = self._declare()
         self._settings = _settings(p)
         rig = load_rig_parameter(p)
