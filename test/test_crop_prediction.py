@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mvpose_ros.bench.crop_prediction import Coverage, coverage, frame_coverage, grown
+from mvpose_ros.bench.crop_prediction import Coverage, coverage, frame_coverage
+from mvpose_ros.core.detection.tracked_crops import grown_boxes
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import FrameResult
 
@@ -40,7 +41,7 @@ def test_no_crop_covers_nobody():
 
 
 def test_grown_moves_each_side_out_by_the_margin_times_the_size():
-    np.testing.assert_allclose(grown(np.array([[10.0, 20, 30, 60]]), 0.1), [[8, 16, 32, 64]])
+    np.testing.assert_allclose(grown_boxes(np.array([[10.0, 20, 30, 60]]), 0.1), [[8, 16, 32, 64]])
 
 
 def test_crops_from_the_set_before_follow_a_walker_only_with_his_motion():

@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from mvpose_ros.core.detection.onnx_config import OnnxDetectorConfig
-from mvpose_ros.core.detection.tracked_crops import predicted_joints, projected_boxes
+from mvpose_ros.core.detection.tracked_crops import grown_boxes, predicted_joints, projected_boxes
 from mvpose_ros.core.geometry.camera import Camera
 from mvpose_ros.core.types import FrameResult
 
@@ -40,12 +40,6 @@ class Coverage:
         ratio = float(np.nanmean(self.area_ratio)) if k else float('nan')
         return (f'crops cover {k} of {n} annotated person-views ({share:.2f}%); mean crop area {ratio:.2f} x the '
                 f"annotation's box")
-
-
-def grown(boxes: np.ndarray, margin: float) -> np.ndarray:
-    """Boxes (Q, 4) u0, v0, u1, v1 with each side moved out by margin times the box's size."""
-    size = boxes[:, 2:] - boxes[:, :2]
-    return np.concatenate([boxes[:, :2] - margin * size, boxes[:, 2:] + margin * size], axis=1)
 
 
 def coverage(boxes: np.ndarray, uv: np.ndarray, size: tuple[int, int]) -> Coverage:
@@ -77,8 +71,8 @@ def frame_coverage(cameras: Sequence[Camera], before: FrameResult, earlier: Fram
     if earlier is not None and len(earlier.person_ids):
         joints = predicted_joints(joints, np.asarray(before.person_ids), np.asarray(earlier.joints),
                                   np.asarray(earlier.person_ids))
-    parts = [coverage(grown(projected_boxes(joints, camera), margin), annotated[:, c], (camera.width, camera.height))
-             for c, camera in enumerate(cameras)]
+    parts = [coverage(grown_boxes(projected_boxes(joints, camera), margin), annotated[:, c],
+                      (camera.width, camera.height)) for c, camera in enumerate(cameras)]
     return Coverage(np.concatenate([p.covered for p in parts]), np.concatenate([p.area_ratio for p in parts]))
 
 

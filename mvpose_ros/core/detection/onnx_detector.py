@@ -22,7 +22,7 @@ from mvpose_ros.core.detection.onnx_config import OnnxDetectorConfig
 from mvpose_ros.core.detection.onnx_models import EFFICIENTPOSE, MULTIPOSE, SINGLE_POSE
 from mvpose_ros.core.detection.onnx_sessions import check_providers, load_session
 from mvpose_ros.core.detection.single_person import SinglePoseModel
-from mvpose_ros.core.detection.tracked_crops import carried_ears, people_region
+from mvpose_ros.core.detection.tracked_crops import carried_ears, grown_boxes, people_region
 from mvpose_ros.core.types import Person2D
 
 # EfficientPose's input normalisation (ImageNet mean and std of RGB in [0, 1])
@@ -279,7 +279,7 @@ class OnnxPoseDetector:
             else:
                 given = np.asarray(given, dtype=np.float64).reshape(-1, 4)
                 keypoints, sigmas = [None] * len(given), cfg.keypoint_sigma * np.hypot(*(given[:, 2:] - given[:, :2]).T)
-            grown = _grown(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
+            grown = grown_boxes(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
             for box, kp, sigma in zip(grown, keypoints, sigmas):
                 crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side, pending.turns[c]), kp,
                                    float(sigma)))
@@ -524,12 +524,6 @@ def _keypoint_gap(a: np.ndarray, b: np.ndarray) -> float:
         return float('inf')
     size = max(np.hypot(*np.ptp(k[k[:, 2] > 0, :2], axis=0)) for k in (a, b))
     return float(np.median(np.hypot(*(a[both, :2] - b[both, :2]).T)) / size)
-
-
-def _grown(boxes: np.ndarray, margin: float) -> np.ndarray:
-    """Boxes (P, 4) u0, v0, u1, v1 with each side moved out by margin times the box's size."""
-    size = boxes[:, 2:] - boxes[:, :2]
-    return np.concatenate([boxes[:, :2] - margin * size, boxes[:, 2:] + margin * size], axis=1)
 
 
 def _peaks(maps: np.ndarray) -> np.ndarray:

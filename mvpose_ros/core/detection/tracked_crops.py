@@ -106,6 +106,12 @@ def projected_boxes(joints: np.ndarray, camera: Camera, margin: float = JOINT_BO
     return np.concatenate([np.maximum(lo - grow, -0.5), np.minimum(hi + grow, edge)], axis=1)
 
 
+def grown_boxes(boxes: np.ndarray, margin: float) -> np.ndarray:
+    """Boxes (P, 4) u0, v0, u1, v1 with each side moved out by margin times the box's size."""
+    size = boxes[:, 2:] - boxes[:, :2]
+    return np.concatenate([boxes[:, :2] - margin * size, boxes[:, 2:] + margin * size], axis=1)
+
+
 def people_region(boxes: np.ndarray, size: tuple[int, int], margin: float) -> np.ndarray:
     """(4,) u0, v0, u1, v1: the part of a camera's (width, height) image MultiPose searches for
     people expected in boxes (Q >= 1, 4) (projected_boxes): each box grown on every side by margin
