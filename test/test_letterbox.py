@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mvpose_ros.core.heatmap import PersonHeatmap
-from mvpose_ros.core.detection.letterbox import letterbox, whole_image
+from mvpose_ros.core.detection.letterbox import letterbox, resized, whole_image
 
 # (width, height, region u0, v0, u1, v1 in pixel-centre coordinates, input side)
 CASES = [
@@ -146,3 +146,26 @@ def test_quarter_turns_of_the_input_square():
         assert tuple(row_col[::-1]) == xy
         np.testing.assert_allclose(lb.to_input([3.0, 0.0]), xy, atol=1e-12)
         np.testing.assert_allclose(lb.to_image(np.array(xy, dtype=float)), [3.0, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize('width, height, out_w, out_h', [(1003, 777, 384, 289), (460, 320, 134, 192),
+                                                         (320, 460, 192, 134), (150, 90, 100, 70)])
+def test_resized_maps_pixel_edges_exactly_and_averages_when_shrinking(width, height, out_w, out_h):
+    """A ramp's value is its pixel's centre, so each output pixel must hold the image coordinate
+    of its own centre (edges to edges: x + 0.5 = (X + 0.5) * width / out_w), whatever whole-block
+    factor and bilinear rest the shrink takes; the rows and columns no whole block holds stay
+    within a pixel of it at the far edge. A one-pixel checkerboard shrunk by 2 or more averages
+    to grey rather than aliasing."""
+    u = np.tile(np.arange(width, dtype=np.float32), (height, 1))
+    v = np.tile(np.arange(height, dtype=np.float32)[:, None], (1, width))
+    out = resized(np.stack([u, v, u], axis=-1), out_w, out_h)
+    assert out.shape == (out_h, out_w, 3)
+    expect_u = (np.arange(out_w) + 0.5) * width / out_w - 0.5
+    expect_v = (np.arange(out_h) + 0.5) * height / out_h - 0.5
+    np.testing.assert_allclose(out[1:-1, 1:-1, 0], np.tile(expect_u[1:-1], (out_h - 2, 1)), atol=0.02)
+    np.testing.assert_allclose(out[1:-1, 1:-1, 1], np.tile(expect_v[1:-1, None], (1, out_w - 2)), atol=0.02)
+    np.testing.assert_allclose(out[..., 0], np.tile(expect_u, (out_h, 1)), atol=1.0)
+    checker = ((np.add.outer(np.arange(height), np.arange(width)) % 2) * 255).astype(np.uint8)
+    grey = resized(checker[..., None].repeat(3, axis=-1), out_w, out_h)
+    if min(width / out_w, height / out_h) >= 2:
+        assert np.abs(grey[1:-1, 1:-1].astype(float) - 127.5).max() < 40
