@@ -58,23 +58,24 @@ def test_frame_572_finds_the_three_annotated_actors(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_a_sequence_runs_multipose_on_every_kth_set_only(tmp_path, capsys):
-    """Frame 572 three times with --person-detector-every 3: MultiPose on the first set only, the
-    other two take their crops from the previous set's skeletons, cost no MultiPose time, and
-    still find the three actors (measured: 65-68, 60-68, 115-126 mm over such sets; the stage
-    itself varies by a few mm from set to set)."""
+def test_a_sequence_runs_multipose_on_each_cameras_whole_image_every_kth_set_only(tmp_path, capsys):
+    """Frame 572 three times with --person-detector-every 5: MultiPose on every image of the first
+    set (no skeletons yet), then on one camera's a set in turn (cameras 4 and 3); the others take
+    their crops from the previous set's skeletons, and the sets still find the three actors
+    (measured: 65-68, 60-68, 115-126 mm over such sets; the stage itself varies by a few mm from
+    set to set)."""
     assert images.main(['--calibration', CALIBRATION, '--images', *FRAMES, '--frame', '572', '--ground-truth', 'shelf',
-                        '--output', str(tmp_path), '--sets', '3', '--person-detector-every', '3',
+                        '--output', str(tmp_path), '--sets', '3', '--person-detector-every', '5',
                         '--heatmaps', 'efficientpose']) == 0
     out = capsys.readouterr().out
     sets = re.findall(r'set (\d): MultiPose on (\d) images +([0-9.]+) ms, crop model (\d+) people +([0-9.]+) ms.*'
                       r'MPJPE actor 1 ([0-9.]+) mm, actor 3 ([0-9.]+) mm, actor 4 ([0-9.]+) mm', out)
-    assert [(s[0], s[1]) for s in sets] == [('0', '5'), ('1', '0'), ('2', '0')], out
+    assert [(s[0], s[1]) for s in sets] == [('0', '5'), ('1', '1'), ('2', '1')], out
     # the four people of the scene in every set: no crop's duplicate of a person kept (it came back
     # as a fifth 3D person in the second crop set, and crops planned from it kept it)
     assert re.findall(r'; (\d) in 3D;', out) == ['4'] * 3, out
     for s in sets[1:]:
-        assert float(s[2]) < 0.1 * float(s[4])  # no MultiPose: a small fraction of EfficientPose's time
+        assert float(s[2]) < 0.5 * float(s[4])  # one image's MultiPose: less than the 12 or more crops'
         assert int(s[3]) >= 12 and all(float(m) < MPJPE_BOUND_MM for m in s[5:])
     assert re.search(r'median of 3 sets: MultiPose [0-9.]+ ms, crop model [0-9.]+ ms, heatmaps [0-9.]+ ms, '
                      r'association and 3D [0-9.]+ ms, total [0-9.]+ ms; [0-9.]+ sets/s', out), out
@@ -125,18 +126,18 @@ def test_the_default_heatmaps_multipose_keypoints_score_frame_572_without_effici
 
 @pytest.mark.slow
 def test_a_multipose_sequence_searches_regions_around_the_previous_skeletons_between_whole_images(tmp_path, capsys):
-    """Frame 572 three times with --person-detector-every 3 and the default heatmaps: MultiPose
-    searches the whole images of the first set, then only the region around the previous set's
-    skeletons in each camera (the whole image where none projects), still finding the four
+    """Frame 572 three times with --person-detector-every 5 and the default heatmaps: MultiPose
+    searches the whole images of the first set, then the whole image of one camera a set in turn
+    and only the region around the previous set's skeletons in the others, still finding the four
     people and the actors (measured over the 6 region sets of a 9-set run: actors 1 / 3 / 4 at
     47.0-50.0 / 52.3-56.3 / 105.3-108.1 mm, against 47.9-51.8 / 54.3-55.9 / 105.7-107.3 over 9
     whole-image sets; one region set found 3 of camera 0's 4 people)."""
     assert images.main(['--calibration', CALIBRATION, '--images', *FRAMES, '--frame', '572', '--ground-truth', 'shelf',
-                        '--output', str(tmp_path), '--sets', '3', '--person-detector-every', '3']) == 0
+                        '--output', str(tmp_path), '--sets', '3', '--person-detector-every', '5']) == 0
     out = capsys.readouterr().out
     sets = re.findall(r'set (\d): MultiPose on (\d) images(?: \((\d) regions\))? +[0-9.]+ ms.*; (\d) in 3D; '
                       r'MPJPE actor 1 ([0-9.]+) mm, actor 3 ([0-9.]+) mm, actor 4 ([0-9.]+) mm', out)
-    assert [s[:3] for s in sets] == [('0', '5', ''), ('1', '5', '5'), ('2', '5', '5')], out
+    assert [s[:3] for s in sets] == [('0', '5', ''), ('1', '5', '4'), ('2', '5', '4')], out
     assert all(s[3] == '4' and all(float(m) < b for m, b in zip(s[4:], (60.0, 60.0, 125.0))) for s in sets), out
 
 

@@ -65,19 +65,30 @@ def test_ears_follow_the_nearest_previous_neck():
         assert (carried_ears(np.array(neck), before, size=200.0)[:, 2] == 0).all()
 
 
-def test_multipose_runs_every_kth_set_and_while_no_skeleton_is_known():
+def test_each_camera_searches_every_kth_set_in_turn_and_all_while_no_skeleton_is_known():
     cam = _camera()
-    planner = CropPlanner([cam, cam], every=3)
+    planner = CropPlanner([cam, cam, cam], every=3)
     skeleton = np.array([[[0.0, 4.0, 0.5], [0.4, 4.0, -0.5], [-0.4, 4.0, 0.0], [0.1, 4.0, -0.9]]])
-    ran = []
-    for n in range(7):
+    searched = []
+    for n in range(8):
         plan = planner.plan()
-        ran.append(all(p is None for p in plan))
-        if not ran[-1]:
-            assert all(p.shape == (1, 4) for p in plan)
-        planner.update(plan, [[], []])
+        searched.append(''.join('W' if p is None else '.' for p in plan))
+        assert all(p.shape == (1, 4) for p in plan if p is not None)
+        planner.update(plan, [[], [], []])
         planner.skeletons(skeleton if n != 4 else skeleton[:0])  # set 4 saw nobody
-    assert ran == [True, False, False, True, False, True, False]
+    # set 0: no skeleton yet; then camera c at the sets n with (n + c) % 3 == 0; set 5 after nobody
+    assert searched == ['WWW', '..W', '.W.', 'W..', '..W', 'WWW', 'W..', '..W']
+    # every camera searches within any 3 sets in a row, and one camera a set in the steady state
+    two = CropPlanner([cam, cam], every=4)
+    two.update([None, None], [[], []])
+    two.skeletons(skeleton)
+    searches = []
+    for _ in range(8):
+        plan = two.plan()
+        assert two.plan() is not plan and [p is None for p in two.plan()] == [p is None for p in plan]  # no side effect
+        searches.append(sum(p is None for p in plan))
+        two.update(plan, [[], []])
+    assert searches == [0, 1, 0, 1, 0, 1, 0, 1]
     with pytest.raises(ValueError, match='person_detector_every 0 must be >= 1'):
         CropPlanner([cam], every=0)
     # a camera whose intrinsics are not known yet runs MultiPose on its whole image
@@ -235,7 +246,7 @@ def test_a_person_who_enters_is_found_within_k_sets_and_kept_by_multipose_until_
 
     tracked = [a for a in annotated if a != entering]
     whole, found = [], []
-    for n in range(6):
+    for n in range(5):
         plan = planner.plan()
         whole.append(plan[0] is None)
         (people,) = detector.detect_set([empty if n == 0 else image], plan, planner.previous)
@@ -244,6 +255,6 @@ def test_a_person_who_enters_is_found_within_k_sets_and_kept_by_multipose_until_
         if found[-1] and n > 3:
             tracked = list(annotated)  # the 3D stage took him up after a set that found him
         planner.skeletons(actors[tracked], np.array(tracked))
-    assert whole == [True, False, False, True, True, False]
+    assert whole == [True, False, False, True, True]
     assert found[:3] == [False, False, False] and found[3] and all(found[3:])
-    assert len(planner.plan()[0]) == len(annotated)  # crops for all, the one who entered too
+    assert len(planner.plan()[0]) == len(annotated)  # then crops for all, the one who entered too

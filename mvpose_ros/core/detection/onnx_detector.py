@@ -252,63 +252,77 @@ class OnnxPoseDetector:
         return future
 
     def finish(self, pending: PendingSet) -> list[list[Person2D] | None]:
-        """The people of a set start_set started, as detect_set returns them (waiting for its
-        MultiPose runs); self.timing becomes this set's."""
+        """The people of a set start_set started, as detect_set returns them; self.timing becomes
+        this set's. The crops of the cameras given boxes run while MultiPose still searches the
+        others (on its workers), then those of the people it found."""
         cfg = self.config
-        images, boxes, previous = pending.images, pending.boxes, pending.previous
-        found_all = [f.result() for f in pending.finds]
-        finds = iter(found_all)
-        t0 = time.perf_counter()
-        crops: list[_Crop] = []
-        side = self._crop_side
+        images, boxes = pending.images, pending.boxes
         out: list[list[Person2D] | None] = [None if bgr is None else [] for bgr in images]
-        # heatmaps 'multipose': per camera its people's keypoints (P, 16, 3) and Gaussian stds (P,)
-        alone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        for c, (bgr, given) in enumerate(zip(images, boxes)):
-            if bgr is None:
-                continue
-            if given is None or cfg.heatmaps == 'multipose':
-                found = next(finds)
-                inference = self._inference_keypoints(found.keypoints, found.bounds)
-                sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
-                if cfg.heatmaps == 'multipose':
-                    alone[c] = (inference, sigmas)
-                    continue
-                keypoints: list[np.ndarray | None] = list(inference)
-                given = found.boxes
-            else:
-                given = np.asarray(given, dtype=np.float64).reshape(-1, 4)
-                keypoints, sigmas = [None] * len(given), cfg.keypoint_sigma * np.hypot(*(given[:, 2:] - given[:, :2]).T)
-            grown = grown_boxes(np.asarray(given, dtype=np.float64).reshape(-1, 4), cfg.box_margin)
-            for box, kp, sigma in zip(grown, keypoints, sigmas):
-                crops.append(_Crop(c, letterbox(bgr.shape[1], bgr.shape[0], box, side, pending.turns[c]), kp,
-                                   float(sigma)))
+        t0 = time.perf_counter()
+        model = 0.0  # seconds in the crop model
+        given = [c for c, (bgr, b) in enumerate(zip(images, boxes))
+                 if bgr is not None and b is not None and cfg.heatmaps != 'multipose']
+        crops = [crop for c in given for crop in self._crops(pending, c, np.asarray(boxes[c], dtype=np.float64),
+                                                              [None] * len(boxes[c]))]
+        model += self._add_people(pending, crops, out)
+        cropped = {crop.camera for crop in crops}
         t1 = time.perf_counter()
-        if self._single is not None:  # a single-person keypoint model: its keypoints as Gaussians
-            found = self._single.run(np.stack([c.box.apply(images[c.camera])[..., ::-1] for c in crops])
-                                     if crops else np.zeros((0, side, side, 3), dtype=np.uint8))
-            t2 = time.perf_counter()
-            for crop, coco in zip(crops, found.keypoints):
-                out[crop.camera] += keypoint_people(self._crop_keypoints(crop.box, coco)[None],
-                                                    np.array([crop.sigma]), cfg.stride)
-        else:
-            maps = self._heatmaps(images, crops)
-            t2 = time.perf_counter()
-            for crop, raw in zip(crops, maps):
-                before = previous[crop.camera] if previous is not None else np.zeros((0, NUM_INFERENCE_JOINTS, 3))
-                person = self._person(crop, raw, before)
-                if person is not None:
-                    out[crop.camera].append(person)
-        for c, (inference, sigmas) in alone.items():
-            out[c] = keypoint_people(inference, sigmas, cfg.stride)
-        for c in {crop.camera for crop in crops}:
+        found_all = [f.result() for f in pending.finds]
+        t2 = time.perf_counter()
+        searched = [c for c, bgr in enumerate(images) if bgr is not None and c not in given]
+        crops = []
+        for c, found in zip(searched, found_all):
+            inference = self._inference_keypoints(found.keypoints, found.bounds)
+            sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
+            if cfg.heatmaps == 'multipose':
+                out[c] = keypoint_people(inference, sigmas, cfg.stride)
+            else:
+                crops += self._crops(pending, c, found.boxes, list(inference))
+        model += self._add_people(pending, crops, out)
+        for c in cropped | {crop.camera for crop in crops}:
             out[c] = without_duplicates(out[c])
         end = time.perf_counter()
         multipose = max((f.done for f in found_all), default=pending.started) - pending.started
-        self.timing = DetectionTiming(multipose, t2 - t1, end - t2 + t1 - t0, end - pending.started,
+        # heatmaps: the set's own work besides the crop model, not counting the wait for MultiPose
+        self.timing = DetectionTiming(multipose, model, end - t0 - model - (t2 - t1), end - pending.started,
                                       sum(len(p) for p in out if p is not None), len(found_all), pending.regions,
                                       sum(f.runs - 1 for f in found_all))
         return out
+
+    def _crops(self, pending: PendingSet, camera: int, boxes: np.ndarray,
+               keypoints: list[np.ndarray | None]) -> list[_Crop]:
+        """The crops of a camera's people boxes (Q, 4) (grown by box_margin), each with its
+        MultiPose keypoints (16, 3) or None (given boxes)."""
+        boxes = boxes.reshape(-1, 4)
+        bgr = pending.images[camera]
+        sigmas = self.config.keypoint_sigma * np.hypot(*(boxes[:, 2:] - boxes[:, :2]).T)
+        return [_Crop(camera, letterbox(bgr.shape[1], bgr.shape[0], box, self._crop_side, pending.turns[camera]),
+                      kp, float(sigma))
+                for box, kp, sigma in zip(grown_boxes(boxes, self.config.box_margin), keypoints, sigmas)]
+
+    def _add_people(self, pending: PendingSet, crops: list[_Crop], out: list[list[Person2D] | None]) -> float:
+        """The crop model on crops, each one's person added to its camera's list in out; returns
+        the seconds the model's runs took."""
+        if not crops:
+            return 0.0
+        images, cfg = pending.images, self.config
+        start = time.perf_counter()
+        if self._single is not None:  # a single-person keypoint model: its keypoints as Gaussians
+            found = self._single.run_cut(lambda i: crops[i].box.apply(images[crops[i].camera])[..., ::-1], len(crops))
+            took = time.perf_counter() - start
+            for crop, coco in zip(crops, found.keypoints):
+                out[crop.camera] += keypoint_people(self._crop_keypoints(crop.box, coco)[None],
+                                                    np.array([crop.sigma]), cfg.stride)
+            return took
+        maps = self._heatmaps(images, crops)
+        took = time.perf_counter() - start
+        for crop, raw in zip(crops, maps):
+            before = (pending.previous[crop.camera] if pending.previous is not None
+                      else np.zeros((0, NUM_INFERENCE_JOINTS, 3)))
+            person = self._person(crop, raw, before)
+            if person is not None:
+                out[crop.camera].append(person)
+        return took
 
     def _find_people(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None,
                      turns: int, level: int = 0) -> _Found:

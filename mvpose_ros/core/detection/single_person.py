@@ -10,7 +10,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -54,14 +54,20 @@ class SinglePoseModel:
         if rgb.ndim != 4 or rgb.shape[1:] != (self.side, self.side, 3) or rgb.dtype != np.uint8:
             raise ValueError(f'{self.model.spec.kind}: expected crops (N, {self.side}, {self.side}, 3) uint8 RGB, '
                              f'got {rgb.dtype} {rgb.shape}')
-        runs = (self._pool.map(self._one, rgb) if self._pool is not None and len(rgb) > 1 else map(self._one, rgb))
+        return self.run_cut(rgb.__getitem__, len(rgb))
+
+    def run_cut(self, cut: Callable[[int], np.ndarray], n: int) -> SinglePoseOutput:
+        """The model on n crops, crop i (side, side, 3) uint8 RGB made by cut(i) on the worker that
+        runs it (cutting a crop from its image is part of each crop's work, side by side)."""
+        runs = (self._pool.map(lambda i: self._one(cut(i)), range(n)) if self._pool is not None and n > 1
+                else (self._one(cut(i)) for i in range(n)))
         outs = list(runs)
         if not outs:
             c = 17 if self.model.movenet else 39
-            n = self.side // 4
-            empty = np.zeros((0, n, n, c), dtype=np.float32)
+            m = self.side // 4
+            empty = np.zeros((0, m, m, c), dtype=np.float32)
             return SinglePoseOutput(np.zeros((0, COCO_KEYPOINTS, 3)), empty,
-                                    np.zeros((0, n, n, 2 * c), dtype=np.float32) if self.model.movenet else None)
+                                    np.zeros((0, m, m, 2 * c), dtype=np.float32) if self.model.movenet else None)
         keypoints = np.stack([o[0] for o in outs])
         heatmap = np.concatenate([o[1] for o in outs])
         offsets = np.concatenate([o[2] for o in outs]) if self.model.movenet else None
@@ -69,6 +75,9 @@ class SinglePoseModel:
 
     def _one(self, rgb: np.ndarray) -> tuple[np.ndarray, ...]:
         """One crop (side, side, 3): its COCO-17 keypoints (17, 3) and the raw maps (1, h, w, C)."""
+        if rgb.shape != (self.side, self.side, 3) or rgb.dtype != np.uint8:
+            raise ValueError(f'{self.model.spec.kind}: expected a crop ({self.side}, {self.side}, 3) uint8 RGB, '
+                             f'got {rgb.dtype} {rgb.shape}')
         if self.model.movenet:
             x = rgb[None].astype(np.int32)
         else:

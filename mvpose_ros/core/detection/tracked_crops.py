@@ -3,8 +3,8 @@ box around each person's joints where they are and where his motion since the sk
 takes them by the next set (predicted_joints), and the ears (which only MoveNet MultiPose gives)
 carried from the camera's previous people along with their neck.
 
-Between two runs of MultiPose on the whole image (every `person_detector_every`-th set), the crop
-model works on these boxes as its crops, or, with heatmaps 'multipose', MultiPose searches only
+Between two runs of MultiPose on a camera's whole image (every `person_detector_every`-th set, the
+cameras taking turns), the crop model works on these boxes as its crops, or, with heatmaps 'multipose', MultiPose searches only
 the region around them (people_region). A camera where a whole-image run found someone no
 skeleton explains (unexplained) stays on whole-image runs until the 3D stage takes him up.
 The rules in full: docs/crop_models.md#tracked-crops."""
@@ -146,12 +146,15 @@ def carried_ears(neck: np.ndarray, previous: np.ndarray, size: float, gate: floa
 
 
 class CropPlanner:
-    """Which cameras of the next set run MultiPose and which get crops from skeletons: MultiPose
-    runs on every camera of every `every`-th set, and of any set while no skeletons are known
-    (or the last ones held nobody), and on a camera whose last MultiPose run found someone the
-    skeletons do not explain (see the module docstring); in between, every camera gets the
-    projected_boxes of the skeletons where they are and where their motion takes them (a camera
-    whose intrinsics are not known yet, None in `cameras`, runs MultiPose)."""
+    """Which cameras of the next set run MultiPose on the whole image and which get crops from
+    skeletons. Each camera's whole image is searched once every `every` sets, the cameras' turns
+    spread over those sets (camera c of N at the n-th set detected when (n + c * every // N) % every == 0), so
+    that a set costs about the same as the next and a new person is looked for within `every`
+    sets in every camera. Every camera searches while no skeletons are known (or the last ones held
+    nobody), and a camera whose last search found someone the skeletons do not explain searches at
+    every set until they do (see the module docstring). The others get the projected_boxes of the
+    skeletons where they are and where their motion takes them (a camera whose intrinsics are not
+    known yet, None in `cameras`, searches)."""
 
     def __init__(self, cameras: Sequence[Camera | None], every: int = 1) -> None:
         if every < 1:
@@ -163,21 +166,24 @@ class CropPlanner:
         self._predicted = self._joints  # where the skeletons' motion takes them by the next set
         self._found: list[np.ndarray | None] = [None] * len(self.cameras)  # MultiPose's people, not yet checked
         self.unexplained = [False] * len(self.cameras)
-        self._since = 0  # sets detected since MultiPose last ran, that one included (0: never ran)
+        self._sets = 0  # sets detected so far (update)
         self.previous = [np.zeros((0, NUM_INFERENCE_JOINTS, 3)) for _ in self.cameras]
 
     def plan(self) -> list[np.ndarray | None]:
-        """Per camera, None (run MultiPose) or the boxes (Q, 4) of the next set's crops."""
-        if self._since == 0 or self._since >= self.every or len(self._joints) == 0:
+        """Per camera, None (run MultiPose on its whole image) or the boxes (Q, 4) of the next
+        set's crops."""
+        n = self._sets
+        if len(self._joints) == 0:
             return [None] * len(self.cameras)
         both = np.concatenate([self._joints, self._predicted], axis=1)  # (P, 2J, 3): a box holds where he goes
-        return [None if camera is None or self.unexplained[c] else projected_boxes(both, camera)
+        turn = [(n + c * self.every // len(self.cameras)) % self.every == 0 for c in range(len(self.cameras))]
+        return [None if camera is None or self.unexplained[c] or turn[c] else projected_boxes(both, camera)
                 for c, camera in enumerate(self.cameras)]
 
     def update(self, plan: Sequence[np.ndarray | None], people: Sequence[Sequence[Person2D] | None]) -> None:
         """After a set was detected with `plan`: its people per camera (None: no image), whose
         keypoints carry the ears into the next set."""
-        self._since = 1 if all(p is None for p in plan) else self._since + 1
+        self._sets += 1
         for c, found in enumerate(people):
             if found is not None:
                 self.previous[c] = np.array([p.keypoints for p in found]).reshape(-1, NUM_INFERENCE_JOINTS, 3)
