@@ -4,9 +4,10 @@ takes them by the next set (predicted_joints), and the ears (which only MoveNet 
 carried from the camera's previous people along with their neck.
 
 Between two runs of MultiPose on a camera's whole image (every `person_detector_every`-th set, the
-cameras taking turns), the crop model works on these boxes as its crops, or, with heatmaps 'multipose', MultiPose searches only
-the region around them (people_region). A camera where a whole-image run found someone no
-skeleton explains (unexplained) stays on whole-image runs until the 3D stage takes him up.
+cameras taking turns), the crop model works on these boxes as its crops, or, with heatmaps
+'multipose', MultiPose searches only the region around them (people_region). A camera where a
+whole-image run found someone no skeleton explains (unexplained) stays on whole-image runs until
+the 3D stage takes him up.
 The rules in full: docs/crop_models.md#tracked-crops."""
 from __future__ import annotations
 
