@@ -3,6 +3,7 @@ resized into place) and the network's maps back onto image pixels, for whole non
 person crops, and crops cut by the image border."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -169,3 +170,35 @@ def test_resized_maps_pixel_edges_exactly_and_averages_when_shrinking(width, hei
     grey = resized(checker[..., None].repeat(3, axis=-1), out_w, out_h)
     if min(width / out_w, height / out_h) >= 2:
         assert np.abs(grey[1:-1, 1:-1].astype(float) - 127.5).max() < 40
+
+
+@pytest.mark.parametrize('box, out_w, out_h', [((101.3, 40.6, 587.9, 702.2), 141, 192),
+                                               ((3.5, 7.25, 80.0, 61.0), 150, 110),
+                                               ((0.0, 0.0, 1003.0, 777.0), 384, 297)])
+def test_resized_maps_a_boxs_fractional_edges_exactly(box, out_w, out_h):
+    """Part of an image (a crop cut from a shrunk copy has fractional edges) on the output:
+    output pixel X holds the image coordinate box[0] + (X + 0.5) * (box[2] - box[0]) / out_w - 0.5."""
+    width, height = 1003, 777
+    u = np.tile(np.arange(width, dtype=np.float32), (height, 1))
+    v = np.tile(np.arange(height, dtype=np.float32)[:, None], (1, width))
+    out = resized(np.stack([u, v, u], axis=-1), out_w, out_h, np.array(box))
+    expect_u = box[0] + (np.arange(out_w) + 0.5) * (box[2] - box[0]) / out_w - 0.5
+    expect_v = box[1] + (np.arange(out_h) + 0.5) * (box[3] - box[1]) / out_h - 0.5
+    np.testing.assert_allclose(out[1:-1, 1:-1, 0], np.tile(expect_u[1:-1], (out_h - 2, 1)), atol=0.02)
+    np.testing.assert_allclose(out[1:-1, 1:-1, 1], np.tile(expect_v[1:-1, None], (1, out_w - 2)), atol=0.02)
+
+
+def test_a_crop_cut_from_a_shrunk_copy_is_the_crop_of_the_image():
+    """A person crop's input from a copy of the image half its size (a JPEG decoded at half
+    scale) against the same crop from the image itself: the same picture, within the detail
+    the copy lost."""
+    v, u = np.mgrid[0:776, 0:1032]
+    wave = (127 + 100 * np.sin(u / 9.0) * np.cos(v / 11.0)).astype(np.uint8)  # a few px of detail
+    image = np.ascontiguousarray(np.stack([wave, wave[::-1], wave[:, ::-1]], axis=-1))
+    half = cv2.resize(image, (516, 388), interpolation=cv2.INTER_AREA)
+    lb = letterbox(1032, 776, np.array([412.3, 80.7, 688.9, 742.2]), 192)
+    full = lb.apply(image).astype(float)
+    assert np.abs(full - lb.apply(half, np.array([2.0, 2.0]))).mean() < 1.0
+    # a copy's scale wrong by half a percent along either axis moves the picture visibly
+    for wrong in ([2.01, 2.0], [2.0, 2.01]):
+        assert np.abs(full - lb.apply(half, np.array(wrong))).mean() > 2.0

@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from mvpose_ros.core.detection.rig_sets import RigSets, SetCallbacks, SetSettings, without_numbers
@@ -142,8 +143,8 @@ class _Detector:
     def __init__(self) -> None:
         self.calls = []
 
-    def reduced_decoding(self, width: int, height: int) -> int:
-        return 2
+    def reduced_decoding(self, width: int, height: int, boxes=None) -> int:
+        return 2 if boxes is None else 4  # 4: from the camera's planned crops
 
     def detect_set(self, images, boxes, previous, sizes, turns):
         self.calls.append((images, boxes, sizes, turns))
@@ -169,6 +170,15 @@ def test_a_set_of_images_is_decoded_side_by_side_then_detected_once():
         assert decoded == [('a', 2), None, None] and boxes == [None] * 3 and turns == [0, 0, 2]
         assert sizes == [(c.width, c.height) for c in cameras]
         assert images.tracking and TRACK_MAX_AGE_S == 1.0
+        # skeletons known: at the next set camera 2 searches its whole image in turn, cameras 0 and
+        # 1 are decoded as far as their planned crops allow
+        from mvpose_ros.core.datasets.shelf_campus import dataset_dir, load_actors_gt
+        actors = load_actors_gt(dataset_dir('shelf') / 'actorsGT.mat', [572]).poses[0]
+        actors = actors[np.isfinite(actors).all(axis=(1, 2))]
+        images.track(0, actors, np.arange(len(actors)))
+        images.detect(1, ['a', 'b', 'c'], cameras, [0, 0, 0], decode)
+        decoded, boxes = detector.calls[-1][:2]
+        assert [b is None for b in boxes] == [False, False, True] and decoded == [('a', 4), ('b', 4), ('c', 2)]
     finally:
         images.close()
     untracked = ImageSetDetector(detector, cameras)

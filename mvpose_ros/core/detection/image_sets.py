@@ -55,19 +55,20 @@ class ImageSetDetector:
         where the detector allows (OnnxPoseDetector.reduced_decoding), ValueError when unusable
         (a camera whose intrinsics are not known included)."""
         sizes = [None if cam is None else (cam.width, cam.height) for cam in cameras]
+        plan = self._plan(stamp_ns, cameras)
 
         def decoded(c: int) -> np.ndarray | ValueError | None:
             if items[c] is None:
                 return None
             try:
-                return decode(c, items[c], 1 if sizes[c] is None else self.detector.reduced_decoding(*sizes[c]))
+                return decode(c, items[c], 1 if sizes[c] is None else
+                              self.detector.reduced_decoding(*sizes[c], None if plan is None else plan[c]))
             except ValueError as exc:  # for the caller to report: a decoding thread only decodes
                 return exc
 
         images = list(self._decoders.map(decoded, range(len(items))))
         errors = [(c, image) for c, image in enumerate(images) if isinstance(image, ValueError)]
         images = [None if isinstance(image, ValueError) else image for image in images]
-        plan = self._plan(stamp_ns, cameras)
         found = self.detector.detect_set(images, plan, None if plan is None else self._planner.previous, sizes,
                                          list(turns))
         if plan is not None:

@@ -45,13 +45,18 @@ class Letterbox:
         x0, y0, x1, y1 = self.roi
         return (uv[..., 0] >= x0 - 0.5) & (uv[..., 0] <= x1 - 0.5) & (uv[..., 1] >= y0 - 0.5) & (uv[..., 1] <= y1 - 0.5)
 
-    def apply(self, image: np.ndarray) -> np.ndarray:
+    def apply(self, image: np.ndarray, shrink: np.ndarray | None = None) -> np.ndarray:
         """The (size, size, C) input of image (H, W, C): the roi resized into the content
-        rectangle, zeros around (see resized)."""
+        rectangle, zeros around (see resized). shrink (2,): camera pixels per image pixel along
+        u, v when image is a shrunk copy of the image the letterbox was made for."""
         x0, y0, x1, y1 = self.roi
         cx, cy, cw, ch = self.content
         out = np.zeros((self.size, self.size) + image.shape[2:], dtype=image.dtype)
-        out[cy:cy + ch, cx:cx + cw] = resized(image[y0:y1, x0:x1], cw, ch)
+        if shrink is None:
+            out[cy:cy + ch, cx:cx + cw] = resized(image[y0:y1, x0:x1], cw, ch)
+        else:
+            edges = np.array([x0, y0, x1, y1], dtype=np.float64) / np.tile(np.asarray(shrink, dtype=np.float64), 2)
+            out[cy:cy + ch, cx:cx + cw] = resized(image, cw, ch, edges)
         return np.ascontiguousarray(np.rot90(out, self.turns)) if self.turns % 4 else out
 
     def image_grid(self, stride: float) -> tuple[np.ndarray, tuple[int, int]]:
@@ -93,24 +98,28 @@ def _turned(xy: np.ndarray, turns: int, size: int) -> np.ndarray:
     return np.stack(turned, axis=-1)
 
 
-def resized(image: np.ndarray, width: int, height: int) -> np.ndarray:
-    """image (H, W, C) resized to (height, width, C), its pixel edges mapped onto the output's
-    exactly (as cv2.resize's). Shrinking by k >= 2 or more averages k x k blocks first (area
-    averaging, so small people are not aliased; OpenCV's whole-factor path, several times
-    faster than its general one), then interpolates bilinearly by the rest, less than 2; the
-    last H mod k rows and W mod k columns, which no whole block holds, are replicated from
-    their neighbours."""
+def resized(image: np.ndarray, width: int, height: int, box: np.ndarray | None = None) -> np.ndarray:
+    """The part box (4,) x0, y0, x1, y1 (pixel edges: 0 is pixel 0's left edge; default the whole
+    image) of image (H, W, C) resized to (height, width, C), box's edges mapped onto the output's
+    exactly (as cv2.resize maps an image's). Shrinking by k >= 2 or more averages k x k blocks
+    first (area averaging, so small people are not aliased; OpenCV's whole-factor path, several
+    times faster than its general one), then interpolates bilinearly by the rest, less than 2;
+    outside the image's whole blocks, pixels are replicated from the edge."""
     h, w = image.shape[:2]
-    k = int(min(w / width, h / height))
-    if k < 2:
-        return cv2.resize(image, (width, height), interpolation=cv2.INTER_LINEAR)
-    blocks = cv2.resize(image[:h // k * k, :w // k * k], (w // k, h // k), interpolation=cv2.INTER_AREA)
-    if blocks.shape[:2] == (height, width):
-        return blocks
-    # output pixel centre x + 0.5 = a * (block pixel centre + 0.5), a per axis
-    a = np.array([width * k / w, height * k / h])
-    m = np.array([[a[0], 0.0, 0.5 * a[0] - 0.5], [0.0, a[1], 0.5 * a[1] - 0.5]])
-    return cv2.warpAffine(blocks, m, (width, height), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    box = np.array([0.0, 0.0, w, h] if box is None else box, dtype=np.float64)
+    k = int(min((box[2] - box[0]) / width, (box[3] - box[1]) / height))
+    if k >= 2:
+        x0, y0 = int(box[0]) // k * k, int(box[1]) // k * k  # whole blocks from a multiple of k
+        x1 = x0 + (min(w, int(np.ceil(box[2]))) - x0) // k * k
+        y1 = y0 + (min(h, int(np.ceil(box[3]))) - y0) // k * k
+        image = cv2.resize(image[y0:y1, x0:x1], ((x1 - x0) // k, (y1 - y0) // k), interpolation=cv2.INTER_AREA)
+        box = (box - [x0, y0, x0, y0]) / k
+        if image.shape[:2] == (height, width) and np.allclose(box, [0, 0, width, height]):
+            return image
+    # output pixel centre X: X + 0.5 = a * (x + 0.5 - box edge), per axis
+    a = np.array([width / (box[2] - box[0]), height / (box[3] - box[1])])
+    m = np.array([[a[0], 0.0, a[0] * (0.5 - box[0]) - 0.5], [0.0, a[1], a[1] * (0.5 - box[1]) - 0.5]])
+    return cv2.warpAffine(image, m, (width, height), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def _tent_taps(positions: np.ndarray, n: int, step: float) -> tuple[np.ndarray, np.ndarray]:

@@ -80,10 +80,14 @@ class _Found:
 @dataclass
 class PendingSet:
     """A set OnnxPoseDetector.start_set has started: its images, boxes and previous people as
-    given, MultiPose's runs on the images it searches (in camera order), and when it started."""
+    given, each camera's (width, height) and its camera pixels per image pixel (2,) u, v (None:
+    the image is at the camera's size), MultiPose's runs on the images it searches (in camera
+    order), and when it started."""
 
     images: list[np.ndarray | None]
     boxes: list[np.ndarray | None]
+    sizes: list[tuple[int, int] | None]
+    shrinks: list[np.ndarray | None]
     previous: Sequence[np.ndarray] | None
     turns: list[int]
     finds: list[Future[_Found]]
@@ -183,18 +187,28 @@ class OnnxPoseDetector:
         is a shrunk copy (reduced_decoding): people come back in the camera's pixels. turns: per
         camera, the quarter turns (np.rot90's) that stand its people up before the networks see
         them (upright.upright_turns; default none): people come back in the camera's own pixels.
-        ValueError naming the camera for an image that is not uint8 BGR, and for a shrunk image
-        without heatmaps 'multipose' (crops are cut from the image)."""
+        ValueError naming the camera for an image that is not uint8 BGR."""
         return self.finish(self.start_set(images, boxes, previous, sizes, turns))
 
-    def reduced_decoding(self, width: int, height: int) -> int:
+    def reduced_decoding(self, width: int, height: int, boxes: np.ndarray | None = None) -> int:
         """By how much (1, 2, 4 or 8) an image of a width x height camera may be shrunk before
-        detect_set without changing what the detector sees: with heatmaps 'multipose', the most that
-        keeps its long side at least SHRUNK_OVERSAMPLING times MultiPose's input side; else 1 (crops
-        need every pixel)."""
+        detect_set without changing what the detector sees. With heatmaps 'multipose', the most that
+        keeps its long side at least SHRUNK_OVERSAMPLING times MultiPose's input side. With a crop
+        model, given boxes (Q, 4) (the camera's crops, detect_set's boxes), the most that keeps
+        every crop at least as many pixels as the model's input along its long side (8 for none);
+        else 1 (MultiPose's people, of any size, become crops)."""
         k = 1
+        if self.config.heatmaps != 'multipose':
+            if boxes is None:
+                return 1
+            grown = grown_boxes(np.asarray(boxes, dtype=np.float64).reshape(-1, 4), self.config.box_margin)
+            longest = (grown[:, 2:] - grown[:, :2]).max(axis=1)
+            least = float(longest.min()) if len(longest) else np.inf
+            while k < 8 and least >= 2 * k * self._crop_side:
+                k *= 2
+            return k
         least = SHRUNK_OVERSAMPLING * self.config.input_size
-        while self.config.heatmaps == 'multipose' and k < 8 and max(width, height) >= 2 * k * least:
+        while k < 8 and max(width, height) >= 2 * k * least:
             k *= 2
         return k
 
@@ -215,11 +229,6 @@ class OnnxPoseDetector:
         turns = list(turns) if turns is not None else [0] * len(images)
         if not len(sizes) == len(turns) == len(images):
             raise ValueError(f'detect_set: {len(images)} images, {len(sizes)} sizes and {len(turns)} turns')
-        shrunk = (bgr is not None and size is not None and bgr.shape[1::-1] != tuple(size)
-                  for bgr, size in zip(images, sizes))
-        if cfg.heatmaps != 'multipose' and any(shrunk):
-            raise ValueError(f"detect_set: heatmaps {cfg.heatmaps!r} cuts its crops from the image, which must be "
-                             "at the camera's size (shrunk images need heatmaps 'multipose')")
         for c, bgr in enumerate(images):
             if bgr is not None and (bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8):
                 raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
@@ -233,7 +242,10 @@ class OnnxPoseDetector:
             region = None if given is None or len(given) == 0 else people_region(given, size, cfg.region_margin)
             finds.append(self._start_find(bgr, size, region, turn))
             regions += region is not None
-        return PendingSet(list(images), list(boxes), previous, turns, finds, regions, started)
+        shrinks = [None if bgr is None or size is None or bgr.shape[1::-1] == tuple(size)
+                   else np.array(size, dtype=np.float64) / bgr.shape[1::-1] for bgr, size in zip(images, sizes)]
+        sizes = [None if bgr is None else tuple(size or bgr.shape[1::-1]) for bgr, size in zip(images, sizes)]
+        return PendingSet(list(images), list(boxes), sizes, shrinks, previous, turns, finds, regions, started)
 
     def _start_find(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None,
                     turns: int) -> Future[_Found]:
@@ -262,8 +274,8 @@ class OnnxPoseDetector:
         model = 0.0  # seconds in the crop model
         given = [c for c, (bgr, b) in enumerate(zip(images, boxes))
                  if bgr is not None and b is not None and cfg.heatmaps != 'multipose']
-        crops = [crop for c in given for crop in self._crops(pending, c, np.asarray(boxes[c], dtype=np.float64),
-                                                              [None] * len(boxes[c]))]
+        crops = [crop for c in given
+                 for crop in self._crops(pending, c, np.asarray(boxes[c], dtype=np.float64), [None] * len(boxes[c]))]
         model += self._add_people(pending, crops, out)
         cropped = {crop.camera for crop in crops}
         t1 = time.perf_counter()
@@ -294,9 +306,9 @@ class OnnxPoseDetector:
         """The crops of a camera's people boxes (Q, 4) (grown by box_margin), each with its
         MultiPose keypoints (16, 3) or None (given boxes)."""
         boxes = boxes.reshape(-1, 4)
-        bgr = pending.images[camera]
+        width, height = pending.sizes[camera]
         sigmas = self.config.keypoint_sigma * np.hypot(*(boxes[:, 2:] - boxes[:, :2]).T)
-        return [_Crop(camera, letterbox(bgr.shape[1], bgr.shape[0], box, self._crop_side, pending.turns[camera]),
+        return [_Crop(camera, letterbox(width, height, box, self._crop_side, pending.turns[camera]),
                       kp, float(sigma))
                 for box, kp, sigma in zip(grown_boxes(boxes, self.config.box_margin), keypoints, sigmas)]
 
@@ -308,13 +320,15 @@ class OnnxPoseDetector:
         images, cfg = pending.images, self.config
         start = time.perf_counter()
         if self._single is not None:  # a single-person keypoint model: its keypoints as Gaussians
-            found = self._single.run_cut(lambda i: crops[i].box.apply(images[crops[i].camera])[..., ::-1], len(crops))
+            found = self._single.run_cut(lambda i: crops[i].box.apply(images[crops[i].camera],
+                                                                      pending.shrinks[crops[i].camera])[..., ::-1],
+                                         len(crops))
             took = time.perf_counter() - start
             for crop, coco in zip(crops, found.keypoints):
                 out[crop.camera] += keypoint_people(self._crop_keypoints(crop.box, coco)[None],
                                                     np.array([crop.sigma]), cfg.stride)
             return took
-        maps = self._heatmaps(images, crops)
+        maps = self._heatmaps(images, pending.shrinks, crops)
         took = time.perf_counter() - start
         for crop, raw in zip(crops, maps):
             before = (pending.previous[crop.camera] if pending.previous is not None
@@ -400,16 +414,19 @@ class OnnxPoseDetector:
         keypoints[drop] = (np.nan, np.nan, 0.0)
         return keypoints
 
-    def _heatmaps(self, images: Sequence[np.ndarray | None], crops: list[_Crop]) -> np.ndarray:
+    def _heatmaps(self, images: Sequence[np.ndarray | None], shrinks: Sequence[np.ndarray | None],
+                  crops: list[_Crop]) -> np.ndarray:
         """EfficientPose heatmaps (N, side, side, 16), channel last, clipped to [0, 1], of the
-        letterboxed crops, in runs of at most max_batch crops."""
+        letterboxed crops (cut from images, shrunk by shrinks: PendingSet), in runs of at most
+        max_batch crops."""
         side = self._spec.input_side
         if not crops:
             return np.zeros((0, side, side, 16), dtype=np.float32)
         batch = self.config.max_batch or len(crops)
         outputs = []
         for first in range(0, len(crops), batch):
-            chunk = np.stack([c.box.apply(images[c.camera]) for c in crops[first:first + batch]])[..., ::-1]
+            chunk = np.stack([c.box.apply(images[c.camera], shrinks[c.camera])
+                              for c in crops[first:first + batch]])[..., ::-1]
             chunk = (chunk.astype(np.float32) * np.float32(1 / 255.0) - _MEAN) / _STD
             (out,) = self._efficientpose.run([self._spec.output_name], {self._spec.input_name: chunk})
             outputs.append(out)
