@@ -590,3 +590,34 @@ def test_shelf_bag_with_a_bumped_or_an_unplugged_camera():
     assert set(unplugged) == {k for k in real if not (k[0] == '/cam3/openpose' and k[1] >= first)}
     with pytest.raises(ValueError, match='camera 7'):
         shelf_recipe(shelf, fault=recipes.CameraFault(7, 450))
+
+
+@pytest.mark.slow
+def test_shelf_rig_hd_recipe_is_a_30_hz_1920_by_1080_rig_showing_the_same_scene(tmp_path):
+    """shelf_rig_hd: 1920 x 1080 images at 30 Hz (60 sets, shelf_rig's offsets and gaps), each
+    Shelf image scaled to the frame's height between black bars, its CameraInfo moved with it: a
+    world point's patch in the HD image shows what its patch in shelf_rig's image shows."""
+    from msg_adapters.camera_info_msg import info_to_intrinsics
+    from msg_adapters.image_msg import compressed_to_image
+    from mvpose_ros.bags.recipes import ForeignRig, HdRig, shelf_rig_recipe, shelf_rig_stamps
+    from mvpose_ros.core.geometry.rig import load_rig_file
+    plain, hd = shelf_rig_recipe(SHELF), shelf_rig_recipe(SHELF, hd=True)
+    assert hd.name == 'shelf_rig_hd' and hd.fingerprint() != plain.fingerprint()
+    stamps = shelf_rig_stamps(HdRig)
+    left = [s for s in stamps['left'] if s is not None]
+    assert len(left) == 60 and np.allclose(np.diff(left), 1e9 / 30, atol=2.5e6)
+    assert sum(s is None for s in stamps[ForeignRig.DROP_CAMERA]) == len(ForeignRig.DROPPED_SETS)
+    first = _first_messages(plain, hd)
+    (tmp_path / 'rig.yaml').write_text(hd.rig_text())
+    rig = load_rig_file(tmp_path / 'rig.yaml')
+    for name, rig_camera in zip(ForeignRig.NAMES, rig.cameras):
+        camera = rig_camera.with_info(*info_to_intrinsics(first['shelf_rig_hd'][f'/rig/{name}/camera_info']))
+        before = rig_camera.with_info(*info_to_intrinsics(first['shelf_rig'][f'/rig/{name}/camera_info']))
+        assert (camera.width, camera.height) == (1920, 1080)
+        image = compressed_to_image(first['shelf_rig_hd'][f'/rig/{name}/image_raw/compressed']).astype(int)
+        plain_image = compressed_to_image(first['shelf_rig'][f'/rig/{name}/image_raw/compressed']).astype(int)
+        assert image.shape == (1080, 1920, 3) and image[:, :200].max() < 10  # a black bar on the left
+        for (u, v), (u0, v0) in zip(np.round(camera.project(_seen_points(before))).astype(int),
+                                    np.round(before.project(_seen_points(before))).astype(int)):
+            assert np.abs(image[v - 2:v + 3, u - 2:u + 3].mean(axis=(0, 1))
+                          - plain_image[v0 - 2:v0 + 3, u0 - 2:u0 + 3].mean(axis=(0, 1))).max() < 12, name

@@ -297,7 +297,11 @@ def test_rig_report_counts_sets_skew_and_latency_and_predictions_lines():
     assert 'sets in 4, processed 2, dropped 2 (set numbers 1, 3)' in text
     assert 'p50 6.0 ms, max 6.0 ms' in text and 'p50 9.0 ms, max 12.0 ms' in text
     assert 'p50 150.0 ms' in text and problems == ['2 of 4 sets got no /skeletons']
-    assert rig_report(stamps, [0] * 4, node, people, 20 * MS, False, SimpleNamespace(write=lambda s: None)) == []
+    assert 'per second of bag time' not in text  # lockstep: the graph sets the pace
+    lines.clear()
+    assert rig_report(stamps, [0] * 4, node, people, 20 * MS, False, SimpleNamespace(write=lines.append)) == []
+    per_second = 1e9 / PERIOD
+    assert f'sets processed per second of bag time: {per_second / 2:.2f} of {per_second:.2f} sent' in ''.join(lines)
     records = [json.loads(line) for line in rig_prediction_lines(stamps, node.outputs)]
     assert [(r['frame'], r['stamp']) for r in records] == [(0, stamps[0]), (2, stamps[2])]
     assert list(records[0]) == ['frame', 'stamp', 'people']

@@ -41,7 +41,7 @@ from mvpose_ros.core.scenarios.frame_drops import FrameDrop
 # so bags made by older code count as out of date.
 RECIPE_VERSION = 1
 RECIPES = ('shelf', 'shelf_images', 'shelf_crowd', 'shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'shelf_rig_lenses',
-           'campus')
+           'shelf_rig_hd', 'campus')
 CROWD_PEOPLE = 20  # 3D people per frame the shelf_crowd bag aims at
 SHELF_IMAGE_FRAMES = (572,)
 GROUND_TRUTH_TOPIC = '/ground_truth/skeletons'
@@ -89,9 +89,10 @@ def make_recipe(name: str, data_root: str | None = None, campus_dir: str | Path 
                             fault=fault)
     if name == 'shelf_crowd':
         return shelf_crowd_recipe(dataset_dir('shelf', data_root))
-    if name in ('shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'shelf_rig_lenses'):
+    if name in ('shelf_rig', 'shelf_rig_raw', 'shelf_rig_turned', 'shelf_rig_lenses', 'shelf_rig_hd'):
         return shelf_rig_recipe(dataset_dir('shelf', data_root), compressed=name != 'shelf_rig_raw',
-                                turned=name == 'shelf_rig_turned', lenses=name == 'shelf_rig_lenses')
+                                turned=name == 'shelf_rig_turned', lenses=name == 'shelf_rig_lenses',
+                                hd=name == 'shelf_rig_hd')
     raise ValueError(f'recipe must be one of {", ".join(RECIPES)}; got {name!r}')
 
 
@@ -250,6 +251,16 @@ class ForeignRig:
         return f'{name}_optical_frame'
 
 
+class HdRig(ForeignRig):
+    """shelf_rig_hd: the shelf_rig cameras as 30 Hz 1920 x 1080 cameras: each Shelf image scaled
+    to the frame's height (1080 / 776) and centred between black bars, 60 sets."""
+
+    SCALE = 1080 / 776
+    WIDTH, HEIGHT = 1920, 1080
+    SETS = 60
+    PERIOD_NS = 33_333_333  # 30 Hz
+
+
 def scaled_camera(camera: Camera, scale: float) -> Camera:
     """The camera of an image resized by `scale` (cv2.resize's pixel-centre mapping
     x' = scale * (x + 0.5) - 0.5); distortion acts on normalised coordinates and is unchanged."""
@@ -259,6 +270,14 @@ def scaled_camera(camera: Camera, scale: float) -> Camera:
     K[0, 1] *= scale
     K[:2, 2] = scale * (K[:2, 2] + 0.5) - 0.5
     return replace(camera, K=K, width=round(camera.width * scale), height=round(camera.height * scale))
+
+
+def padded_camera(camera: Camera, left: int, top: int, width: int, height: int) -> Camera:
+    """The camera of its image placed at (left, top) in a width x height frame (borders added)."""
+    K = np.array(camera.K, dtype=float)
+    K[0, 2] += left
+    K[1, 2] += top
+    return replace(camera, K=K, width=width, height=height)
 
 
 def lensed_camera(camera: Camera, model: str, dist: Sequence[float], focal: float = 1.0) -> Camera:
@@ -310,7 +329,8 @@ def shelf_rig_stamps(rig: type[ForeignRig] = ForeignRig) -> dict[str, list[int |
     return out
 
 
-def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = False, lenses: bool = False) -> str:
+def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = False, lenses: bool = False,
+                  hd: bool = False) -> str:
     """The shelf_rig bags' rig file: per camera its driver topics and extrinsics from the Shelf
     calibration (position, orientation quaternion; turned: each camera turned by ForeignRig.TURNS),
     as a user writes it: no intrinsics (those come from the bag's CameraInfo, at the upscaled size)
@@ -331,16 +351,20 @@ def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = Fal
            f'(np.rot90 of image and camera).\n' if turned else '')
     if lenses:
         how += f'# Their lenses (CameraInfo\'s distortion_model): {", ".join(m for m, _, _ in ForeignRig.LENSES)}.\n'
+    size = (f'scaled x{HdRig.SCALE:.4g} into {HdRig.WIDTH} x {HdRig.HEIGHT} frames at 30 Hz' if hd
+            else f'upscaled x{ForeignRig.SCALE:g}')
     return (f'# The rig of the shelf_rig bags (mvpose-make-bag): the five Shelf cameras under a driver\'s\n'
-            f'# names, {kind} images upscaled x{ForeignRig.SCALE:g}; extrinsics from\n'
+            f'# names, {kind} images {size}; extrinsics from\n'
             f'# {calibration.name}; intrinsics, image size and frame ids come from each camera\'s CameraInfo.\n'
             + how + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
 
 
-def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False, lenses: bool = False) -> Recipe:
+def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False, lenses: bool = False,
+                     hd: bool = False) -> Recipe:
     """The `shelf_rig` bag (CompressedImage; `shelf_rig_raw` with compressed False: Image rgb8;
     `shelf_rig_turned` with turned: its cameras turned by ForeignRig.TURNS; `shelf_rig_lenses` with
-    lenses: seen through ForeignRig.LENSES) from the Shelf folder `shelf`: see ForeignRig. Each
+    lenses: seen through ForeignRig.LENSES; `shelf_rig_hd` with hd: HdRig's frames and timing) from
+    the Shelf folder `shelf`: see ForeignRig. Each
     message is logged at its header stamp; every image goes with a CameraInfo of the same stamp
     (camera_info first)."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
@@ -351,10 +375,17 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False,
     if len(cameras) != len(ForeignRig.NAMES):
         raise ValueError(f'{calibration}: {len(cameras)} cameras, expected {len(ForeignRig.NAMES)}')
 
+    rig = HdRig if hd else ForeignRig
+
     def items() -> Iterator[Item]:
-        scaled = [scaled_camera(cam, ForeignRig.SCALE) for cam in cameras]
+        scaled = [scaled_camera(cam, rig.SCALE) for cam in cameras]
         pixels = [cv2.resize(read_image(path, cam), (big.width, big.height), interpolation=cv2.INTER_LINEAR)
                   for path, cam, big in zip(images, cameras, scaled)]
+        if hd:
+            left = [(HdRig.WIDTH - cam.width) // 2 for cam in scaled]
+            pixels = [cv2.copyMakeBorder(p, 0, HdRig.HEIGHT - p.shape[0], x, HdRig.WIDTH - p.shape[1] - x,
+                                         cv2.BORDER_CONSTANT) for p, x in zip(pixels, left)]
+            scaled = [padded_camera(cam, x, 0, HdRig.WIDTH, HdRig.HEIGHT) for cam, x in zip(scaled, left)]
         if turned:
             scaled = [turned_camera(cam, k) for cam, k in zip(scaled, ForeignRig.TURNS)]
             pixels = [np.ascontiguousarray(np.rot90(p, k)) for p, k in zip(pixels, ForeignRig.TURNS)]
@@ -366,7 +397,7 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False,
         # One encoding per camera: every set shows the same capture, only the header changes.
         payload = ([image_to_compressed_msg(p, header0, 'jpeg', ForeignRig.JPEG_QUALITY) for p in pixels]
                    if compressed else [image_to_msg(p, header0, 'rgb8') for p in pixels])
-        stamps = shelf_rig_stamps()
+        stamps = shelf_rig_stamps(rig)
         # (stamp, camera) in log order; messages are made as they are written (raw images are big)
         order = sorted((stamp, c) for c, name in enumerate(ForeignRig.NAMES) for stamp in stamps[name]
                        if stamp is not None)
@@ -383,9 +414,10 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False,
             yield ForeignRig.info_topic(name), camera_to_info(scaled[c], header), stamp
             yield ForeignRig.image_topic(name, compressed), image, stamp
 
-    name = ('shelf_rig_turned' if turned else 'shelf_rig_lenses' if lenses else 'shelf_rig' if compressed
-            else 'shelf_rig_raw')
-    return Recipe(name, (calibration, *images), items, lambda: rig_file_text(calibration, compressed, turned, lenses))
+    name = ('shelf_rig_turned' if turned else 'shelf_rig_lenses' if lenses else 'shelf_rig_hd' if hd
+            else 'shelf_rig' if compressed else 'shelf_rig_raw')
+    return Recipe(name, (calibration, *images), items,
+                  lambda: rig_file_text(calibration, compressed, turned, lenses, hd))
 
 
 def campus_image(campus_dir: Path, camera: int, frame: int) -> Path:

@@ -1,6 +1,7 @@
 """`mvpose-make-bag`: build a rosbag2 (MCAP) bag of the real data for the ROS graph.
 
-    mvpose-make-bag shelf|shelf_images|shelf_crowd|shelf_rig|shelf_rig_raw|shelf_rig_turned|shelf_rig_lenses
+    mvpose-make-bag shelf|shelf_images|shelf_crowd|shelf_rig|shelf_rig_raw|shelf_rig_turned|shelf_rig_lenses|
+                    shelf_rig_hd
                     [--data-root DIR] [--output DIR] [--force]
     mvpose-make-bag shelf --drop-every N | --drop-fraction F [--drop-seed S]   (bags/shelf_every2, ...)
     mvpose-make-bag campus --campus-dir CampusSeq1 [--output DIR] [--force]

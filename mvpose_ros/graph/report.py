@@ -309,6 +309,11 @@ def rig_report(set_stamps: Sequence[int], bag_skews_ns: Sequence[int], node: Rec
           + (f' (set numbers {frame_ranges([i for i, s in enumerate(set_stamps) if s not in node.outputs])})'
              if len(processed) < len(set_stamps) else '')
           + f'; duplicate {len(duplicate)}, unexpected {len(unexpected)}', file=out)
+    if not lockstep and len(set_stamps) > 1:
+        # the bag's span, one set period included: played at --rate 1, the run's wall time
+        span = (set_stamps[-1] - set_stamps[0]) * 1e-9 * len(set_stamps) / (len(set_stamps) - 1)
+        print(f'sets processed per second of bag time: {len(processed) / span:.2f} of {len(set_stamps) / span:.2f} '
+              'sent', file=out)
     bag = np.asarray(bag_skews_ns, dtype=float) * 1e-6
     graph = set_skews_ms(processed, people_stamps, max_skew_ns)
     if bag.size:
