@@ -316,3 +316,18 @@ def test_latency_is_reported_by_quarter_of_the_run():
     lines = out.getvalue().splitlines()
     assert lines[1] == 'latency p50 by quarter of the run: 100, 110, 120, 650 ms'
     assert lines[2] == 'latency p95 by quarter of the run: 100, 110, 120, 1055 ms'
+
+
+def test_tracked_crops_overrides_turn_the_rig_detector_to_lightning_on_tracked_crops():
+    """config/tracked_crops.yaml (mvpose-graph --overrides) holds detector values only; after the
+    rig template they give a valid detector configuration: MoveNet Lightning on crops, MultiPose's
+    whole-image search every 10th set, the template's workers kept."""
+    from mvpose_ros.core.detection.detector_settings import DetectorConfig
+    from mvpose_ros.graph.config import node_section
+    template = load_params(CONFIG.with_name('rig_template.yaml'))
+    overrides = load_params(CONFIG.with_name('tracked_crops.yaml'))
+    assert set(overrides) == {'/**/heatmap_detector'}
+    settings = DetectorConfig.from_params(node_section([template, overrides], 'heatmap_detector'))
+    onnx = settings.onnx
+    assert (onnx.heatmaps, onnx.model, settings.person_detector_every) == ('efficientpose', 'lightning', 10)
+    assert settings.onnx.crop_workers == template['/**/heatmap_detector']['crop_workers'] == 2
