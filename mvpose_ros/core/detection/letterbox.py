@@ -101,10 +101,10 @@ def _turned(xy: np.ndarray, turns: int, size: int) -> np.ndarray:
 def resized(image: np.ndarray, width: int, height: int, box: np.ndarray | None = None) -> np.ndarray:
     """The part box (4,) x0, y0, x1, y1 (pixel edges: 0 is pixel 0's left edge; default the whole
     image) of image (H, W, C) resized to (height, width, C), box's edges mapped onto the output's
-    exactly (as cv2.resize maps an image's). Shrinking by k >= 2 or more averages k x k blocks
-    first (area averaging, so small people are not aliased; OpenCV's whole-factor path, several
-    times faster than its general one), then interpolates bilinearly by the rest, less than 2;
-    outside the image's whole blocks, pixels are replicated from the edge."""
+    exactly (as cv2.resize maps an image's). Shrinking by k or more (k >= 2 whole) averages k x k
+    blocks first (area averaging, so small people are not aliased; OpenCV's whole-factor path,
+    several times faster than its general one), then interpolates bilinearly by the rest, less than
+    2; outside the image's whole blocks, pixels are replicated from the edge."""
     h, w = image.shape[:2]
     box = np.array([0.0, 0.0, w, h] if box is None else box, dtype=np.float64)
     k = int(min((box[2] - box[0]) / width, (box[3] - box[1]) / height))
