@@ -65,8 +65,8 @@ def _same_count(paths: Sequence[Path], cameras: Sequence[Camera]) -> None:
 
 def stage_config(sets: int, head_model: str) -> StageConfig:
     """One set: the clip of one frame, BP from scratch. A sequence: the rig graph's bp_solver
-    parameters (a set solved with at most `window` - 1 before it; solving the whole clip so far
-    again at every set made a set's 3D stage grow from about 25 ms to 100-175 ms over 20 sets)."""
+    parameters (a set solved with at most `window` - 1 before it, so that a set's 3D stage does
+    not grow with the sequence)."""
     if sets == 1:
         return StageConfig.from_params({'window': 0, 'head_model': head_model})
     solver = node_section([load_params(package_path(RIG_TEMPLATE))], 'bp_solver')
