@@ -33,7 +33,7 @@ from mvpose_ros.core.detection.onnx_detector import OnnxDetectorConfig, OnnxPose
 from mvpose_ros.core.geometry.rig import matrix_to_quaternion
 from mvpose_ros.nodes.health import DIAGNOSTICS_QOS
 from mvpose_ros.nodes.runtime import DATA_QOS
-from ros_harness import probe, spin_until, start_node, stop
+from ros_harness import NodeLinks, matched, probe, spin_until, start_node, stop
 
 RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
@@ -41,6 +41,12 @@ MS = 1_000_000
 # frame_rate 1 with the 25 Hz max_skew: a camera not heard yet holds a set back 1 s, not a 25 Hz
 # period, so that images a burst or the transport spreads out still make whole first sets
 SLOW_FIRST_SET = ('-p', 'frame_rate:=1.0', '-p', 'max_skew:=0.02')
+
+
+def _reached(links: NodeLinks, writers: list, topics: list[str]) -> Callable[[], bool]:
+    """Whether this probe's writers see the whole-rig detector's readers and the detector (in
+    /rig) reports its readers of `topics` matched: a volatile reader drops what comes before."""
+    return lambda: matched(writers) and all(links.reads('rig/heatmap_detector', t) for t in topics)
 
 
 def _frame(camera: int) -> np.ndarray:
@@ -209,6 +215,7 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
         node.create_subscription(Header, '/rig/skeletons/dropped', dropped.append, DATA_QOS)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         info = node.create_publisher(CameraInfo, '/rig/right/camera_info', qos_profile_sensor_data)
+        links = NodeLinks(node)
         # frame_rate 5 Hz, a fifth of the cameras' (max_skew given, so the sets are as at 25 Hz): said
         # once; a camera not heard yet is waited 0.2 s, so a burst the transport spreads stays whole
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
@@ -219,7 +226,8 @@ def test_the_whole_rig_detects_the_newest_set_and_drops_whole_sets_while_busy(do
                                                                                _header(0, 'right_optical'))),
                                  lambda: 'right: intrinsics from /rig/right/camera_info' in log.read_text(),
                                  period=0.1), log.read_text()
-            assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs), 30.0)
+            assert spin_until(executor, _reached(links, pubs, [f'/rig/{n}/image/compressed' for n in names]),
+                              30.0), log.read_text()
             for k in range(sets):  # each set as soon as the last is received: far faster than its detection
                 for c, pub in enumerate(pubs):
                     pub.publish(CompressedImage(header=_header(stamps[c][k], f'{names[c]}_optical'),
@@ -289,15 +297,18 @@ def test_the_first_set_waits_for_a_camera_info_taken_just_after_its_images(domai
         out = _people_outputs(node, names)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         info = node.create_publisher(CameraInfo, '/rig/right/camera_info', RELIABLE)
+        links = NodeLinks(node)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
                           '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', *overrides, *SLOW_FIRST_SET,
                           '-p', 'qos_overrides./rig/right/camera_info.subscription.reliability:=reliable')
         try:
-            assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs + [info]), 30.0)
+            topics = [f'/rig/{n}/image/compressed' for n in names] + ['/rig/right/camera_info']
+            assert spin_until(executor, _reached(links, pubs + [info], topics), 30.0), log.read_text()
             for c, pub in enumerate(pubs):
                 pub.publish(CompressedImage(header=_header(stamp, f'{names[c]}_optical'), format=jpegs[c].format,
                                             data=jpegs[c].data))
-            spin_until(executor, lambda: False, 0.1)
+            # the CameraInfo once the node has every image
+            assert all(pub.wait_for_all_acked(Duration(seconds=10)) for pub in pubs), log.read_text()
             info.publish(camera_to_info(shelf_cameras()[2], _header(stamp, 'right_optical')))
             assert spin_until(executor, lambda: all(stamp in o for o in out), 60.0), log.read_text()
         finally:
@@ -325,11 +336,13 @@ def test_between_whole_image_sets_multipose_searches_where_the_newest_skeletons_
         out = _people_outputs(node, names)
         pubs = [node.create_publisher(CompressedImage, f'/rig/{name}/image/compressed', RELIABLE) for name in names]
         live = node.create_publisher(PointCloud2, '/rig/skeletons/live', DATA_QOS)
+        links = NodeLinks(node)
         proc = start_node('heatmap_detector', domain, log, '-r', '__ns:=/rig', '-p', 'camera:=all',
                           '-p', 'backend:=onnx', '-p', 'threads:=1', '-p', f'rig:={rig}', '-p', 'sync_timeout:=20.0',
                           '-p', 'person_detector_every:=3', *overrides, *SLOW_FIRST_SET)
         try:
-            assert spin_until(executor, lambda: all(p.get_subscription_count() > 0 for p in pubs + [live]), 30.0)
+            topics = [f'/rig/{n}/image/compressed' for n in names] + ['/rig/skeletons/live']
+            assert spin_until(executor, _reached(links, pubs + [live], topics), 30.0), log.read_text()
             for k, stamp in enumerate(stamps):
                 if k == 1:
                     live.publish(skeletons_to_msg(np.array([7]), joints[None], _header(stamps[0], 'world'),

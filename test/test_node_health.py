@@ -16,9 +16,16 @@ from ros_harness import matched, probe, spin_until, start_node, stop
 
 
 def _set(node, executor, client, name: str, value: ParameterValue):
-    future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
-    assert spin_until(executor, future.done, 10.0)
-    return future.result().results[0]
+    """The result of setting one parameter. A request sent before the node's service has matched
+    this client's endpoints is lost without a reply (discovery is per endpoint), so it is sent
+    again until one comes: setting a parameter twice is setting it once."""
+    request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
+    for _ in range(6):
+        future = client.call_async(request)
+        if spin_until(executor, future.done, 5.0):
+            return future.result().results[0]
+        client.remove_pending_request(future)
+    raise AssertionError(f'no reply to setting {name}')
 
 
 def test_bp_solver_publishes_diagnostics_and_takes_live_parameters(domain, tmp_path):
@@ -65,9 +72,16 @@ def test_bp_solver_publishes_diagnostics_and_takes_live_parameters(domain, tmp_p
 def test_association_takes_its_stage_and_sync_parameters_live_and_refuses_a_bad_one(domain, tmp_path):
     log = tmp_path / 'association.log'
     with probe(domain, 'association_probe') as (node, executor):
+        arrays: list[DiagnosticArray] = []
+        node.create_subscription(DiagnosticArray, '/diagnostics', arrays.append, DIAGNOSTICS_QOS)
         client = node.create_client(SetParameters, '/association/set_parameters')
-        proc = start_node('association', domain, log)
+        proc = start_node('association', domain, log, '-p', 'diagnostics.period:=0.2')
         try:
+            # its service exists from the node's construction; it answers once the node spins,
+            # which its first diagnostics show (under load, seconds later)
+            assert spin_until(executor, lambda: any(s.name.startswith('association: ')
+                                                    for a in arrays for s in msg_to_statuses(a)), 60.0), \
+                log.read_text()
             assert client.wait_for_service(20.0), log.read_text()
             double = ParameterType.PARAMETER_DOUBLE
             for name, value in (('track_iou', 0.4), ('max_skew', 0.03)):
