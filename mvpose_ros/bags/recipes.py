@@ -351,7 +351,7 @@ def rig_file_text(calibration: Path, compressed: bool = True, turned: bool = Fal
            f'(np.rot90 of image and camera).\n' if turned else '')
     if lenses:
         how += f'# Their lenses (CameraInfo\'s distortion_model): {", ".join(m for m, _, _ in ForeignRig.LENSES)}.\n'
-    size = (f'scaled x{HdRig.SCALE:.4g} into {HdRig.WIDTH} x {HdRig.HEIGHT} frames at 30 Hz' if hd
+    size = (f'scaled x{HdRig.SCALE:.4g} into {HdRig.WIDTH} x {HdRig.HEIGHT} frames at {1e9 / HdRig.PERIOD_NS:.0f} Hz' if hd
             else f'upscaled x{ForeignRig.SCALE:g}')
     return (f'# The rig of the shelf_rig bags (mvpose-make-bag): the five Shelf cameras under a driver\'s\n'
             f'# names, {kind} images {size}; extrinsics from\n'
@@ -364,9 +364,8 @@ def shelf_rig_recipe(shelf: Path, compressed: bool = True, turned: bool = False,
     """The `shelf_rig` bag (CompressedImage; `shelf_rig_raw` with compressed False: Image rgb8;
     `shelf_rig_turned` with turned: its cameras turned by ForeignRig.TURNS; `shelf_rig_lenses` with
     lenses: seen through ForeignRig.LENSES; `shelf_rig_hd` with hd: HdRig's frames and timing) from
-    the Shelf folder `shelf`: see ForeignRig. Each
-    message is logged at its header stamp; every image goes with a CameraInfo of the same stamp
-    (camera_info first)."""
+    the Shelf folder `shelf`: see ForeignRig. Each message is logged at its header stamp; every
+    image goes with a CameraInfo of the same stamp (camera_info first)."""
     calibration = shelf / 'calibration' / 'calibration_shelf.json'
     _require(calibration)
     cameras = dataset_cameras('shelf', calibration=calibration)

@@ -233,18 +233,17 @@ class OnnxPoseDetector:
             if bgr is not None and (bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.dtype != np.uint8):
                 raise ValueError(f'image{f" of camera {c}" if len(images) > 1 else ""}: expected (H, W, 3) uint8 BGR, '
                                  f'got {bgr.dtype} {bgr.shape}')
+        sizes = [None if bgr is None else tuple(size or bgr.shape[1::-1]) for bgr, size in zip(images, sizes)]
+        shrinks = [None if bgr is None or bgr.shape[1::-1] == size
+                   else np.array(size, dtype=np.float64) / bgr.shape[1::-1] for bgr, size in zip(images, sizes)]
         started = time.perf_counter()
         finds, regions = [], 0
         for bgr, given, size, turn in zip(images, boxes, sizes, turns):
             if bgr is None or not (given is None or cfg.heatmaps == 'multipose'):
                 continue
-            size = size or (bgr.shape[1], bgr.shape[0])
             region = None if given is None or len(given) == 0 else people_region(given, size, cfg.region_margin)
             finds.append(self._start_find(bgr, size, region, turn))
             regions += region is not None
-        shrinks = [None if bgr is None or size is None or bgr.shape[1::-1] == tuple(size)
-                   else np.array(size, dtype=np.float64) / bgr.shape[1::-1] for bgr, size in zip(images, sizes)]
-        sizes = [None if bgr is None else tuple(size or bgr.shape[1::-1]) for bgr, size in zip(images, sizes)]
         return PendingSet(list(images), list(boxes), sizes, shrinks, previous, turns, finds, regions, started)
 
     def _start_find(self, bgr: np.ndarray, size: tuple[int, int], region: np.ndarray | None,
@@ -285,8 +284,8 @@ class OnnxPoseDetector:
         crops = []
         for c, found in zip(searched, found_all):
             inference = self._inference_keypoints(found.keypoints, found.bounds)
-            sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
             if cfg.heatmaps == 'multipose':
+                sigmas = cfg.keypoint_sigma * np.hypot(*(found.boxes[:, 2:] - found.boxes[:, :2]).T)
                 out[c] = keypoint_people(inference, sigmas, cfg.stride)
             else:
                 crops += self._crops(pending, c, found.boxes, list(inference))

@@ -75,9 +75,6 @@ class SinglePoseModel:
 
     def _one(self, rgb: np.ndarray) -> tuple[np.ndarray, ...]:
         """One crop (side, side, 3): its COCO-17 keypoints (17, 3) and the raw maps (1, h, w, C)."""
-        if rgb.shape != (self.side, self.side, 3) or rgb.dtype != np.uint8:
-            raise ValueError(f'{self.model.spec.kind}: expected a crop ({self.side}, {self.side}, 3) uint8 RGB, '
-                             f'got {rgb.dtype} {rgb.shape}')
         if self.model.movenet:
             x = rgb[None].astype(np.int32)
         else:
